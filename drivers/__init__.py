@@ -1,0 +1,1 @@
+"""drivers: transports (a port is a URL), framers and device codecs."""

@@ -1,0 +1,1 @@
+"""fdi: estimators and fault detectors of fdi-bridge (pure algorithms, no I/O)."""

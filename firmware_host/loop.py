@@ -1,0 +1,128 @@
+"""The loop owns time: fixed-rate scheduling on absolute deadlines, with an injected clock.
+
+``FixedRateLoop`` runs a step function every ``period_s`` seconds on absolute deadlines
+(``next += period``), never accumulating drift. Its clock and sleep are arguments, so tests drive
+it with :class:`FakeClock` and never wait on the wall clock. It counts overruns (a step that ended
+after the next deadline) and keeps the step processing times and the start-time jitter.
+
+``EpochTimer`` is the rover's counterpart: the rover is paced by the receiver's epochs, not by a
+timer, so it measures each epoch's processing time and counts an overrun when an epoch took longer
+than the receiver's period.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+Clock = Callable[[], float]
+Sleep = Callable[[float], None]
+
+
+class FakeClock:
+    """A clock for tests: ``sleep`` advances time instantly; ``advance`` moves it by hand."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self.now = start
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            self.now += seconds
+
+    def advance(self, seconds: float) -> None:
+        self.now += seconds
+
+
+@dataclass
+class TimingStats:
+    """Processing times (s) and start jitter (s) of a loop, with overrun count."""
+
+    proc_s: list[float] = field(default_factory=list)
+    jitter_s: list[float] = field(default_factory=list)
+    overruns: int = 0
+    steps: int = 0
+
+    def summary(self) -> dict[str, float | int]:
+        """p50/p99/max of processing time and jitter, in milliseconds."""
+        out: dict[str, float | int] = {"steps": self.steps, "overruns": self.overruns}
+        for name, values in (("proc", self.proc_s), ("jitter", self.jitter_s)):
+            if values:
+                arr = np.asarray(values) * 1e3
+                out[f"{name}_p50_ms"] = float(np.percentile(arr, 50))
+                out[f"{name}_p99_ms"] = float(np.percentile(arr, 99))
+                out[f"{name}_max_ms"] = float(arr.max())
+        return out
+
+
+class FixedRateLoop:
+    """Call ``step(k, t)`` every ``period_s`` on absolute deadlines until it returns False.
+
+    ``t`` is the step's deadline on the injected clock. A step that finishes after the next
+    deadline counts as an overrun; the loop then skips the missed deadlines (it does not try to
+    catch up with a burst of late steps) and the skipped count is added to ``overruns``.
+    """
+
+    def __init__(
+        self,
+        period_s: float,
+        clock: Clock = time.monotonic,
+        sleep: Sleep = time.sleep,
+    ) -> None:
+        if period_s <= 0:
+            raise ValueError("period_s must be > 0")
+        self.period_s = period_s
+        self.clock = clock
+        self.sleep = sleep
+        self.stats = TimingStats()
+
+    def run(self, step: Callable[[int, float], bool], max_steps: int | None = None) -> TimingStats:
+        next_deadline = self.clock()
+        k = 0
+        while max_steps is None or k < max_steps:
+            now = self.clock()
+            if now < next_deadline:
+                self.sleep(next_deadline - now)
+                now = self.clock()
+            self.stats.jitter_s.append(max(0.0, now - next_deadline))
+            t0 = now
+            keep_going = step(k, next_deadline)
+            t1 = self.clock()
+            self.stats.proc_s.append(t1 - t0)
+            self.stats.steps += 1
+            k += 1
+            next_deadline += self.period_s
+            # A step that ends after the next deadline overran it; skip every deadline it
+            # overran (one overrun each) rather than running a burst of late steps.
+            while t1 > next_deadline:
+                self.stats.overruns += 1
+                next_deadline += self.period_s
+            if not keep_going:
+                break
+        return self.stats
+
+
+class EpochTimer:
+    """Per-epoch processing time and overruns for an event-paced loop (the rover)."""
+
+    def __init__(self, clock: Clock = time.perf_counter) -> None:
+        self.clock = clock
+        self.stats = TimingStats()
+        self._t0 = 0.0
+
+    def start(self) -> None:
+        self._t0 = self.clock()
+
+    def stop(self, period_s: float | None) -> float:
+        """End the epoch; ``period_s`` is the receiver's epoch period (None if not known yet)."""
+        dt = self.clock() - self._t0
+        self.stats.proc_s.append(dt)
+        self.stats.steps += 1
+        if period_s is not None and dt > period_s:
+            self.stats.overruns += 1
+        return dt
