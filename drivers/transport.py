@@ -1,0 +1,120 @@
+"""Transports: a port is a URL.
+
+Every driver opens its link with :func:`open_port`, a thin wrapper over
+``serial.serial_for_url``: ``/dev/ttyUSB0``, a pty path from a replay, ``loop://``,
+``socket://host:port``, ``spy://...`` and ``rfc2217://`` are all the same to a driver.
+pyserial's exceptions are translated into :class:`~fdi.errors.PortError` here, at the boundary.
+
+:class:`SerialSettings` is the typed form of a port's configuration (it is also a config table).
+"""
+
+from __future__ import annotations
+
+import errno
+from dataclasses import dataclass, field
+from typing import Literal
+
+import serial
+import serial.rs485
+
+from fdi.errors import PortClosedError, PortError
+
+Parity = Literal["N", "E", "O", "M", "S"]
+
+
+@dataclass(frozen=True)
+class RS485Config:
+    """pyserial's RS-485 driver-enable settings, for adapters that need the kernel's help."""
+
+    rts_level_for_tx: bool = True
+    rts_level_for_rx: bool = False
+    loopback: bool = False
+    delay_before_tx: float | None = None
+    delay_before_rx: float | None = None
+
+
+@dataclass(frozen=True)
+class SerialSettings:
+    """A port URL and its line settings (a ``[... .port]`` table in the config)."""
+
+    url: str = "loop://"
+    baudrate: int = field(default=9600, metadata={"gt": 0})
+    bytesize: int = field(default=8, metadata={"ge": 5, "le": 8})
+    parity: Parity = "N"
+    stopbits: float = field(default=1.0, metadata={"ge": 1.0, "le": 2.0})
+    timeout_s: float = field(default=0.05, metadata={"ge": 0.0})
+    rs485: RS485Config | None = None
+
+
+def open_port(settings: SerialSettings, *, do_not_open: bool = False) -> serial.SerialBase:
+    """Open ``settings.url`` with ``serial.serial_for_url``; raise :class:`PortError` on failure."""
+    try:
+        port = serial.serial_for_url(
+            settings.url,
+            baudrate=settings.baudrate,
+            bytesize=settings.bytesize,
+            parity=settings.parity,
+            stopbits=settings.stopbits,
+            timeout=settings.timeout_s,
+            do_not_open=True,
+        )
+        if settings.rs485 is not None:
+            r = settings.rs485
+            port.rs485_mode = serial.rs485.RS485Settings(
+                rts_level_for_tx=r.rts_level_for_tx,
+                rts_level_for_rx=r.rts_level_for_rx,
+                loopback=r.loopback,
+                delay_before_tx=r.delay_before_tx,
+                delay_before_rx=r.delay_before_rx,
+            )
+        if not do_not_open:
+            port.open()
+    except (serial.SerialException, OSError, ValueError) as err:
+        raise PortError(f"could not open {settings.url!r}: {err}") from err
+    return port
+
+
+def read_some(port: serial.SerialBase, size: int = 4096) -> bytes:
+    """Read what is waiting (at least one byte or until the port's timeout).
+
+    Raises :class:`PortClosedError` when the far end went away (USB unplugged, pty master
+    closed), :class:`PortError` for any other failure.
+    """
+    try:
+        waiting = port.in_waiting
+        if waiting:
+            return bytes(port.read(min(size, waiting)))
+        first = bytes(port.read(1))  # blocks up to the port's timeout
+        if first and port.in_waiting:
+            return first + bytes(port.read(min(size - 1, port.in_waiting)))
+        return first
+    except serial.SerialException as err:
+        if _looks_closed(err):
+            raise PortClosedError(f"{port.port}: closed by the far end: {err}") from err
+        raise PortError(f"could not read from {port.port}: {err}") from err
+    except OSError as err:
+        if err.errno in (errno.EIO, errno.ENXIO, errno.ENODEV, errno.EBADF):
+            raise PortClosedError(f"{port.port}: {err.strerror}") from err
+        raise PortError(f"could not read from {port.port}: {err}") from err
+
+
+def write_all(port: serial.SerialBase, data: bytes) -> None:
+    """Write ``data``; translate failures into :class:`PortError`."""
+    try:
+        port.write(data)
+    except serial.SerialTimeoutException as err:
+        raise PortError(f"write to {port.port} timed out") from err
+    except (serial.SerialException, OSError) as err:
+        raise PortClosedError(f"could not write to {port.port}: {err}") from err
+
+
+def _looks_closed(err: Exception) -> bool:
+    text = str(err)
+    return (
+        "returned no data" in text
+        or "Input/output error" in text
+        or "[Errno 5]" in text
+        or "disconnected" in text
+        or "[Errno 6]" in text
+        or "[Errno 19]" in text
+    )
