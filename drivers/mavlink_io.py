@@ -1,0 +1,538 @@
+"""The one door to pymavlink: dialect, encoding, decoding, connections and ``.tlog`` reading.
+
+pymavlink keeps process-wide state: ``mavutil`` picks its dialect and wire protocol from the
+environment variables ``MAVLINK_DIALECT`` and ``MAVLINK20`` when it is first imported, and
+``mavutil.set_dialect`` swaps a module-global. This module is the only one in fdi-bridge that
+imports pymavlink (STYLE.md rule 7). It fixes the dialect to **ardupilotmega** and the wire
+protocol to **MAVLink 2** here, before ``mavutil`` is imported, and nowhere else. Everything the
+rest of the project needs from pymavlink goes through the functions and classes below:
+
+* :class:`GpsInputFix` and :class:`MavEndpoint` -- a mavutil connection (``udpout:``,
+  ``udpin:``, ``tcp:``, a serial path) that sends typed messages and returns the bytes it sent;
+* :class:`MavPacker` -- the same encoders without a connection: each call returns the packed
+  packet (the router's own component writes those bytes where it wants);
+* :func:`decode_packet` -- one framed packet (bytes) to a decoded message, or ``None``;
+* :func:`crc_extra` / :func:`message_name` -- the dialect's per-message tables, for the framer;
+* :func:`iter_tlog` -- a QGroundControl ``.tlog`` as ``(timestamp, raw bytes, message)`` records.
+
+pymavlink's exceptions are translated into :class:`~fdi.errors.PortError` where a transport is
+opened or written; bad packets are answered with ``None`` (a counted policy, never a guess).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fdi.errors import PortError
+
+DIALECT = "ardupilotmega"
+
+# pymavlink reads these when mavutil is imported and whenever set_dialect() runs: fix them here,
+# once, for the whole process (rule 7). MAVLINK20 selects the v20 dialect modules, which send
+# MAVLink 2 and still decode MAVLink 1.
+os.environ["MAVLINK20"] = "1"
+os.environ["MAVLINK_DIALECT"] = DIALECT
+
+from pymavlink import mavutil  # noqa: E402  (after the environment is fixed)
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
+
+if mavutil.current_dialect != DIALECT:  # someone imported mavutil before us with another dialect
+    mavutil.set_dialect(DIALECT)
+
+MAVLink = mavlink2.MAVLink
+MAVError = mavlink2.MAVError
+
+# Enum values the rest of the project may use without importing pymavlink.
+MAV_TYPE_GCS = mavlink2.MAV_TYPE_GCS
+MAV_TYPE_ONBOARD_CONTROLLER = mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
+MAV_AUTOPILOT_INVALID = mavlink2.MAV_AUTOPILOT_INVALID
+MAV_STATE_ACTIVE = mavlink2.MAV_STATE_ACTIVE
+MAV_CMD_DO_SET_MODE = mavlink2.MAV_CMD_DO_SET_MODE
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+MAV_PARAM_TYPE_REAL32 = mavlink2.MAV_PARAM_TYPE_REAL32
+MAV_RESULT_ACCEPTED = mavlink2.MAV_RESULT_ACCEPTED
+MAV_RESULT_DENIED = mavlink2.MAV_RESULT_DENIED
+MAV_RESULT_UNSUPPORTED = mavlink2.MAV_RESULT_UNSUPPORTED
+MAV_SEVERITY_EMERGENCY = mavlink2.MAV_SEVERITY_EMERGENCY
+MAV_SEVERITY_ALERT = mavlink2.MAV_SEVERITY_ALERT
+MAV_SEVERITY_CRITICAL = mavlink2.MAV_SEVERITY_CRITICAL
+MAV_SEVERITY_ERROR = mavlink2.MAV_SEVERITY_ERROR
+MAV_SEVERITY_WARNING = mavlink2.MAV_SEVERITY_WARNING
+MAV_SEVERITY_NOTICE = mavlink2.MAV_SEVERITY_NOTICE
+MAV_SEVERITY_INFO = mavlink2.MAV_SEVERITY_INFO
+MAV_SEVERITY_DEBUG = mavlink2.MAV_SEVERITY_DEBUG
+
+GPS_INPUT_IGNORE_FLAG_VDOP = mavlink2.GPS_INPUT_IGNORE_FLAG_VDOP
+GPS_INPUT_IGNORE_FLAG_VEL_HORIZ = mavlink2.GPS_INPUT_IGNORE_FLAG_VEL_HORIZ
+GPS_INPUT_IGNORE_FLAG_VEL_VERT = mavlink2.GPS_INPUT_IGNORE_FLAG_VEL_VERT
+
+STATUSTEXT_LEN = 50
+"""Bytes of text one STATUSTEXT carries; longer text is sent as chunks (MAVLink 2 ``id``)."""
+NAMED_VALUE_NAME_LEN = 10
+PARAM_ID_LEN = 16
+
+# Custom-mode tables per vehicle, from pymavlink (ArduPilot's mode numbers): name -> number.
+_MODE_TABLES: dict[str, dict[int, str]] = {
+    "rover": mavutil.mode_mapping_rover,
+    "boat": mavutil.mode_mapping_rover,
+    "sub": mavutil.mode_mapping_sub,
+}
+
+
+def crc_extra(msgid: int) -> int | None:
+    """The CRC_EXTRA seed byte of message ``msgid`` in the dialect, or None when unknown."""
+    cls = mavlink2.mavlink_map.get(msgid)
+    return None if cls is None else int(cls.crc_extra)
+
+
+def crc_extra_table() -> dict[int, int]:
+    """``{msgid: CRC_EXTRA}`` for every message of the dialect (a fresh dict)."""
+    return {msgid: int(cls.crc_extra) for msgid, cls in mavlink2.mavlink_map.items()}
+
+
+def message_name(msgid: int) -> str | None:
+    """The dialect's name of message ``msgid`` (``"HEARTBEAT"``), or None when unknown."""
+    cls = mavlink2.mavlink_map.get(msgid)
+    return None if cls is None else str(cls.msgname)
+
+
+def message_id(name: str) -> int:
+    """The id of the message called ``name`` (``"PARAM_SET"`` -> 23); KeyError if unknown."""
+    return int(getattr(mavlink2, f"MAVLINK_MSG_ID_{name}"))
+
+
+def custom_mode_number(mode: str, vehicle: str = "rover") -> int:
+    """ArduPilot's custom-mode number of ``mode`` on ``vehicle`` (``"HOLD"``, rover -> 4)."""
+    table = _MODE_TABLES.get(vehicle.lower())
+    if table is None:
+        raise ValueError(f"unknown vehicle {vehicle!r}; known: {', '.join(sorted(_MODE_TABLES))}")
+    for number, name in table.items():
+        if name == mode.upper():
+            return int(number)
+    raise ValueError(f"{vehicle} has no mode {mode!r}; known: {', '.join(table.values())}")
+
+
+@dataclass(frozen=True)
+class GpsInputFix:
+    """A fix for the autopilot's MAVLink GPS (GPS_INPUT; ArduPilot ``GPSn_TYPE = 14``).
+
+    ``None`` velocity components or ``vdop`` are sent as zero with the matching ignore flag.
+    """
+
+    time_usec: int  # bridge's own timestamp (µs)
+    gps_week: int
+    gps_week_ms: int
+    fix_type: int  # 0/1 no fix, 2 2D, 3 3D, 4 DGPS, 5 RTK float, 6 RTK fixed (GPS_FIX_TYPE)
+    lat_deg: float
+    lon_deg: float
+    alt_m: float  # AMSL
+    hdop: float
+    vdop: float | None
+    vn_mps: float | None
+    ve_mps: float | None
+    vd_mps: float | None
+    speed_accuracy_mps: float
+    horiz_accuracy_m: float
+    vert_accuracy_m: float
+    satellites_visible: int
+    gps_id: int = 0
+
+
+def gps_input_ignore_flags(fix: GpsInputFix) -> int:
+    """GPS_INPUT_IGNORE_FLAGS for the fields of ``fix`` that are not known."""
+    flags = 0
+    if fix.vdop is None:
+        flags |= GPS_INPUT_IGNORE_FLAG_VDOP
+    if fix.vn_mps is None or fix.ve_mps is None:
+        flags |= GPS_INPUT_IGNORE_FLAG_VEL_HORIZ
+    if fix.vd_mps is None:
+        flags |= GPS_INPUT_IGNORE_FLAG_VEL_VERT
+    return flags
+
+
+def _or0(value: float | None) -> float:
+    return 0.0 if value is None else float(value)
+
+
+def statustext_chunks(text: str) -> list[bytes]:
+    """Split ``text`` (ASCII; other characters become ``?``) into 50-byte STATUSTEXT chunks.
+
+    A text that fills its last chunk exactly is followed by an empty chunk, so the receiver sees
+    the NUL that ends a chunked text (MAVLink STATUSTEXT ``chunk_seq`` rule).
+    """
+    data = text.encode("ascii", errors="replace")
+    if len(data) <= STATUSTEXT_LEN:
+        return [data]
+    chunks = [data[i : i + STATUSTEXT_LEN] for i in range(0, len(data), STATUSTEXT_LEN)]
+    if len(chunks[-1]) == STATUSTEXT_LEN:
+        chunks.append(b"")
+    return chunks
+
+
+class _Encoders:
+    """Typed encoders shared by :class:`MavEndpoint` and :class:`MavPacker`.
+
+    Subclasses provide ``_mav`` (a pymavlink ``MAVLink``) and ``_emit(msg) -> bytes``.
+    """
+
+    _mav: Any
+    _statustext_id = 0
+
+    def _emit(self, msg: Any) -> bytes:
+        raise NotImplementedError
+
+    def send_gps_input(self, fix: GpsInputFix) -> bytes:
+        msg = self._mav.gps_input_encode(
+            int(fix.time_usec),
+            int(fix.gps_id),
+            gps_input_ignore_flags(fix),
+            int(fix.gps_week_ms),
+            int(fix.gps_week),
+            int(fix.fix_type),
+            round(fix.lat_deg * 1e7),
+            round(fix.lon_deg * 1e7),
+            float(fix.alt_m),
+            float(fix.hdop),
+            _or0(fix.vdop),
+            _or0(fix.vn_mps),
+            _or0(fix.ve_mps),
+            _or0(fix.vd_mps),
+            float(fix.speed_accuracy_mps),
+            float(fix.horiz_accuracy_m),
+            float(fix.vert_accuracy_m),
+            int(fix.satellites_visible),
+        )
+        return self._emit(msg)
+
+    def send_statustext(self, severity: int, text: str) -> bytes:
+        """One STATUSTEXT, or several chunks sharing a nonzero ``id`` when text > 50 bytes."""
+        chunks = statustext_chunks(text)
+        if len(chunks) == 1:
+            return self._emit(self._mav.statustext_encode(severity, chunks[0]))
+        self._statustext_id = self._statustext_id % 0xFFFF + 1
+        out = b""
+        for seq, chunk in enumerate(chunks):
+            msg = self._mav.statustext_encode(severity, chunk, self._statustext_id, seq)
+            out += self._emit(msg)
+        return out
+
+    def send_heartbeat(self) -> bytes:
+        """MAV_TYPE_ONBOARD_CONTROLLER / MAV_AUTOPILOT_INVALID: a companion, not a vehicle."""
+        msg = self._mav.heartbeat_encode(
+            MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE
+        )
+        return self._emit(msg)
+
+    def request_mode(self, target_system: int, mode: str, vehicle: str = "rover") -> bytes:
+        """Ask the autopilot for a custom mode (``"HOLD"`` on a rover is custom mode 4).
+
+        Sent as COMMAND_LONG MAV_CMD_DO_SET_MODE (param1 = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        param2 = custom mode) to component 1 (the autopilot), not the deprecated SET_MODE
+        message: ArduPilot answers a COMMAND_LONG with COMMAND_ACK, so the bridge learns
+        whether the mode change was accepted.
+        """
+        number = custom_mode_number(mode, vehicle)
+        msg = self._mav.command_long_encode(
+            target_system,
+            1,
+            MAV_CMD_DO_SET_MODE,
+            0,
+            float(MAV_MODE_FLAG_CUSTOM_MODE_ENABLED),
+            float(number),
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        )
+        return self._emit(msg)
+
+    def send_named_value_float(self, name: str, value: float, time_boot_ms: int) -> bytes:
+        """NAMED_VALUE_FLOAT; ``name`` is cut to 10 ASCII bytes."""
+        raw = name.encode("ascii", errors="replace")[:NAMED_VALUE_NAME_LEN]
+        msg = self._mav.named_value_float_encode(int(time_boot_ms) & 0xFFFFFFFF, raw, value)
+        return self._emit(msg)
+
+    def send_param_value(self, name: str, value: float, index: int, count: int) -> bytes:
+        """PARAM_VALUE of a REAL32 parameter (``name`` up to 16 ASCII bytes)."""
+        raw = name.encode("ascii", errors="replace")[:PARAM_ID_LEN]
+        msg = self._mav.param_value_encode(raw, value, MAV_PARAM_TYPE_REAL32, count, index)
+        return self._emit(msg)
+
+    def send_command_ack(
+        self, command: int, result: int, target_system: int = 0, target_component: int = 0
+    ) -> bytes:
+        msg = self._mav.command_ack_encode(command, result, 0, 0, target_system, target_component)
+        return self._emit(msg)
+
+    def send_manual_control(
+        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0
+    ) -> bytes:
+        """MANUAL_CONTROL (x/y/r in -1000..1000, z in 0..1000 on ArduSub, 500 = neutral)."""
+        msg = self._mav.manual_control_encode(target_system, x, y, z, r, buttons)
+        return self._emit(msg)
+
+    def send_param_set(
+        self, target_system: int, target_component: int, name: str, value: float
+    ) -> bytes:
+        raw = name.encode("ascii", errors="replace")[:PARAM_ID_LEN]
+        msg = self._mav.param_set_encode(
+            target_system, target_component, raw, value, MAV_PARAM_TYPE_REAL32
+        )
+        return self._emit(msg)
+
+    def send_param_request_list(self, target_system: int, target_component: int) -> bytes:
+        return self._emit(self._mav.param_request_list_encode(target_system, target_component))
+
+    def send_param_request_read(
+        self, target_system: int, target_component: int, name: str, index: int = -1
+    ) -> bytes:
+        raw = name.encode("ascii", errors="replace")[:PARAM_ID_LEN]
+        msg = self._mav.param_request_read_encode(target_system, target_component, raw, index)
+        return self._emit(msg)
+
+    def setup_signing(self, key: bytes, *, link_id: int = 0, timestamp: int | None = None) -> None:
+        """Sign every packet sent from now on with the 32-byte ``key`` (MAVLink 2 signing).
+
+        ``timestamp`` is in 10 µs units since 2015-01-01 (default: now).
+        """
+        if len(key) != 32:
+            raise ValueError("a MAVLink signing key is 32 bytes")
+        signing = self._mav.signing
+        signing.secret_key = bytes(key)
+        signing.sign_outgoing = True
+        signing.link_id = link_id
+        signing.timestamp = signing_timestamp_now() if timestamp is None else timestamp
+
+
+_SIGNING_EPOCH_S = 1420070400  # 2015-01-01T00:00:00Z
+
+
+def signing_timestamp_now(now_s: float | None = None) -> int:
+    """A MAVLink signing timestamp (10 µs units since 2015-01-01) for ``now_s`` (Unix s)."""
+    import time
+
+    t = time.time() if now_s is None else now_s
+    return int(max(0.0, t - _SIGNING_EPOCH_S) * 100_000)
+
+
+class _Sink:
+    """A file-like object pymavlink's ``MAVLink.send`` writes into; keeps the last packet."""
+
+    def __init__(self) -> None:
+        self.last = b""
+
+    def write(self, buf: bytes) -> None:
+        self.last = bytes(buf)
+
+
+class MavPacker(_Encoders):
+    """The encoders of :class:`MavEndpoint` with no connection: each call returns the packet.
+
+    The sequence number advances per packet as on a real link; signing works the same way.
+    """
+
+    def __init__(self, source_system: int = 1, source_component: int = 191) -> None:
+        self._sink = _Sink()
+        self._mav = MAVLink(self._sink, srcSystem=source_system, srcComponent=source_component)
+
+    @property
+    def source_system(self) -> int:
+        return int(self._mav.srcSystem)
+
+    @property
+    def source_component(self) -> int:
+        return int(self._mav.srcComponent)
+
+    def _emit(self, msg: Any) -> bytes:
+        self._mav.send(msg)
+        return self._sink.last
+
+
+class MavEndpoint(_Encoders):
+    """A pymavlink connection by URL that sends typed messages and returns the bytes sent.
+
+    ``url`` is what ``mavutil.mavlink_connection`` takes: ``udpout:HOST:PORT`` (send to),
+    ``udpin:HOST:PORT`` (listen on; port 0 picks a free one, see :attr:`local_address`),
+    ``tcp:HOST:PORT``, ``tcpin:HOST:PORT`` or a serial device path with ``baud``.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        source_system: int = 1,
+        source_component: int = 191,
+        baud: int = 57600,
+    ) -> None:
+        self.url = url
+        self.bad_packets = 0
+        try:
+            self._conn = mavutil.mavlink_connection(
+                url,
+                baud=baud,
+                source_system=source_system,
+                source_component=source_component,
+                dialect=DIALECT,
+                autoreconnect=False,
+            )
+        except (OSError, ValueError, MAVError) as err:
+            raise PortError(f"could not open MAVLink endpoint {url!r}: {err}") from err
+        except Exception as err:  # serial.SerialException and other driver errors
+            raise PortError(f"could not open MAVLink endpoint {url!r}: {err}") from err
+        self._mav = self._conn.mav
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """``(host, port)`` the underlying socket is bound to, or None (serial, file)."""
+        port = getattr(self._conn, "port", None)
+        getsockname = getattr(port, "getsockname", None)
+        if getsockname is None:
+            return None
+        host, portnum = getsockname()[:2]
+        return str(host), int(portnum)
+
+    def _emit(self, msg: Any) -> bytes:
+        try:
+            self._mav.send(msg)
+        except OSError as err:
+            raise PortError(f"could not write to {self.url!r}: {err}") from err
+        return bytes(msg.get_msgbuf())
+
+    def send_raw(self, data: bytes) -> None:
+        """Write already-packed bytes (a replayed packet) unchanged."""
+        try:
+            self._conn.write(data)
+        except OSError as err:
+            raise PortError(f"could not write to {self.url!r}: {err}") from err
+
+    def recv(self, timeout_s: float = 0.0) -> Any | None:
+        """The next decoded message, or None when none came within ``timeout_s``.
+
+        Packets pymavlink could not decode (``BAD_DATA``) are counted in :attr:`bad_packets`
+        and skipped.
+        """
+        import time
+
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        while True:
+            try:
+                if timeout_s > 0:
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        return None
+                    msg = self._conn.recv_match(blocking=True, timeout=remaining)
+                else:
+                    msg = self._conn.recv_msg()
+            except OSError as err:
+                raise PortError(f"could not read from {self.url!r}: {err}") from err
+            if msg is None:
+                return None
+            if msg.get_type() == "BAD_DATA":
+                self.bad_packets += 1
+                continue
+            return msg
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self._conn.close()
+
+    def __enter__(self) -> MavEndpoint:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# A parser used only by decode_packet: pymavlink's decode() keeps signing/sequence counters but
+# no state that changes how the next packet decodes (no secret key is ever set on it).
+_decoder = MAVLink(None)
+_decoder.robust_parsing = True
+
+
+def decode_packet(data: bytes) -> Any | None:
+    """Decode one complete framed packet; None when its CRC or length is wrong.
+
+    A message id the dialect does not know decodes to pymavlink's ``MAVLink_unknown``
+    (``get_type()`` ``"UNKNOWN_<id>"``), not None. Signatures are not checked here.
+    """
+    try:
+        return _decoder.decode(bytearray(data))
+    except (MAVError, struct.error, IndexError, ValueError):
+        return None
+
+
+@dataclass(frozen=True)
+class TlogRecord:
+    """One record of a ``.tlog``: the timestamp and the packet as stored."""
+
+    t_us: int  # the 8-byte big-endian microsecond timestamp
+    raw: bytes  # the packet bytes exactly as in the file
+    msg: Any | None  # decoded pymavlink message, or None for BAD_DATA / undecodable
+
+
+_MAGIC_V1 = 0xFE
+_MAGIC_V2 = 0xFD
+
+
+def _packet_length(buf: bytes, pos: int) -> int | None:
+    """Length of the packet starting at ``buf[pos]`` from its header, or None if not a start."""
+    if pos >= len(buf):
+        return None
+    magic = buf[pos]
+    if magic == _MAGIC_V1:
+        if pos + 2 > len(buf):
+            return None
+        return 6 + buf[pos + 1] + 2
+    if magic == _MAGIC_V2:
+        if pos + 3 > len(buf):
+            return None
+        signed = buf[pos + 2] & 0x01
+        return 10 + buf[pos + 1] + 2 + (13 if signed else 0)
+    return None
+
+
+def iter_tlog(path: str | os.PathLike[str]) -> Iterator[TlogRecord]:
+    """Iterate over a QGroundControl ``.tlog``: 8-byte big-endian µs, then one packet, repeated.
+
+    Each packet's length comes from its header. A record whose packet does not start with a
+    MAVLink magic byte (a damaged file) becomes one record holding the bytes up to the next
+    position where a plausible timestamp + magic pair starts, with ``msg = None``. A packet
+    whose CRC does not match the dialect is yielded with its bytes and ``msg = None`` (what
+    pymavlink reports as ``BAD_DATA``). A truncated final record is yielded with ``msg = None``.
+    """
+    data = Path(path).read_bytes()
+    pos = 0
+    end = len(data)
+    while pos + 8 < end:
+        (t_us,) = struct.unpack_from(">Q", data, pos)
+        start = pos + 8
+        length = _packet_length(data, start)
+        if length is None:
+            nxt = _resync_tlog(data, start + 1, t_us)
+            yield TlogRecord(t_us, data[start:nxt], None)
+            pos = nxt
+            continue
+        raw = data[start : start + length]
+        pos = start + length
+        if len(raw) < length:
+            yield TlogRecord(t_us, raw, None)
+            break
+        yield TlogRecord(t_us, raw, decode_packet(raw))
+
+
+def _resync_tlog(data: bytes, pos: int, t_us: int) -> int:
+    """First offset >= pos where a timestamp within a day of ``t_us`` precedes a magic byte."""
+    day_us = 86_400 * 1_000_000
+    for i in range(pos, len(data) - 8):
+        if data[i + 8] in (_MAGIC_V1, _MAGIC_V2):
+            (t,) = struct.unpack_from(">Q", data, i)
+            if abs(t - t_us) < day_us:
+                return i
+    return len(data)
