@@ -1,0 +1,524 @@
+"""NMEA 0183: the framer (bytes -> lines) and the codec (line -> typed message).
+
+Two layers, kept apart (pynmeagps style):
+
+* :class:`NmeaFramer` turns an arbitrary byte stream into candidate sentences. It resyncs on
+  ``$``, caps a line's length *before* collecting more of it, and reports every rejected piece
+  with a reason (``garbage``, ``too_long``, ``truncated``, ``bad_chars``).
+* :func:`parse_sentence` is a pure function from one line to a frozen dataclass (:class:`Gga`,
+  :class:`Rmc`, :class:`Vtg`, :class:`Gsa`, :class:`Gst`, :class:`Zda`, :class:`Gll`). It
+  requires a valid checksum, uses pynmea2 (``check=True``) only to split and identify the
+  sentence, and converts every field itself with range checks: pynmea2 coerces bad fields
+  silently, so none of its conversions reach the estimators. A bad sentence raises
+  :class:`~fdi.errors.DecodeError` with a short reason; proprietary (``$P...``) and unknown
+  sentences raise :class:`Ignored` so the caller counts them without calling them errors.
+
+Units are in the field names: degrees, metres, metres per second, seconds of day (UTC).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import pynmea2
+
+from fdi.errors import DecodeError
+
+KNOT_MPS = 1852.0 / 3600.0
+KMH_MPS = 1000.0 / 3600.0
+MAX_LINE = 120  # NMEA 0183 says 82 characters; receivers in the wild send a little more
+
+SUPPORTED = frozenset({"GGA", "RMC", "VTG", "GSA", "GST", "ZDA", "GLL"})
+
+
+class Ignored(Exception):  # noqa: N818 - a control-flow signal, not an error
+    """A well-formed sentence this codec does not use (proprietary or unknown type)."""
+
+    def __init__(self, reason: str, sentence_type: str) -> None:
+        self.reason = reason
+        self.sentence_type = sentence_type
+        super().__init__(f"{reason}: {sentence_type}")
+
+
+# --------------------------------------------------------------------------- framer
+
+
+@dataclass(frozen=True, slots=True)
+class Rejected:
+    """A piece of the byte stream the framer threw away, and why."""
+
+    reason: str
+    data: bytes
+
+
+class NmeaFramer:
+    """Bytes in, lines out. ``feed`` yields ``bytes`` (a complete line, no CR/LF) or ``Rejected``.
+
+    A line starts at ``$`` and ends at CR or LF. A ``$`` inside a line means the previous
+    sentence was cut short (a packet collision): the partial line is rejected as ``truncated``
+    and a new line starts. A line that reaches ``max_line`` characters without an end is
+    rejected as ``too_long`` and the framer waits for the next ``$``. Bytes between lines are
+    ``garbage`` (CR/LF and blanks excepted).
+    """
+
+    def __init__(self, max_line: int = MAX_LINE) -> None:
+        self.max_line = max_line
+        self._buf = bytearray()
+        self._in_line = False
+        self._garbage = bytearray()
+        self._skipping = False  # after too_long: drop until the next '$'
+
+    def feed(self, data: bytes) -> Iterator[bytes | Rejected]:
+        buf = self._buf
+        for byte in data:
+            if byte == 0x24:  # '$'
+                if self._garbage:
+                    yield Rejected("garbage", bytes(self._garbage))
+                    self._garbage.clear()
+                if self._in_line and buf:
+                    yield Rejected("truncated", bytes(buf))
+                buf.clear()
+                buf.append(byte)
+                self._in_line = True
+                self._skipping = False
+            elif byte in (0x0D, 0x0A):
+                if self._in_line:
+                    line = bytes(buf)
+                    buf.clear()
+                    self._in_line = False
+                    if all(0x20 <= c < 0x7F for c in line):
+                        yield line
+                    else:
+                        yield Rejected("bad_chars", line)
+                elif self._garbage:
+                    yield Rejected("garbage", bytes(self._garbage))
+                    self._garbage.clear()
+                self._skipping = False
+            elif self._in_line:
+                buf.append(byte)
+                if len(buf) >= self.max_line:
+                    yield Rejected("too_long", bytes(buf))
+                    buf.clear()
+                    self._in_line = False
+                    self._skipping = True
+            elif not self._skipping and byte not in (0x20, 0x09, 0x00):
+                self._garbage.append(byte)
+                if len(self._garbage) >= self.max_line:
+                    yield Rejected("garbage", bytes(self._garbage))
+                    self._garbage.clear()
+
+    def flush(self) -> Iterator[Rejected]:
+        """End of stream: whatever is pending is a truncated line (or garbage)."""
+        if self._in_line and self._buf:
+            yield Rejected("truncated", bytes(self._buf))
+        if self._garbage:
+            yield Rejected("garbage", bytes(self._garbage))
+        self._buf.clear()
+        self._garbage.clear()
+        self._in_line = False
+
+
+# --------------------------------------------------------------------------- messages
+
+
+@dataclass(frozen=True, slots=True)
+class Gga:
+    talker: str
+    time_s: float | None
+    lat_deg: float | None
+    lon_deg: float | None
+    quality: int
+    num_sats: int | None
+    hdop: float | None
+    alt_msl_m: float | None
+    geoid_sep_m: float | None
+    dgps_age_s: float | None
+    dgps_station: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class Rmc:
+    talker: str
+    time_s: float | None
+    valid: bool
+    lat_deg: float | None
+    lon_deg: float | None
+    speed_mps: float | None
+    course_deg: float | None
+    date: tuple[int, int, int] | None  # (year, month, day)
+    mode: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class Vtg:
+    talker: str
+    course_deg: float | None
+    speed_mps: float | None
+    mode: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class Gsa:
+    talker: str
+    fix_mode: int | None  # 1 none, 2 2D, 3 3D
+    pdop: float | None
+    hdop: float | None
+    vdop: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class Gst:
+    talker: str
+    time_s: float | None
+    rms_m: float | None
+    sd_lat_m: float | None
+    sd_lon_m: float | None
+    sd_alt_m: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class Zda:
+    talker: str
+    time_s: float | None
+    date: tuple[int, int, int] | None
+
+
+@dataclass(frozen=True, slots=True)
+class Gll:
+    talker: str
+    time_s: float | None
+    valid: bool
+    lat_deg: float | None
+    lon_deg: float | None
+
+
+NmeaMessage = Gga | Rmc | Vtg | Gsa | Gst | Zda | Gll
+
+
+# --------------------------------------------------------------------------- field helpers
+
+
+def checksum(body: bytes | str) -> int:
+    """XOR of the characters between ``$`` and ``*``."""
+    data = body.encode("ascii") if isinstance(body, str) else body
+    value = 0
+    for c in data:
+        value ^= c
+    return value
+
+
+def _float(text: str, name: str) -> float | None:
+    if text == "":
+        return None
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise DecodeError("bad_field", f"{name}={text!r}") from err
+    if not math.isfinite(value):
+        raise DecodeError("bad_field", f"{name}={text!r}")
+    return value
+
+
+def _nonneg(text: str, name: str) -> float | None:
+    value = _float(text, name)
+    if value is not None and value < 0:
+        raise DecodeError("bad_field", f"{name}={text!r}")
+    return value
+
+
+def _int(text: str, name: str) -> int | None:
+    if text == "":
+        return None
+    try:
+        return int(text)
+    except ValueError as err:
+        raise DecodeError("bad_field", f"{name}={text!r}") from err
+
+
+def _time(text: str) -> float | None:
+    """hhmmss[.sss] -> seconds of day."""
+    if text == "":
+        return None
+    if len(text) < 6 or not text[:6].isdigit():
+        raise DecodeError("bad_field", f"time={text!r}")
+    hh, mm = int(text[0:2]), int(text[2:4])
+    try:
+        ss = float(text[4:])
+    except ValueError as err:
+        raise DecodeError("bad_field", f"time={text!r}") from err
+    if hh > 23 or mm > 59 or not 0.0 <= ss < 61.0:
+        raise DecodeError("bad_field", f"time={text!r}")
+    return hh * 3600 + mm * 60 + ss
+
+
+def _date(ddmmyy: str) -> tuple[int, int, int] | None:
+    if ddmmyy == "":
+        return None
+    if len(ddmmyy) != 6 or not ddmmyy.isdigit():
+        raise DecodeError("bad_field", f"date={ddmmyy!r}")
+    d, m, y = int(ddmmyy[0:2]), int(ddmmyy[2:4]), int(ddmmyy[4:6])
+    if not (1 <= d <= 31 and 1 <= m <= 12):
+        raise DecodeError("bad_field", f"date={ddmmyy!r}")
+    # NMEA's two-digit year: 80..99 -> 19xx, else 20xx (as gpsd does around its pivot).
+    return (1900 + y if y >= 80 else 2000 + y, m, d)
+
+
+def _latlon(value: str, hemi: str, is_lat: bool) -> float | None:
+    """ddmm.mmmm / dddmm.mmmm with hemisphere -> signed degrees, strictly range-checked."""
+    if value == "" and hemi == "":
+        return None
+    name = "lat" if is_lat else "lon"
+    if value == "" or hemi == "":
+        raise DecodeError("bad_field", f"{name}={value!r},{hemi!r}")
+    deg_digits = 2 if is_lat else 3
+    head, _, _ = value.partition(".")
+    if len(head) != deg_digits + 2 or not head.isdigit():
+        raise DecodeError("bad_field", f"{name}={value!r}")
+    try:
+        degrees = int(value[:deg_digits])
+        minutes = float(value[deg_digits:])
+    except ValueError as err:
+        raise DecodeError("bad_field", f"{name}={value!r}") from err
+    limit = 90 if is_lat else 180
+    if not 0.0 <= minutes < 60.0 or degrees > limit:
+        raise DecodeError("bad_field", f"{name}={value!r}")
+    result = degrees + minutes / 60.0
+    if result > limit:
+        raise DecodeError("bad_field", f"{name}={value!r}")
+    valid_hemi = ("N", "S") if is_lat else ("E", "W")
+    if hemi not in valid_hemi:
+        raise DecodeError("bad_field", f"{name} hemisphere={hemi!r}")
+    return -result if hemi in ("S", "W") else result
+
+
+def _field(data: list[str], i: int) -> str:
+    return data[i].strip() if i < len(data) else ""
+
+
+# --------------------------------------------------------------------------- codec
+
+
+def parse_sentence(line: bytes) -> NmeaMessage:
+    """One framed line (``$...*HH``, no CR/LF) -> a typed message.
+
+    Raises :class:`DecodeError` (reasons ``no_checksum``, ``bad_checksum``, ``parse_error``,
+    ``bad_field``, ``short``) or :class:`Ignored` (``proprietary``, ``unknown_sentence``).
+    """
+    star = line.rfind(b"*")
+    if star < 0 or len(line) - star != 3:
+        raise DecodeError("no_checksum", line[:20].decode("ascii", "replace"))
+    try:
+        given = int(line[star + 1 :], 16)
+    except ValueError as err:
+        raise DecodeError("no_checksum", line[star:].decode("ascii", "replace")) from err
+    body = line[1:star]
+    if checksum(body) != given:
+        raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
+    address = body.split(b",", 1)[0].decode("ascii")
+    if address.startswith("P"):
+        raise Ignored("proprietary", address)
+    if len(address) != 5 or not address.isalpha():
+        raise DecodeError("parse_error", f"address {address!r}")
+    talker, kind = address[:2], address[2:]
+    if kind not in SUPPORTED:
+        raise Ignored("unknown_sentence", address)
+    try:
+        msg = pynmea2.parse(line.decode("ascii"), check=True)
+    except (pynmea2.ParseError, ValueError, AttributeError, TypeError) as err:
+        raise DecodeError("parse_error", str(err)[:60]) from err
+    data: list[str] = list(msg.data)
+    return _DECODERS[kind](talker, data)
+
+
+def _gga(talker: str, d: list[str]) -> Gga:
+    if len(d) < 9:
+        raise DecodeError("short", f"GGA has {len(d)} fields")
+    quality = _int(_field(d, 5), "quality")
+    if quality is None:
+        quality = 0
+    if not 0 <= quality <= 9:
+        raise DecodeError("bad_field", f"quality={quality}")
+    sats = _int(_field(d, 6), "sats")
+    if sats is not None and not 0 <= sats <= 99:
+        raise DecodeError("bad_field", f"sats={sats}")
+    return Gga(
+        talker=talker,
+        time_s=_time(_field(d, 0)),
+        lat_deg=_latlon(_field(d, 1), _field(d, 2), True),
+        lon_deg=_latlon(_field(d, 3), _field(d, 4), False),
+        quality=quality,
+        num_sats=sats,
+        hdop=_nonneg(_field(d, 7), "hdop"),
+        alt_msl_m=_float(_field(d, 8), "alt"),
+        geoid_sep_m=_float(_field(d, 10), "geoid_sep"),
+        dgps_age_s=_nonneg(_field(d, 12), "dgps_age"),
+        dgps_station=_field(d, 13) or None,
+    )
+
+
+def _rmc(talker: str, d: list[str]) -> Rmc:
+    if len(d) < 9:
+        raise DecodeError("short", f"RMC has {len(d)} fields")
+    status = _field(d, 1)
+    if status not in ("A", "V", ""):
+        raise DecodeError("bad_field", f"status={status!r}")
+    mode = _field(d, 11) or None
+    valid = status == "A" and mode != "N"
+    speed_kn = _nonneg(_field(d, 6), "speed")
+    course = _float(_field(d, 7), "course")
+    if course is not None and not 0.0 <= course <= 360.0:
+        raise DecodeError("bad_field", f"course={course}")
+    try:
+        lat = _latlon(_field(d, 2), _field(d, 3), True)
+        lon = _latlon(_field(d, 4), _field(d, 5), False)
+    except DecodeError:
+        if valid:
+            raise
+        lat = lon = None  # void RMC with junk placeholders (seen: lat "36000.0000")
+    return Rmc(
+        talker=talker,
+        time_s=_time(_field(d, 0)),
+        valid=valid,
+        lat_deg=lat,
+        lon_deg=lon,
+        speed_mps=None if speed_kn is None else speed_kn * KNOT_MPS,
+        course_deg=course,
+        date=_date(_field(d, 8)) if valid else _safe_date(_field(d, 8)),
+        mode=mode,
+    )
+
+
+def _safe_date(text: str) -> tuple[int, int, int] | None:
+    try:
+        return _date(text)
+    except DecodeError:
+        return None
+
+
+def _vtg(talker: str, d: list[str]) -> Vtg:
+    # Modern form: course,T,course_m,M,speed_kn,N,speed_kmh,K[,mode]
+    course = _float(_field(d, 0), "course")
+    if course is not None and not 0.0 <= course <= 360.0:
+        raise DecodeError("bad_field", f"course={course}")
+    speed_kmh = _nonneg(_field(d, 6), "speed_kmh")
+    speed_kn = _nonneg(_field(d, 4), "speed_kn")
+    if speed_kmh is not None:
+        speed = speed_kmh * KMH_MPS
+    elif speed_kn is not None:
+        speed = speed_kn * KNOT_MPS
+    else:
+        speed = None
+    mode = _field(d, 8) or None
+    if mode == "N":
+        course = speed = None
+    return Vtg(talker=talker, course_deg=course, speed_mps=speed, mode=mode)
+
+
+def _gsa(talker: str, d: list[str]) -> Gsa:
+    if len(d) < 17:
+        raise DecodeError("short", f"GSA has {len(d)} fields")
+    fix = _int(_field(d, 1), "fix_mode")
+    return Gsa(
+        talker=talker,
+        fix_mode=fix,
+        pdop=_nonneg(_field(d, 14), "pdop"),
+        hdop=_nonneg(_field(d, 15), "hdop"),
+        vdop=_nonneg(_field(d, 16), "vdop"),
+    )
+
+
+def _gst(talker: str, d: list[str]) -> Gst:
+    if len(d) < 8:
+        raise DecodeError("short", f"GST has {len(d)} fields")
+    return Gst(
+        talker=talker,
+        time_s=_time(_field(d, 0)),
+        rms_m=_nonneg(_field(d, 1), "rms"),
+        sd_lat_m=_nonneg(_field(d, 5), "sd_lat"),
+        sd_lon_m=_nonneg(_field(d, 6), "sd_lon"),
+        sd_alt_m=_nonneg(_field(d, 7), "sd_alt"),
+    )
+
+
+def _zda(talker: str, d: list[str]) -> Zda:
+    if len(d) < 4:
+        raise DecodeError("short", f"ZDA has {len(d)} fields")
+    day, month, year = _int(_field(d, 1), "day"), _int(_field(d, 2), "month"), _int(
+        _field(d, 3), "year"
+    )
+    date: tuple[int, int, int] | None = None
+    if day is not None and month is not None and year is not None:
+        if not (1 <= day <= 31 and 1 <= month <= 12 and 1980 <= year <= 2200):
+            raise DecodeError("bad_field", f"date={day}/{month}/{year}")
+        date = (year, month, day)
+    return Zda(talker=talker, time_s=_time(_field(d, 0)), date=date)
+
+
+def _gll(talker: str, d: list[str]) -> Gll:
+    if len(d) < 6:
+        raise DecodeError("short", f"GLL has {len(d)} fields")
+    status = _field(d, 5)
+    mode = _field(d, 6) or None
+    valid = status == "A" and mode != "N"
+    try:
+        lat = _latlon(_field(d, 0), _field(d, 1), True)
+        lon = _latlon(_field(d, 2), _field(d, 3), False)
+    except DecodeError:
+        if valid:
+            raise
+        lat = lon = None
+    return Gll(talker=talker, time_s=_time(_field(d, 4)), valid=valid, lat_deg=lat, lon_deg=lon)
+
+
+_DECODERS = {
+    "GGA": _gga,
+    "RMC": _rmc,
+    "VTG": _vtg,
+    "GSA": _gsa,
+    "GST": _gst,
+    "ZDA": _zda,
+    "GLL": _gll,
+}
+
+
+# --------------------------------------------------------------------------- encoder
+
+
+def with_checksum(body: str) -> bytes:
+    """``"GPGGA,..."`` -> ``b"$GPGGA,...*HH\\r\\n"``."""
+    return f"${body}*{checksum(body):02X}\r\n".encode("ascii")
+
+
+def format_lat(lat_deg: float) -> tuple[str, str]:
+    hemi = "N" if lat_deg >= 0 else "S"
+    a = abs(lat_deg)
+    d = int(a)
+    m = (a - d) * 60.0
+    if round(m, 8) >= 60.0:
+        d, m = d + 1, 0.0
+    return f"{d:02d}{m:011.8f}", hemi
+
+
+def format_lon(lon_deg: float) -> tuple[str, str]:
+    hemi = "E" if lon_deg >= 0 else "W"
+    a = abs(lon_deg)
+    d = int(a)
+    m = (a - d) * 60.0
+    if round(m, 8) >= 60.0:
+        d, m = d + 1, 0.0
+    return f"{d:03d}{m:011.8f}", hemi
+
+
+def format_time(time_s: float) -> str:
+    t = round(time_s, 2) % 86400.0
+    hh = int(t // 3600)
+    mm = int((t - hh * 3600) // 60)
+    ss = t - hh * 3600 - mm * 60
+    return f"{hh:02d}{mm:02d}{ss:05.2f}"
+
+
+def format_date(date: tuple[int, int, int]) -> str:
+    y, m, d = date
+    return f"{d:02d}{m:02d}{y % 100:02d}"

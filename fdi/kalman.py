@@ -1,0 +1,101 @@
+"""Linear Kalman filter on GPS fixes, with the residual chi-square test.
+
+Zhou & Zhang (2010), section 1.1, equations (1)-(6). The state per axis is position and velocity
+(a constant-velocity model with white acceleration noise ``q``); the measurement is the fix's
+east/north/up position (m = 3). With a diagonal ``R`` the 6-state filter separates exactly into
+three 2-state filters, which is how it is computed here (plain floats: a NumPy 6×6 filter costs
+10× more on arrays this small; shared/FINDINGS.md). The symbols are filterpy's and the paper's:
+
+    x̂(k,k−1) = Φ x̂(k−1)                       (1)
+    ẑ(k,k−1) = H x̂(k,k−1)                      (2)
+    D(k)     = Z(k) − ẑ(k,k−1)                  (3)   innovation ("residual")
+    S(k)     = H P(k,k−1) Hᵀ + R(k)             (4)
+    F(k)     = Dᵀ S⁻¹ D                         (5)   ~ χ²(m) when there is no fault
+    fault  ⟺  F(k) > T_d,  P{F > T_d} = α       (6)
+
+The covariance update is in Joseph form. Units: metres, seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class AxisFilter:
+    """One axis: state ``[p, v]``, covariance ``[[P00, P01], [P01, P11]]``."""
+
+    p: float = 0.0
+    v: float = 0.0
+    P00: float = 1e6
+    P01: float = 0.0
+    P11: float = 1e6
+
+    def predict(self, dt: float, q: float) -> None:
+        # (1) x̂(k,k−1) = Φ x̂(k−1), Φ = [[1, dt], [0, 1]]
+        self.p += self.v * dt
+        # P(k,k−1) = Φ P Φᵀ + Q, Q = q [[dt³/3, dt²/2], [dt²/2, dt]]
+        p00 = self.P00 + 2.0 * dt * self.P01 + dt * dt * self.P11 + q * dt**3 / 3.0
+        p01 = self.P01 + dt * self.P11 + q * dt * dt / 2.0
+        p11 = self.P11 + q * dt
+        self.P00, self.P01, self.P11 = p00, p01, p11
+
+    def innovation(self, z: float, r: float) -> tuple[float, float]:
+        # (3) D = Z − H x̂(k,k−1);  (4) S = H P Hᵀ + R, H = [1, 0]
+        return z - self.p, self.P00 + r
+
+    def update(self, z: float, r: float) -> None:
+        d, s = self.innovation(z, r)
+        k0 = self.P00 / s
+        k1 = self.P01 / s
+        self.p += k0 * d
+        self.v += k1 * d
+        # Joseph form: P = (I − K H) P (I − K H)ᵀ + K R Kᵀ
+        a = 1.0 - k0
+        p00 = a * a * self.P00 + k0 * k0 * r
+        p01 = a * (self.P01 - k1 * self.P00) + k0 * k1 * r
+        p11 = self.P11 - 2.0 * k1 * self.P01 + k1 * k1 * self.P00 + k1 * k1 * r
+        self.P00, self.P01, self.P11 = p00, p01, p11
+
+
+@dataclass
+class GpsKalman:
+    """Three decoupled constant-velocity axes (east, north, up) with the χ² residual test."""
+
+    q: float = 0.5  # white acceleration spectral density, m²/s³
+    axes: list[AxisFilter] = field(default_factory=lambda: [AxisFilter() for _ in range(3)])
+    initialised: bool = False
+    # Last test, kept for inspection (filterpy's x_prior / mahalanobis idea).
+    D: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    S: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    F: float = 0.0
+
+    def reset(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
+        """Start at a fix with its own variance and an unknown velocity."""
+        for ax, zi, ri in zip(self.axes, z, r, strict=True):
+            ax.p, ax.v = zi, 0.0
+            ax.P00, ax.P01, ax.P11 = ri, 0.0, 25.0
+        self.initialised = True
+
+    def predict(self, dt: float) -> None:
+        for ax in self.axes:
+            ax.predict(dt, self.q)
+
+    def test(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> float:
+        """F(k) of eq. (5) for the predicted state; also stores ``D`` and ``S``."""
+        d0, s0 = self.axes[0].innovation(z[0], r[0])
+        d1, s1 = self.axes[1].innovation(z[1], r[1])
+        d2, s2 = self.axes[2].innovation(z[2], r[2])
+        self.D = (d0, d1, d2)
+        self.S = (s0, s1, s2)
+        # (5) F = Dᵀ S⁻¹ D with S diagonal
+        self.F = d0 * d0 / s0 + d1 * d1 / s1 + d2 * d2 / s2
+        return self.F
+
+    def update(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
+        for ax, zi, ri in zip(self.axes, z, r, strict=True):
+            ax.update(zi, ri)
+
+    @property
+    def position(self) -> tuple[float, float, float]:
+        return (self.axes[0].p, self.axes[1].p, self.axes[2].p)

@@ -1,0 +1,380 @@
+"""GPS hard-fault detection and isolation for the farm rover.
+
+Zhou Jun, Zhang Peng, "Hard fault isolation of GPS navigation system based on gray prediction
+for agricultural robot", Trans. CSAM 41(12), 2010. Per epoch:
+
+1. the Kalman filter's residual chi-square test, F(k) = DᵀS⁻¹D against T_d (eq. 1-6,
+   :mod:`fdi.kalman`), T_d computed from α and m = 3;
+2. the GM(1,1) one-step prediction of each axis from the last n valid fixes (eq. 7-17,
+   :mod:`fdi.grey`) and its residual ε(k) = x⁰(k) − x̂⁰(k) (eq. 18) against a gate;
+3. isolation: a fix judged faulty is replaced by its prediction *before* the filter update, and
+   the prediction window continues with the replaced value (section 2.2);
+4. "if the GPS data stay abnormal ... raise an alarm or stop automatic navigation" (section
+   2.2): past ``max_consecutive`` replacements the isolator raises an alarm, requests a stop of
+   automatic navigation, and restarts the window on the receiver's own data (no lock-in,
+   shared/FINDINGS.md), latching the alarm until ``recover_epochs`` fixes in a row pass.
+
+Beyond the paper, for real data (each is a parameter, and the paper preset turns it off):
+
+* ``predictor = "doppler"`` models, per axis, the fix minus the displacement integrated from the
+  receiver's Doppler speed and course (RMC/VTG). That series is the slowly varying DGPS error,
+  which GM(1,1) predicts to millimetres, so the residual no longer carries the vehicle's
+  manoeuvres (a 1 Hz headland turn costs GM(1,1) 0.33 m on raw positions; FINDINGS).
+* ``gate_sigmas > 0`` sets the grey gate from the residual spread actually observed (an
+  exponentially weighted RMS of accepted residuals) rather than from the absolute σ: real DGPS
+  error is correlated in time, so the residual is a few centimetres, not 1.55 σ.
+* ``gate_axes = "horizontal"`` tests the horizontal residual's length, so a jump is caught
+  whatever its direction; the vertical residual has its own gate.
+* quality screens (satellites, HDOP) from GGA; R from GST where the receiver sends it.
+
+Units: metres, seconds; positions are local east/north/up (:mod:`fdi.geodesy`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Literal
+
+from fdi.chi2 import threshold
+from fdi.grey import gm11_predict_shifted
+from fdi.kalman import GpsKalman
+
+Action = Literal["accept", "replace", "alarm", "no_fix"]
+
+
+@dataclass(frozen=True)
+class RoverDetectorParams:
+    """Detector parameters (the ``[rover.detector]`` config table)."""
+
+    strategy: Literal["grey", "three_zone", "combined"] = "grey"
+    # Section 1: residual chi-square test.
+    alpha: float = field(default=0.05, metadata={"gt": 0.0, "lt": 1.0})
+    chi2_enabled: bool = True
+    sigma_m: float = field(default=0.35, metadata={"gt": 0.0})  # R = σ² when no GST
+    sigma_up_m: float = field(default=0.7, metadata={"gt": 0.0})
+    use_gst: bool = True
+    q_accel: float = field(default=0.5, metadata={"gt": 0.0})  # m²/s³
+    # Section 2: GM(1,1) grey prediction.
+    window: int = field(default=5, metadata={"ge": 4, "le": 50})
+    predictor: Literal["raw", "doppler"] = "doppler"
+    shift_m: float = field(default=100.0, metadata={"gt": 0.0})
+    gate_m: float = field(default=0.7, metadata={"gt": 0.0})  # fixed gate (the floor if adaptive)
+    gate_up_m: float = field(default=1.5, metadata={"gt": 0.0})
+    gate_axes: Literal["per_axis", "horizontal"] = "horizontal"
+    gate_sigmas: float = field(default=0.0, metadata={"ge": 0.0})  # 0: fixed gate
+    gate_tau_epochs: float = field(default=200.0, metadata={"ge": 1.0})
+    gate_sigma0_m: float = field(default=0.1, metadata={"gt": 0.0})
+    test_up: bool = True
+    # Isolation and alarm.
+    max_consecutive: int = field(default=5, metadata={"ge": 0})
+    recover_epochs: int = field(default=5, metadata={"ge": 1})
+    # Quality screens (0 disables).
+    min_sats: int = field(default=4, metadata={"ge": 0})
+    max_hdop: float = field(default=0.0, metadata={"ge": 0.0})
+    # Time.
+    max_gap_s: float = field(default=5.0, metadata={"gt": 0.0})
+
+
+@dataclass(frozen=True, slots=True)
+class FixInput:
+    """One receiver epoch in local metres (``None`` position: the receiver has no fix)."""
+
+    t_s: float  # monotonic fix time (UTC seconds, rollover-corrected)
+    enu: tuple[float, float, float] | None
+    speed_mps: float | None = None
+    course_deg: float | None = None
+    sd_enu_m: tuple[float, float, float] | None = None  # from GST
+    num_sats: int | None = None
+    hdop: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """What the isolator did with one epoch, and the statistics that led to it."""
+
+    action: Action
+    fault: bool
+    reason: str
+    out_enu: tuple[float, float, float] | None  # what is passed on (None: nothing valid)
+    pred_enu: tuple[float, float, float] | None
+    grey_res_h: float | None
+    grey_res_u: float | None
+    grey_gate_h: float
+    grey_gate_u: float
+    chi2: float | None
+    chi2_threshold: float
+    consecutive: int
+    alarm: bool
+    alarm_raised: bool  # the alarm was raised at this epoch
+    kf_enu: tuple[float, float, float] | None
+
+
+class RoverIsolator:
+    """Feed :class:`FixInput` epochs in time order; get a :class:`Decision` for each."""
+
+    def __init__(self, params: RoverDetectorParams) -> None:
+        self.p = params
+        self.T_d = threshold(params.alpha, 3)  # eq. (6), m = 3
+        self.kf = GpsKalman(q=params.q_accel)
+        n = params.window
+        self._win: deque[tuple[float, float, float]] = deque(maxlen=n)  # Doppler-free values
+        self._disp = [0.0, 0.0, 0.0]  # Doppler-integrated displacement
+        self._last_v: tuple[float, float] | None = None
+        self._last_t: float | None = None
+        self._consec = 0
+        self._alarm = False
+        self._good_run = 0
+        self._var_h = params.gate_sigma0_m**2
+        self._var_u = (2.0 * params.gate_sigma0_m) ** 2
+        self._ewma = 1.0 / params.gate_tau_epochs
+
+    # -------------------------------------------------------------- helpers
+
+    def _restart(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
+        self._win.clear()
+        self._disp = [0.0, 0.0, 0.0]
+        self._win.append(z)
+        self.kf.reset(z, r)
+        self._consec = 0
+
+    def _r(self, fix: FixInput) -> tuple[float, float, float]:
+        sd = fix.sd_enu_m if self.p.use_gst else None
+        if sd is not None:
+            return (max(sd[0], 0.01) ** 2, max(sd[1], 0.01) ** 2, max(sd[2], 0.01) ** 2)
+        s, su = self.p.sigma_m, self.p.sigma_up_m
+        return (s * s, s * s, su * su)
+
+    def _velocity(self, fix: FixInput) -> tuple[float, float] | None:
+        if self.p.predictor != "doppler" or fix.speed_mps is None:
+            return None
+        if fix.course_deg is None:
+            return (0.0, 0.0) if fix.speed_mps < 0.05 else None
+        c = math.radians(fix.course_deg)
+        return (fix.speed_mps * math.sin(c), fix.speed_mps * math.cos(c))
+
+    def _predict(self) -> tuple[float, float, float] | None:
+        """Grey prediction of the Doppler-free value at this epoch (per axis)."""
+        w = self._win
+        if self.p.predictor == "raw":
+            if len(w) < self.p.window:
+                return None
+        elif not w:
+            return None
+        if len(w) < 4:
+            return w[-1]
+        shift = self.p.shift_m
+        return (
+            gm11_predict_shifted([v[0] for v in w], shift),
+            gm11_predict_shifted([v[1] for v in w], shift),
+            gm11_predict_shifted([v[2] for v in w], shift),
+        )
+
+    def _gates(self) -> tuple[float, float]:
+        p = self.p
+        if p.gate_sigmas <= 0.0:
+            return p.gate_m, p.gate_up_m
+        return (
+            max(p.gate_m, p.gate_sigmas * math.sqrt(self._var_h)),
+            max(p.gate_up_m, p.gate_sigmas * math.sqrt(self._var_u)),
+        )
+
+    # -------------------------------------------------------------- the step
+
+    def step(self, fix: FixInput) -> Decision:
+        p = self.p
+        gate_h, gate_u = self._gates()
+        if fix.enu is None:
+            return self._no_fix("no_fix", gate_h, gate_u)
+        dt = None if self._last_t is None else fix.t_s - self._last_t
+        if dt is not None and dt <= 0.0:
+            return self._no_fix("time_backwards" if dt < 0 else "duplicate_time", gate_h, gate_u)
+        z = fix.enu
+        r = self._r(fix)
+        v = self._velocity(fix)
+        self._last_t = fix.t_s
+
+        restart_reason = ""
+        if dt is None or not self.kf.initialised:
+            restart_reason = "start"
+        elif dt > p.max_gap_s:
+            restart_reason = "gap_restart"
+        if restart_reason:
+            self._restart(z, r)
+            self._last_v = v
+            return self._decide_accept(z, None, None, None, None, gate_h, gate_u, restart_reason)
+        assert dt is not None
+
+        # Doppler displacement over the interval (trapezoid); None breaks the Doppler chain.
+        lv = self._last_v
+        if p.predictor == "doppler" and v is not None and lv is not None:
+            self._disp[0] += 0.5 * (v[0] + lv[0]) * dt
+            self._disp[1] += 0.5 * (v[1] + lv[1]) * dt
+            chain_ok = True
+        else:
+            chain_ok = p.predictor == "raw"
+            if not chain_ok:
+                # No Doppler this epoch: the window's Doppler-free values no longer line up.
+                self._win.clear()
+                self._disp = [0.0, 0.0, 0.0]
+        self._last_v = v
+        d = self._disp
+
+        # Section 2: grey prediction and residual ε(k) (eq. 18).
+        y_hat = self._predict()
+        pred: tuple[float, float, float] | None = None
+        res_h = res_u = None
+        grey_fault = False
+        if y_hat is not None:
+            pred = (y_hat[0] + d[0], y_hat[1] + d[1], y_hat[2] + d[2])
+            ee, en, eu = z[0] - pred[0], z[1] - pred[1], z[2] - pred[2]
+            if p.gate_axes == "horizontal":
+                res_h = math.hypot(ee, en)
+                grey_fault = res_h > gate_h
+            else:
+                res_h = max(abs(ee), abs(en))
+                grey_fault = res_h > gate_h
+            res_u = abs(eu)
+            if p.test_up and res_u > gate_u:
+                grey_fault = True
+
+        # Section 1: Kalman prediction and residual chi-square test (eq. 1-6).
+        self.kf.predict(dt)
+        F = self.kf.test(z, r)
+        chi2_fault = p.chi2_enabled and F > self.T_d
+
+        reasons = []
+        if grey_fault:
+            reasons.append("grey")
+        if chi2_fault:
+            reasons.append("chi2")
+        if p.min_sats and fix.num_sats is not None and fix.num_sats < p.min_sats:
+            reasons.append("sats")
+        if p.max_hdop and fix.hdop is not None and fix.hdop > p.max_hdop:
+            reasons.append("hdop")
+        fault = bool(reasons)
+
+        if not fault:
+            self._consec = 0
+            if res_h is not None and res_u is not None:
+                self._learn_spread(z, pred)
+            self._window_append(z, d)
+            self.kf.update(z, r)
+            return self._decide_accept(z, pred, res_h, res_u, F, gate_h, gate_u, "")
+
+        # Isolation: replace the faulty fix by its prediction before the filter update.
+        if pred is not None and self._consec < p.max_consecutive:
+            self._consec += 1
+            self._good_run = 0
+            self._window_append(pred, d)
+            self.kf.update(pred, r)
+            return Decision(
+                action="alarm" if self._alarm else "replace",
+                fault=True,
+                reason="+".join(reasons),
+                out_enu=None if self._alarm else pred,
+                pred_enu=pred,
+                grey_res_h=res_h,
+                grey_res_u=res_u,
+                grey_gate_h=gate_h,
+                grey_gate_u=gate_u,
+                chi2=F,
+                chi2_threshold=self.T_d,
+                consecutive=self._consec,
+                alarm=self._alarm,
+                alarm_raised=False,
+                kf_enu=self.kf.position,
+            )
+        # Too many in a row (or nothing to replace with): alarm, stop automatic navigation,
+        # restart on the receiver's data.
+        raised = not self._alarm
+        self._alarm = True
+        self._good_run = 0
+        self._restart(z, r)
+        return Decision(
+            action="alarm",
+            fault=True,
+            reason="+".join(reasons),
+            out_enu=None,
+            pred_enu=pred,
+            grey_res_h=res_h,
+            grey_res_u=res_u,
+            grey_gate_h=gate_h,
+            grey_gate_u=gate_u,
+            chi2=F,
+            chi2_threshold=self.T_d,
+            consecutive=self._consec,
+            alarm=True,
+            alarm_raised=raised,
+            kf_enu=self.kf.position,
+        )
+
+    # -------------------------------------------------------------- pieces
+
+    def _window_append(self, value: tuple[float, float, float], d: list[float]) -> None:
+        self._win.append((value[0] - d[0], value[1] - d[1], value[2] - d[2]))
+
+    def _learn_spread(
+        self, z: tuple[float, float, float], pred: tuple[float, float, float] | None
+    ) -> None:
+        if pred is None:
+            return
+        ee, en, eu = z[0] - pred[0], z[1] - pred[1], z[2] - pred[2]
+        w = self._ewma
+        self._var_h += w * (0.5 * (ee * ee + en * en) - self._var_h)
+        self._var_u += w * (eu * eu - self._var_u)
+
+    def _decide_accept(
+        self,
+        z: tuple[float, float, float],
+        pred: tuple[float, float, float] | None,
+        res_h: float | None,
+        res_u: float | None,
+        F: float | None,
+        gate_h: float,
+        gate_u: float,
+        reason: str,
+    ) -> Decision:
+        if self._alarm:
+            self._good_run += 1
+            if self._good_run >= self.p.recover_epochs:
+                self._alarm = False
+                reason = reason or "recovered"
+        alarm = self._alarm
+        return Decision(
+            action="alarm" if alarm else "accept",
+            fault=False,
+            reason=reason,
+            out_enu=None if alarm else z,
+            pred_enu=pred,
+            grey_res_h=res_h,
+            grey_res_u=res_u,
+            grey_gate_h=gate_h,
+            grey_gate_u=gate_u,
+            chi2=F,
+            chi2_threshold=self.T_d,
+            consecutive=0,
+            alarm=alarm,
+            alarm_raised=False,
+            kf_enu=self.kf.position if self.kf.initialised else None,
+        )
+
+    def _no_fix(self, reason: str, gate_h: float, gate_u: float) -> Decision:
+        return Decision(
+            action="no_fix",
+            fault=False,
+            reason=reason,
+            out_enu=None,
+            pred_enu=None,
+            grey_res_h=None,
+            grey_res_u=None,
+            grey_gate_h=gate_h,
+            grey_gate_u=gate_u,
+            chi2=None,
+            chi2_threshold=self.T_d,
+            consecutive=self._consec,
+            alarm=self._alarm,
+            alarm_raised=False,
+            kf_enu=self.kf.position if self.kf.initialised else None,
+        )
