@@ -96,6 +96,31 @@ def crc_extra_table() -> dict[int, int]:
     return {msgid: int(cls.crc_extra) for msgid, cls in mavlink2.mavlink_map.items()}
 
 
+def target_offsets() -> dict[int, tuple[int | None, int | None]]:
+    """``{msgid: (target_system offset, target_component offset)}`` in the wire payload.
+
+    Only messages with a target field are listed. MANUAL_CONTROL's field ``target`` ("the
+    system to be controlled") counts as its target system. Offsets are into the untruncated
+    payload; a MAVLink 2 packet whose payload was cut before the offset has target 0 there.
+    """
+    out: dict[int, tuple[int | None, int | None]] = {}
+    for msgid, cls in mavlink2.mavlink_map.items():
+        names = list(cls.ordered_fieldnames)
+        offset = 0
+        offsets: dict[str, int] = {}
+        for i, name in enumerate(names):
+            offsets[name] = offset
+            code = chr(cls.native_format[i + 1])  # [0] is the "<" byte-order mark
+            offset += struct.calcsize("<" + code) * max(1, int(cls.array_lengths[i]))
+        sys_name = "target_system" if "target_system" in offsets else None
+        if sys_name is None and "target" in offsets and cls.msgname == "MANUAL_CONTROL":
+            sys_name = "target"
+        if sys_name is None:
+            continue
+        out[msgid] = (offsets[sys_name], offsets.get("target_component"))
+    return out
+
+
 def message_name(msgid: int) -> str | None:
     """The dialect's name of message ``msgid`` (``"HEARTBEAT"``), or None when unknown."""
     cls = mavlink2.mavlink_map.get(msgid)
