@@ -1,0 +1,318 @@
+"""Adaptive FIR trained by LMS, and the dual-criterion compass fault detector.
+
+Zhu, Chen & Liu (2009), "Sensor fault diagnosis and fault-tolerant control method of underwater
+vehicles", Control and Decision 24(9):1335-1339, eq. (3)-(5) (the FIR and its LMS training),
+(7) (criterion 1, e^2 > theta) and (8)-(12) (criterion 2, the weight-drift SNR R(k) > n0).
+
+Units and shapes. Each call of :meth:`DualCriterionDetector.step` is one control period
+(0.2 s on the Outland 1000). ``u`` is the yaw command that was *sent* during the previous period
+(differential thrust, %, -100..100); ``y`` is the compass heading in degrees, unwrapped by the
+caller or not (increments are wrapped to (-180, 180] here). The FIR has ``M`` input taps
+u(k-1) ... u(k-M) (strictly causal: the command of step k is computed from the reading of step k,
+so u(k) would let the filter read the sensor back through the controller and hide a fault), plus
+an optional bias tap (constant input 1) that absorbs a steady current. Inputs are scaled to
+(u - u_op) / u_scale so that |x| <= 1 and mu = 0.01 is inside the LMS stability bound
+(mu < 1 / tr(R) = 1 / (M + 1)). The filter predicts the heading *increment* y(k) - y(k-1) in units
+of deg / y_scale (an FIR cannot represent the yaw integrator when asked for absolute heading).
+e^2 is reported in deg^2. The weight vector C_k has shape (M,) or (M + 1,) with the bias last.
+
+Measured traps this design avoids are listed in ``../shared/FINDINGS.md`` ("Adaptive FIR with
+LMS"). Plain Python floats with a doubled ring buffer and running sums: one step costs a few
+microseconds (see ``firmware_host.rov_app.bench_rov_step``).
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from collections import deque
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Parameters of the FIR, LMS and both criteria (the ``[detector]`` table)."""
+
+    order: int = field(default=70, metadata={"ge": 1, "le": 1000, "doc": "M, FIR taps"})
+    mu: float = field(default=0.01, metadata={"gt": 0.0, "lt": 1.0, "doc": "LMS step"})
+    bias_tap: bool = True
+    u_op: float = field(default=0.0, metadata={"doc": "operating point of u, %"})
+    u_op_samples: int = field(default=50, metadata={"ge": 0, "doc": "EMA of u_op, 0: fixed"})
+    u_scale: float = field(default=100.0, metadata={"gt": 0.0, "doc": "% per unit input"})
+    y_scale: float = field(default=30.0, metadata={"gt": 0.0, "doc": "deg per unit output"})
+    theta_deg2: float = field(default=9.0, metadata={"gt": 0.0, "doc": "theta of eq. (7)"})
+    snr_window: int = field(default=50, metadata={"ge": 3, "doc": "n of eq. (8)-(11), samples"})
+    n0: float = field(default=4.0, metadata={"gt": 0.0, "doc": "n0 of eq. (12)"})
+    persist: int = field(default=4, metadata={"ge": 1, "doc": "samples R > n0 in a row"})
+    confirm_window: int = field(default=5, metadata={"ge": 1, "doc": "samples after suspect"})
+    warmup_samples: int = field(default=100, metadata={"ge": 0, "doc": "train only, no check"})
+    store_average_samples: int = field(default=50, metadata={"ge": 0, "doc": "0: C_k itself"})
+
+    def __post_init__(self) -> None:
+        if self.persist > self.confirm_window:
+            raise ValueError("persist must be <= confirm_window")
+
+
+def wrap180(angle_deg: float) -> float:
+    """Wrap an angle to (-180, 180] degrees."""
+    a = math.fmod(angle_deg + 180.0, 360.0)
+    if a <= 0.0:
+        a += 360.0
+    return a - 180.0
+
+
+class AdaptiveFir:
+    """FIR of eq. (3) trained by LMS, eq. (5), on scaled, strictly causal inputs.
+
+    ``push(u)`` appends the command of the period that just ended; ``predict()`` is d(k) of
+    eq. (3) in output units; ``train(e)`` applies eq. (5) with e in output units.
+    """
+
+    def __init__(
+        self,
+        order: int,
+        mu: float,
+        bias_tap: bool,
+        u_op: float,
+        u_scale: float,
+        u_op_samples: int = 0,
+    ) -> None:
+        self.M = order
+        self.u_op_alpha = 1.0 / u_op_samples if u_op_samples else 0.0
+        self.track_op = u_op_samples > 0
+        self.mu = mu
+        self.bias_tap = bias_tap
+        self.u_op = u_op
+        self.u_scale = u_scale
+        n = order + (1 if bias_tap else 0)
+        # C_k: weights; with a bias tap its weight is the last one and its input is always 1.
+        self.C: list[float] = [0.0] * n
+        # Doubled ring buffer: x = buf[pos:pos + M] is [u(k-1), ..., u(k-M)] (newest first).
+        self._buf: list[float] = [0.0] * (2 * order + 1)
+        self._pos = order
+        self._x_sum = 0.0  # sum of the input taps (running)
+        self.w_sum = 0.0  # sum_i C_i (running), the quantity of eq. (9)
+        self.avg_alpha = 0.0  # > 0: keep an exponential average of C_k (for storage)
+        self.C_avg: list[float] = [0.0] * n
+
+    def push(self, u: float) -> None:
+        """Shift in the (unscaled) command u(k-1), %."""
+        if self.track_op:  # slow operating point: keeps sum(x) near 0 in steady state
+            self.u_op += self.u_op_alpha * (u - self.u_op)
+        x = (u - self.u_op) / self.u_scale
+        if x > 1.0:  # clamp: keeps |x| <= 1 and the LMS step inside its stability bound
+            x = 1.0
+        elif x < -1.0:
+            x = -1.0
+        M = self.M
+        dropped = self._buf[self._pos + M - 1]
+        self._pos -= 1
+        if self._pos < 0:  # rebase: the old window buf[0:M] moves to buf[M+1:2M+1]
+            self._buf[M + 1 : 2 * M + 1] = self._buf[0:M]
+            self._pos = M
+        self._buf[self._pos] = x
+        self._x_sum += x - dropped
+
+    def regressor(self) -> list[float]:
+        x = self._buf[self._pos : self._pos + self.M]
+        if self.bias_tap:
+            x.append(1.0)
+        return x
+
+    def predict(self, C: list[float] | None = None) -> float:
+        # eq. (3): d(k) = sum_i C_i u(k + 1 - i), shifted one step back (strictly causal)
+        w = self.C if C is None else C
+        d = sum(map(operator.mul, w, self._buf[self._pos : self._pos + self.M]))
+        if self.bias_tap:
+            d += w[-1]
+        return d
+
+    def train(self, e: float) -> None:
+        # eq. (5): C_{k+1} = C_k + 2 mu e(k) u(k), with e = y - d (the sign that descends e^2;
+        # the paper's eq. (4) writes e = d - y, which with this update would ascend it).
+        g = 2.0 * self.mu * e
+        x = self._buf[self._pos : self._pos + self.M]
+        C = self.C
+        if self.bias_tap:
+            C[:-1] = [c + g * xi for c, xi in zip(C[:-1], x, strict=True)]
+            C[-1] += g
+            self.w_sum += g * (self._x_sum + 1.0)
+        else:
+            self.C = [c + g * xi for c, xi in zip(C, x, strict=True)]
+            self.w_sum += g * self._x_sum
+        a = self.avg_alpha
+        if a:
+            self.C_avg = [ca + a * (c - ca) for ca, c in zip(self.C_avg, self.C, strict=True)]
+
+    def set_weights(self, C: list[float]) -> None:
+        self.C = list(C)
+        self.C_avg = list(C)
+        self.w_sum = math.fsum(self.C)
+
+
+class WeightDriftSnr:
+    """Criterion 2: R(k) of eq. (8)-(11) over a moving window of the weight sums.
+
+    The window holds sum_i C_ij for the last n steps j. D_j = sum_i (C_ij - C_i0) (eq. (9));
+    C_0 is the window's reference vector, which cancels in the normalisation of eq. (10), so the
+    sums themselves are kept. std is the population standard deviation (ddof = 0). Both divisions
+    are guarded: once the weights converge, std(D) -> 0 and R(k) is then 0, not NaN.
+    """
+
+    EPS = 1e-12
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.s: deque[float] = deque(maxlen=n)
+        self.V_last = 0.0
+
+    def push(self, w_sum: float) -> float:
+        """Append sum_i C_ik and return R(k) (0 until the window is full)."""
+        self.s.append(w_sum)
+        if len(self.s) < self.n:
+            self.V_last = 0.0
+            return 0.0
+        return self._snr()
+
+    def replace_last(self, count: int, w_sum: float) -> None:
+        """Overwrite the last ``count`` sums (undo a disturbance's effect on the window)."""
+        for i in range(1, min(count, len(self.s)) + 1):
+            self.s[-i] = w_sum
+
+    def reset(self) -> None:
+        self.s.clear()
+        self.V_last = 0.0
+
+    def _snr(self) -> float:
+        s = self.s
+        n = len(s)
+        s0 = s[0]
+        D = [sj - s0 for sj in s]  # eq. (9): D_j = sum_i (C_ij - C_i0)
+        mD = sum(D) / n
+        varD = sum((dj - mD) ** 2 for dj in D) / n
+        if varD <= self.EPS * self.EPS:
+            self.V_last = 0.0
+            return 0.0
+        sD = math.sqrt(varD)
+        V = [abs((dj - mD) / sD) for dj in D]  # eq. (10): V = |(D - mean D) / std D|
+        mV = sum(V) / n
+        varV = sum((v - mV) ** 2 for v in V) / n
+        self.V_last = V[-1]
+        if varV <= self.EPS:
+            return 0.0
+        return (V[-1] - mV) ** 2 / varV  # eq. (11): R(k) = (V - mean V)^2 / std(V)^2
+
+
+@dataclass(frozen=True)
+class DetectorStep:
+    """What the detector decided at step k."""
+
+    d_deg: float  # predicted heading increment, deg
+    e2: float  # e^2(k), deg^2 (0 when no reading)
+    snr: float  # R(k)
+    V: float  # V of the newest sample, eq. (10)
+    exceed: bool  # e^2 > theta at this step
+    suspect: bool  # criterion 1 is open (from the first exceedance until confirm/expiry)
+    confirmed: bool  # criterion 2 confirmed at this step (an edge, once per event)
+    dismissed: bool  # the suspect expired without confirmation: a disturbance
+
+
+class DualCriterionDetector:
+    """Criterion 1 (e^2(k) > theta, eq. (7)) then criterion 2 (R(k) > n0, eq. (12)).
+
+    On the first e^2 exceedance the FIR weights are stored (``stored``). Criterion 2 confirms if
+    R(k) > n0 holds for ``persist`` consecutive steps within ``confirm_window`` steps of the
+    exceedance (R(k) jumps for a spike too; a drift keeps the weights displaced, a spike that
+    ends undoes its own update). An unconfirmed suspect is a disturbance: the weights and the
+    SNR window are restored to the stored state, so the disturbance leaves no trace.
+    """
+
+    def __init__(self, cfg: DetectorConfig) -> None:
+        self.cfg = cfg
+        self.fir = AdaptiveFir(
+            cfg.order, cfg.mu, cfg.bias_tap, cfg.u_op, cfg.u_scale, cfg.u_op_samples
+        )
+        if cfg.store_average_samples:
+            self.fir.avg_alpha = 1.0 / cfg.store_average_samples
+        self.snr = WeightDriftSnr(cfg.snr_window)
+        self.stored: list[float] | None = None
+        self.frozen = False  # no training while a confirmed fault is being handled
+        self._suspect_age = -1  # steps since the exceedance, -1 when no suspect is open
+        self._over = 0
+        self._stored_sum = 0.0
+        self._trained = 0
+
+    @property
+    def suspect_open(self) -> bool:
+        return self._suspect_age >= 0
+
+    def push_command(self, u: float) -> None:
+        """The command sent in the period that just ended (call once per period, first)."""
+        self.fir.push(u)
+
+    def predict_deg(self) -> float:
+        return self.fir.predict() * self.cfg.y_scale
+
+    def step(self, dy_deg: float | None) -> DetectorStep:
+        """One period: ``dy_deg`` is the measured heading increment, None when no reading."""
+        cfg = self.cfg
+        d = self.fir.predict()
+        if dy_deg is None:
+            return DetectorStep(d * cfg.y_scale, 0.0, 0.0, 0.0, False, self.suspect_open,
+                                False, False)
+        e = wrap180(dy_deg) / cfg.y_scale - d
+        e2 = (e * cfg.y_scale) ** 2  # eq. (7): J^2(k) = [d(k) - y(k)]^2, deg^2
+        self._trained += 1
+        exceed = e2 > cfg.theta_deg2 and self._trained > cfg.warmup_samples
+        if exceed and not self.suspect_open and not self.frozen:
+            # Store the weights at the suspect instant (before this sample trains them); with
+            # store_average_samples, their recent average: the instantaneous C_k carries the
+            # LMS gradient noise, which a frozen model then integrates as a heading rate.
+            self.stored = list(self.fir.C_avg if self.fir.avg_alpha else self.fir.C)
+            self._stored_sum = self.fir.w_sum
+            self._suspect_age = 0
+            self._over = 0
+        if not self.frozen:
+            self.fir.train(e)
+        R = self.snr.push(self.fir.w_sum) if not self.frozen else 0.0
+        confirmed = dismissed = False
+        if self.suspect_open:
+            self._over = self._over + 1 if cfg.n0 < R else 0
+            if self._over >= cfg.persist:
+                confirmed = True
+                self._suspect_age = -1
+            else:
+                self._suspect_age += 1
+                if self._suspect_age >= cfg.confirm_window:
+                    dismissed = True
+                    self.dismiss()
+        return DetectorStep(d * cfg.y_scale, e2, R, self.snr.V_last, exceed,
+                            self.suspect_open or confirmed, confirmed, dismissed)
+
+    def dismiss(self) -> None:
+        """Close an open suspect as a disturbance: restore the stored weights and window."""
+        if self.stored is not None:
+            age = self._suspect_age + 1
+            self.fir.set_weights(self.stored)
+            self.snr.replace_last(age, self.fir.w_sum)
+        self._suspect_age = -1
+        self._over = 0
+
+    def force_store(self, C: list[float]) -> None:
+        """Set the stored weights from outside (the stuck-reading detector's snapshot)."""
+        self.stored = list(C)
+        self._suspect_age = -1
+
+    def freeze(self) -> None:
+        self.frozen = True
+        self.fir.track_op = False
+
+    def recover(self) -> None:
+        """The sensor is consistent again: restart from the stored (pre-fault) model."""
+        if self.stored is not None:
+            self.fir.set_weights(self.stored)
+        self.snr.reset()
+        self.frozen = False
+        self.fir.track_op = self.cfg.u_op_samples > 0
+        self._suspect_age = -1
+        self._over = 0
