@@ -57,15 +57,18 @@ class RoverDetectorParams:
     use_gst: bool = True
     q_accel: float = field(default=0.5, metadata={"gt": 0.0})  # m²/s³
     # Section 2: GM(1,1) grey prediction.
-    window: int = field(default=5, metadata={"ge": 4, "le": 50})
+    window: int = field(default=12, metadata={"ge": 4, "le": 50})
     predictor: Literal["raw", "doppler"] = "doppler"
     shift_m: float = field(default=100.0, metadata={"gt": 0.0})
     gate_m: float = field(default=0.7, metadata={"gt": 0.0})  # fixed gate (the floor if adaptive)
     gate_up_m: float = field(default=1.5, metadata={"gt": 0.0})
     gate_axes: Literal["per_axis", "horizontal"] = "horizontal"
-    gate_sigmas: float = field(default=0.0, metadata={"ge": 0.0})  # 0: fixed gate
+    gate_sigmas: float = field(default=6.0, metadata={"ge": 0.0})  # 0: fixed gate
     gate_tau_epochs: float = field(default=200.0, metadata={"ge": 1.0})
     gate_sigma0_m: float = field(default=0.1, metadata={"gt": 0.0})
+    # While the window coasts on its own predictions, their error grows: widen the gates by
+    # this much per second since the last accepted fix (0 in the paper).
+    gate_growth_mps: float = field(default=0.0, metadata={"ge": 0.0})
     test_up: bool = True
     # Isolation and alarm.
     max_consecutive: int = field(default=5, metadata={"ge": 0})
@@ -123,6 +126,7 @@ class RoverIsolator:
         self._disp = [0.0, 0.0, 0.0]  # Doppler-integrated displacement
         self._last_v: tuple[float, float] | None = None
         self._last_t: float | None = None
+        self._last_accept_t: float | None = None
         self._consec = 0
         self._alarm = False
         self._good_run = 0
@@ -133,6 +137,7 @@ class RoverIsolator:
     # -------------------------------------------------------------- helpers
 
     def _restart(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
+        self._last_accept_t = self._last_t
         self._win.clear()
         self._disp = [0.0, 0.0, 0.0]
         self._win.append(z)
@@ -188,7 +193,8 @@ class RoverIsolator:
         if fix.enu is None:
             return self._no_fix("no_fix", gate_h, gate_u)
         dt = None if self._last_t is None else fix.t_s - self._last_t
-        if dt is not None and dt <= 0.0:
+        if dt is not None and -p.max_gap_s <= dt <= 0.0:
+            # A stale or repeated epoch: its fix is not passed on.
             return self._no_fix("time_backwards" if dt < 0 else "duplicate_time", gate_h, gate_u)
         z = fix.enu
         r = self._r(fix)
@@ -200,6 +206,8 @@ class RoverIsolator:
             restart_reason = "start"
         elif dt > p.max_gap_s:
             restart_reason = "gap_restart"
+        elif dt < 0.0:
+            restart_reason = "time_reset"  # the receiver's clock jumped back by more than a gap
         if restart_reason:
             self._restart(z, r)
             self._last_v = v
@@ -222,6 +230,10 @@ class RoverIsolator:
         d = self._disp
 
         # Section 2: grey prediction and residual ε(k) (eq. 18).
+        if p.gate_growth_mps > 0.0 and self._consec and self._last_accept_t is not None:
+            coast = p.gate_growth_mps * (fix.t_s - self._last_accept_t)
+            gate_h += coast
+            gate_u += coast
         y_hat = self._predict()
         pred: tuple[float, float, float] | None = None
         res_h = res_u = None
@@ -257,6 +269,7 @@ class RoverIsolator:
 
         if not fault:
             self._consec = 0
+            self._last_accept_t = fix.t_s
             if res_h is not None and res_u is not None:
                 self._learn_spread(z, pred)
             self._window_append(z, d)

@@ -31,7 +31,7 @@ class Command(Protocol):
 
 # Top-level commands: name -> (module, help).
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("firmware_host.demo", "run a built-in demo with no hardware (rover by default)"),
+    "demo": ("", "run a built-in demo with no hardware (rover by default)"),
     "replay": ("firmware_host.replay", "replay a capture or NMEA log through a pty into a pipeline"),
     "record": ("firmware_host.record", "record a serial port's raw bytes to a capture file"),
     "run": ("firmware_host.run", "run on the vehicle with the configured ports"),
@@ -63,12 +63,11 @@ def build_parser() -> argparse.ArgumentParser:
     for name, (module, help_text) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
         if name == "demo":
-            dsub = p.add_subparsers(dest="demo_kind", metavar="KIND")
-            for kind, (dmod, dhelp) in DEMO_COMMANDS.items():
-                dp = dsub.add_parser(kind, help=dhelp, description=dhelp)
-                dp.set_defaults(_module=dmod)
-                _load(dmod).add_arguments(dp)
-            p.set_defaults(_module=DEMO_COMMANDS["rover"][0], _demo_default=True)
+            p.add_argument("kind", nargs="?", default="rover", choices=sorted(DEMO_COMMANDS),
+                           help="which demo (default: rover)")
+            p.add_argument("demo_args", nargs=argparse.REMAINDER,
+                           help="the demo's own options (see: fdi-bridge demo KIND -h)")
+            p.set_defaults(_demo=True)
             continue
         p.set_defaults(_module=module)
         _load(module).add_arguments(p)
@@ -86,22 +85,41 @@ def _setup_logging(verbosity: int) -> None:
     logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 
+def _demo_args(argv: list[str]) -> argparse.Namespace | None:
+    """``fdi-bridge [-v] demo [KIND] [options]``: the KIND's own parser takes the options."""
+    verbose = 0
+    rest = list(argv)
+    while rest and rest[0] in ("-v", "--verbose", "-vv"):
+        verbose += 2 if rest.pop(0) == "-vv" else 1
+    if not rest or rest[0] != "demo":
+        return None
+    rest.pop(0)
+    kind = "rover"
+    if rest and not rest[0].startswith("-"):
+        kind = rest.pop(0)
+    if kind not in DEMO_COMMANDS:
+        known = ", ".join(sorted(DEMO_COMMANDS))
+        raise SystemExit(f"fdi-bridge demo: unknown demo {kind!r} (known: {known})")
+    dmod, dhelp = DEMO_COMMANDS[kind]
+    dparser = argparse.ArgumentParser(prog=f"fdi-bridge demo {kind}", description=dhelp)
+    _load(dmod).add_arguments(dparser)
+    args = dparser.parse_args(rest)
+    args.verbose = verbose
+    args.command = "demo"
+    args._module = dmod
+    return args
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
-        parser.print_help()
-        return 2
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = _demo_args(argv)
+    if args is None:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if args.command is None:
+            parser.print_help()
+            return 2
     _setup_logging(args.verbose)
-    if getattr(args, "_demo_default", False) and getattr(args, "demo_kind", None) is None:
-        # ``fdi-bridge demo`` alone: the rover demo with its defaults.
-        dparser = argparse.ArgumentParser(prog="fdi-bridge demo rover")
-        mod = _load(DEMO_COMMANDS["rover"][0])
-        mod.add_arguments(dparser)
-        defaults: Any = dparser.parse_args([])
-        defaults.verbose = args.verbose
-        args = defaults
-        args._module = DEMO_COMMANDS["rover"][0]
     module = _load(args._module)
     try:
         return int(module.run(args))

@@ -1,0 +1,278 @@
+"""The rover pipeline: receiver bytes -> epochs -> isolation -> outputs, with its counters.
+
+:class:`RoverPipeline` is fed bytes (from whatever port the loop reads) and, per receiver epoch,
+
+1. converts the fix to local metres (reference: configured, else the first valid fix) and the
+   fix time to a monotonic time (midnight rollover handled);
+2. runs :class:`fdi.rover.RoverIsolator`;
+3. writes one JSON Lines record (the replay contract, see README), a corrected NMEA burst and a
+   MAVLink GPS_INPUT, as configured;
+4. counts everything for ``summary()``.
+
+It is deterministic given its input bytes: nothing from the wall clock reaches the epoch
+records (processing times go to the summary only), so replaying a recorded session reproduces
+the same ``epochs.jsonl``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections import Counter
+from collections.abc import Callable
+from typing import Any, Protocol, TextIO
+
+import numpy as np
+
+from drivers.gps import NmeaStream
+from drivers.gps_epochs import GpsEpoch
+from drivers.ratelog import RateLimitedLog
+from fdi.geodesy import LocalFrame
+from fdi.rover import Decision, FixInput, RoverIsolator
+from firmware_host.config import RoverConfig
+
+log = logging.getLogger("fdi_bridge.rover")
+
+
+class EpochSink(Protocol):
+    """Something that takes each epoch's outcome (corrected NMEA, MAVLink, ...)."""
+
+    def emit(self, out: EpochOutcome) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class EpochOutcome:
+    """One epoch's input, decision and output position, handed to the sinks."""
+
+    __slots__ = ("alt", "decision", "epoch", "lat", "lon", "record", "t_s")
+
+    def __init__(
+        self,
+        epoch: GpsEpoch,
+        decision: Decision,
+        lat: float | None,
+        lon: float | None,
+        alt: float | None,
+        t_s: float | None,
+        record: dict[str, Any],
+    ) -> None:
+        self.epoch = epoch
+        self.decision = decision
+        self.lat = lat
+        self.lon = lon
+        self.alt = alt
+        self.t_s = t_s
+        self.record = record
+
+
+def _r(x: float | None, nd: int = 4) -> float | None:
+    return None if x is None else round(x, nd)
+
+
+class RoverPipeline:
+    def __init__(
+        self,
+        cfg: RoverConfig,
+        *,
+        jsonl: TextIO | None = None,
+        sinks: list[EpochSink] | None = None,
+        perf_clock: Callable[[], float] = time.perf_counter,
+        ratelog: RateLimitedLog | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.ratelog = ratelog or RateLimitedLog(log)
+        self.stream = NmeaStream(cfg.max_line, self.ratelog)
+        self.isolator = RoverIsolator(cfg.detector)
+        self.frame: LocalFrame | None = None
+        if cfg.reference is not None:
+            ref = cfg.reference
+            self.frame = LocalFrame(ref.lat_deg, ref.lon_deg, ref.alt_m)
+        self.jsonl = jsonl
+        self.sinks = sinks or []
+        self.perf_clock = perf_clock
+        self.actions: Counter[str] = Counter()
+        self.reasons: Counter[str] = Counter()
+        self.epochs = 0
+        self.faults = 0
+        self.alarms_raised = 0
+        self.sink_errors = 0
+        self.proc_s: list[float] = []
+        self.overruns = 0
+        self._last_utc: float | None = None
+        self._day = 0.0
+        self._period_s: float | None = None
+        self._last_t: float | None = None
+        self.last_outcome: EpochOutcome | None = None
+
+    # ------------------------------------------------------------------ feeding
+
+    def feed(self, data: bytes) -> int:
+        """Feed received bytes; process every epoch they complete. Returns epochs processed."""
+        n = 0
+        for epoch in self.stream.feed(data):
+            self.process(epoch)
+            n += 1
+        return n
+
+    def finish(self) -> int:
+        n = 0
+        for epoch in self.stream.flush():
+            self.process(epoch)
+            n += 1
+        for sink in self.sinks:
+            sink.close()
+        return n
+
+    # ------------------------------------------------------------------ one epoch
+
+    def _time(self, utc: float | None) -> float | None:
+        if utc is None:
+            return None
+        if self._last_utc is not None and utc < self._last_utc - 43200.0:
+            self._day += 86400.0  # midnight rollover
+        self._last_utc = utc
+        return utc + self._day
+
+    def process(self, epoch: GpsEpoch) -> EpochOutcome:
+        t0 = self.perf_clock()
+        t_s = self._time(epoch.utc_s)
+        enu = None
+        h = None
+        if epoch.valid and epoch.lat_deg is not None and epoch.lon_deg is not None:
+            if epoch.alt_msl_m is not None:
+                h = epoch.alt_msl_m + (epoch.geoid_sep_m or 0.0)
+            if self.frame is None:
+                self.frame = LocalFrame(epoch.lat_deg, epoch.lon_deg, h or 0.0)
+            enu = self.frame.to_enu(
+                epoch.lat_deg, epoch.lon_deg, h if h is not None else self.frame.h0_m
+            )
+        sd = None
+        if epoch.sd_lat_m is not None and epoch.sd_lon_m is not None:
+            sd = (epoch.sd_lon_m, epoch.sd_lat_m, epoch.sd_alt_m or 2.0 * epoch.sd_lat_m)
+        if t_s is None and enu is not None:
+            enu = None  # a fix with no time cannot be put in order: not passed on
+        fix = FixInput(
+            t_s=t_s if t_s is not None else 0.0,
+            enu=enu,
+            speed_mps=epoch.speed_mps,
+            course_deg=epoch.course_deg,
+            sd_enu_m=sd,
+            num_sats=epoch.num_sats,
+            hdop=epoch.hdop,
+        )
+        d = self.isolator.step(fix)
+        lat = lon = alt = None
+        if d.out_enu is not None and self.frame is not None:
+            if d.action == "accept":
+                lat, lon, alt = epoch.lat_deg, epoch.lon_deg, epoch.alt_msl_m
+            else:
+                glat, glon, gh = self.frame.to_lla(*d.out_enu)
+                lat, lon = glat, glon
+                alt = gh - (epoch.geoid_sep_m or 0.0) if epoch.alt_msl_m is not None else None
+        record = self._record(epoch, d, enu, lat, lon, alt)
+        outcome = EpochOutcome(epoch, d, lat, lon, alt, t_s, record)
+        self.last_outcome = outcome
+        # Counters.
+        self.epochs += 1
+        self.actions[d.action] += 1
+        if d.reason:
+            self.reasons[d.reason] += 1
+        self.faults += d.fault
+        if d.alarm_raised:
+            self.alarms_raised += 1
+            log.warning("GPS alarm at utc %s: %d faults in a row; stop automatic navigation",
+                        epoch.utc_s, self.cfg.detector.max_consecutive)
+        if self.jsonl is not None:
+            self.jsonl.write(json.dumps(record, separators=(",", ":")) + "\n")
+        for sink in self.sinks:
+            try:
+                sink.emit(outcome)
+            except Exception as err:  # an output failing must not stop the detectors
+                self.sink_errors += 1
+                self.ratelog.warning(f"output {type(sink).__name__}", str(err))
+        dt = self.perf_clock() - t0
+        self.proc_s.append(dt)
+        if t_s is not None and self._last_t is not None and 0 < t_s - self._last_t < 5.0:
+            p = t_s - self._last_t
+            self._period_s = p if self._period_s is None else 0.9 * self._period_s + 0.1 * p
+        if t_s is not None:
+            self._last_t = t_s
+        if self._period_s is not None and dt > self._period_s:
+            self.overruns += 1
+        return outcome
+
+    def _record(
+        self,
+        e: GpsEpoch,
+        d: Decision,
+        enu: tuple[float, float, float] | None,
+        lat: float | None,
+        lon: float | None,
+        alt: float | None,
+    ) -> dict[str, Any]:
+        pred = d.pred_enu
+        kf = d.kf_enu
+        return {
+            "utc": e.utc_s,
+            "date": None if e.date is None else "%04d-%02d-%02d" % e.date,
+            "raw_lat": e.lat_deg,
+            "raw_lon": e.lon_deg,
+            "raw_alt": e.alt_msl_m,
+            "lat": lat,
+            "lon": lon,
+            "alt": alt,
+            "fault": d.fault,
+            "action": d.action,
+            "reason": d.reason,
+            "alarm": d.alarm,
+            "alarm_raised": d.alarm_raised,
+            "quality": e.quality,
+            "sats": e.num_sats,
+            "hdop": e.hdop,
+            "speed": _r(e.speed_mps),
+            "course": e.course_deg,
+            "e": _r(enu[0]) if enu else None,
+            "n": _r(enu[1]) if enu else None,
+            "u": _r(enu[2]) if enu else None,
+            "pred_e": _r(pred[0]) if pred else None,
+            "pred_n": _r(pred[1]) if pred else None,
+            "pred_u": _r(pred[2]) if pred else None,
+            "grey_res_h": _r(d.grey_res_h),
+            "grey_res_u": _r(d.grey_res_u),
+            "grey_gate_h": _r(d.grey_gate_h),
+            "grey_gate_u": _r(d.grey_gate_u),
+            "chi2": _r(d.chi2),
+            "chi2_threshold": _r(d.chi2_threshold),
+            "consecutive": d.consecutive,
+            "kf_e": _r(kf[0]) if kf else None,
+            "kf_n": _r(kf[1]) if kf else None,
+            "kf_u": _r(kf[2]) if kf else None,
+        }
+
+    # ------------------------------------------------------------------ summary
+
+    def summary(self) -> dict[str, Any]:
+        proc = np.asarray(self.proc_s) * 1e3 if self.proc_s else np.zeros(1)
+        return {
+            "epochs": self.epochs,
+            "faults": self.faults,
+            "alarms": self.alarms_raised,
+            "actions": dict(sorted(self.actions.items())),
+            "reasons": dict(sorted(self.reasons.items())),
+            "input": self.stream.counters(),
+            "output_errors": self.sink_errors,
+            "epoch_period_s": None if self._period_s is None else round(self._period_s, 4),
+            "processing_ms": {
+                "p50": round(float(np.percentile(proc, 50)), 4),
+                "p99": round(float(np.percentile(proc, 99)), 4),
+                "max": round(float(proc.max()), 4),
+            },
+            "overruns": self.overruns,
+            "detector": {
+                "strategy": self.cfg.detector.strategy,
+                "chi2_threshold": round(self.isolator.T_d, 4),
+                "predictor": self.cfg.detector.predictor,
+            },
+        }
