@@ -41,11 +41,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
 # ``fdi-bridge sim KIND``: KIND -> (module, help).
 SIM_COMMANDS: dict[str, tuple[str, str]] = {
     "rover": ("firmware_host.rover_sim", "generate a rover NMEA run with injected GPS faults"),
+    "rov": ("firmware_host.rov_app", "ROV compass faults and fault-tolerant heading hold"),
 }
 
 # ``fdi-bridge demo KIND``: KIND -> module with ``run_demo(args) -> int`` and ``add_arguments``.
 DEMO_COMMANDS: dict[str, tuple[str, str]] = {
     "rover": ("firmware_host.rover_demo", "GPS fault isolation on a generated 10-minute rover run"),
+    "rov": ("firmware_host.rov_demo", "ROV compass drift 30 deg with and without FT"),
 }
 
 

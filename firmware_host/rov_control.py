@@ -8,36 +8,14 @@ safe command is kept for ``dropout_hold_s``, then all thrusters go neutral (``ac
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from typing import Any
 
+from drivers.outland import NEUTRAL, ThrusterCommand
 from fdi.heading_ft import FaultTolerantHeading, HeadingDecision
 from fdi.pid import HeadingPid
 from firmware_host.rov_config import RovConfig
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class ThrusterCommand:
-    """Thruster setpoints, % of full thrust, -100..100."""
-
-    port_pct: float = 0.0
-    starboard_pct: float = 0.0
-    lateral_pct: float = 0.0
-    vertical_pct: float = 0.0
-
-    @property
-    def yaw_pct(self) -> float:
-        """Differential thrust (the yaw command u of the FIR)."""
-        return (self.port_pct - self.starboard_pct) / 2.0
-
-
-NEUTRAL = ThrusterCommand()
-
-
-def _clamp(x: float) -> float:
-    return min(max(x, -100.0), 100.0)
 
 
 class RovController:
@@ -75,7 +53,7 @@ class RovController:
             assert dec.heading_used is not None
             u = self.pid.update(self.setpoint_deg, dec.heading_used, dt)
             s = self.cfg.surge_pct
-            cmd = ThrusterCommand(_clamp(s + u), _clamp(s - u), 0.0, 0.0)
+            cmd = ThrusterCommand(min(max(s + u, -100.0), 100.0), min(max(s - u, -100.0), 100.0))
             self._last_safe = cmd
             action = "substitute" if dec.source != "sensor" else "control"
         if dec.event:

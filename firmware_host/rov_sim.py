@@ -14,11 +14,17 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
+import threading
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from drivers.framecodec import Framer, Protocol, decode
+from drivers.outland import NEUTRAL, Telemetry, encode_telemetry, to_command
+from drivers.ptypair import PtyPair
+from fdi.errors import DecodeError
 from firmware_host.rov_config import SimConfig
 
 FAULT_KINDS = ("drift", "stuck", "spike", "noise", "dropout")
@@ -58,17 +64,6 @@ def parse_fault(spec: str) -> FaultSpec:
     if end is not None and end <= start:
         raise ValueError(f"fault spec {spec!r}: END must be after START")
     return FaultSpec(kind, mag, start, end)
-
-
-@dataclass(frozen=True)
-class Telemetry:
-    """What the vehicle reports (units in the names)."""
-
-    heading_deg: float
-    depth_m: float
-    pitch_deg: float
-    roll_deg: float
-    status: int
 
 
 class RovPlant:
@@ -121,3 +116,74 @@ class RovPlant:
             elif f.kind == "dropout":
                 return None
         return Telemetry(h % 360.0, self.cfg.depth_m, 0.0, 0.0, 0)
+
+
+class RovSimServer:
+    """The vehicle's side of the link: bytes in (commands), bytes out (telemetry).
+
+    ``rs232``: :meth:`tick` advances the plant one period with the last command and returns a
+    telemetry frame (streaming). ``rs485``: :meth:`receive` answers each polled command addressed
+    to ``node`` by advancing one period and returning the telemetry (step-locked to the polls).
+    A dropout fault sends nothing.
+    """
+
+    def __init__(self, plant: RovPlant, proto: Protocol, wiring: str, node: int = 1,
+                 period_s: float = 0.2) -> None:
+        self.plant = plant
+        self.proto = proto
+        self.wiring = wiring
+        self.node = node
+        self.period_s = period_s
+        self.framer = Framer(proto)
+        self.command = NEUTRAL
+        self.polls = 0
+
+    def _frame(self) -> bytes:
+        tel = self.plant.measure()
+        return b"" if tel is None else encode_telemetry(self.proto, tel, self.node)
+
+    def tick(self) -> bytes:
+        self.plant.advance(self.command.yaw_pct, self.period_s)
+        return self._frame()
+
+    def receive(self, data: bytes) -> bytes:
+        out = b""
+        for frame in self.framer.feed(data):
+            if frame.node != self.node:
+                continue
+            try:
+                name, values = decode(self.proto, frame)
+            except DecodeError:
+                continue
+            if name != "thrusters":
+                continue
+            self.command = to_command(values)
+            if self.wiring == "rs485" and frame.flags & self.proto.request_flag:
+                self.polls += 1
+                if self.polls > 1:
+                    self.plant.advance(self.command.yaw_pct, self.period_s)
+                out += self._frame()
+        return out
+
+
+def serve_pty(pty: PtyPair, server: RovSimServer, stop: threading.Event,
+              clock: Callable[[], float] = time.monotonic) -> None:
+    """Run ``server`` on the master side of ``pty`` until ``stop`` is set (a thread target)."""
+    next_tick = clock()
+    while not stop.is_set():
+        if server.wiring == "rs232":
+            wait = max(0.0, next_tick - clock())
+            data = pty.read(timeout_s=min(wait, 0.05))
+            if data:
+                server.receive(data)
+            if clock() >= next_tick:
+                out = server.tick()
+                if out:
+                    pty.write(out)
+                next_tick += server.period_s
+        else:
+            data = pty.read(timeout_s=0.05)
+            if data:
+                reply = server.receive(data)
+                if reply:
+                    pty.write(reply)
