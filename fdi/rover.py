@@ -64,7 +64,7 @@ class RoverDetectorParams:
     gate_up_m: float = field(default=1.5, metadata={"gt": 0.0})
     gate_axes: Literal["per_axis", "horizontal"] = "horizontal"
     gate_sigmas: float = field(default=6.0, metadata={"ge": 0.0})  # 0: fixed gate
-    gate_tau_epochs: float = field(default=200.0, metadata={"ge": 1.0})
+    gate_tau_epochs: float = field(default=50.0, metadata={"ge": 1.0})
     gate_sigma0_m: float = field(default=0.1, metadata={"gt": 0.0})
     # While the window coasts on its own predictions, their error grows: widen the gates by
     # this much per second since the last accepted fix (0 in the paper).
@@ -127,6 +127,8 @@ class RoverIsolator:
         self._last_v: tuple[float, float] | None = None
         self._last_t: float | None = None
         self._last_accept_t: float | None = None
+        self._last_up = 0.0
+        self._up_seen = False
         self._consec = 0
         self._alarm = False
         self._good_run = 0
@@ -198,8 +200,28 @@ class RoverIsolator:
             return self._no_fix("time_backwards" if dt < 0 else "duplicate_time", gate_h, gate_u)
         z = fix.enu
         r = self._r(fix)
+        # A 2D fix (no altitude: RMC/GLL only) has NaN up: hold the last known height with a
+        # huge variance, so it neither moves the filter nor is tested.
+        up_known = not math.isnan(z[2])
+        if not up_known:
+            z = (z[0], z[1], self._last_up)
+            r = (r[0], r[1], 1e12)
+        elif not self._up_seen:
+            self._up_seen = True
+            self._win = deque(((w[0], w[1], z[2]) for w in self._win), maxlen=self.p.window)
+            if self.kf.initialised:
+                ax = self.kf.axes[2]
+                ax.p, ax.v, ax.P00, ax.P01, ax.P11 = z[2], 0.0, r[2], 0.0, 25.0
+            up_known = False  # nothing to test it against yet
+        self._last_up = z[2]
         v = self._velocity(fix)
         self._last_t = fix.t_s
+
+        quality = []
+        if p.min_sats and fix.num_sats is not None and fix.num_sats < p.min_sats:
+            quality.append("sats")
+        if p.max_hdop and fix.hdop is not None and fix.hdop > p.max_hdop:
+            quality.append("hdop")
 
         restart_reason = ""
         if dt is None or not self.kf.initialised:
@@ -209,8 +231,11 @@ class RoverIsolator:
         elif dt < 0.0:
             restart_reason = "time_reset"  # the receiver's clock jumped back by more than a gap
         if restart_reason:
-            self._restart(z, r)
             self._last_v = v
+            if quality:  # nothing to replace it with: not passed on
+                return self._raise_alarm(z, r, "+".join(quality), None, None, None, None,
+                                         gate_h, gate_u)
+            self._restart(z, r)
             return self._decide_accept(z, None, None, None, None, gate_h, gate_u, restart_reason)
         assert dt is not None
 
@@ -247,8 +272,8 @@ class RoverIsolator:
             else:
                 res_h = max(abs(ee), abs(en))
                 grey_fault = res_h > gate_h
-            res_u = abs(eu)
-            if p.test_up and res_u > gate_u:
+            res_u = abs(eu) if up_known else None
+            if p.test_up and res_u is not None and res_u > gate_u:
                 grey_fault = True
 
         # Section 1: Kalman prediction and residual chi-square test (eq. 1-6).
@@ -261,17 +286,14 @@ class RoverIsolator:
             reasons.append("grey")
         if chi2_fault:
             reasons.append("chi2")
-        if p.min_sats and fix.num_sats is not None and fix.num_sats < p.min_sats:
-            reasons.append("sats")
-        if p.max_hdop and fix.hdop is not None and fix.hdop > p.max_hdop:
-            reasons.append("hdop")
+        reasons += quality
         fault = bool(reasons)
 
         if not fault:
             self._consec = 0
             self._last_accept_t = fix.t_s
-            if res_h is not None and res_u is not None:
-                self._learn_spread(z, pred)
+            if res_h is not None:
+                self._learn_spread(z, pred, res_u is not None)
             self._window_append(z, d)
             self.kf.update(z, r)
             return self._decide_accept(z, pred, res_h, res_u, F, gate_h, gate_u, "")
@@ -301,6 +323,20 @@ class RoverIsolator:
             )
         # Too many in a row (or nothing to replace with): alarm, stop automatic navigation,
         # restart on the receiver's data.
+        return self._raise_alarm(z, r, "+".join(reasons), pred, res_h, res_u, F, gate_h, gate_u)
+
+    def _raise_alarm(
+        self,
+        z: tuple[float, float, float],
+        r: tuple[float, float, float],
+        reason: str,
+        pred: tuple[float, float, float] | None,
+        res_h: float | None,
+        res_u: float | None,
+        F: float | None,
+        gate_h: float,
+        gate_u: float,
+    ) -> Decision:
         raised = not self._alarm
         self._alarm = True
         self._good_run = 0
@@ -308,7 +344,7 @@ class RoverIsolator:
         return Decision(
             action="alarm",
             fault=True,
-            reason="+".join(reasons),
+            reason=reason,
             out_enu=None,
             pred_enu=pred,
             grey_res_h=res_h,
@@ -329,14 +365,15 @@ class RoverIsolator:
         self._win.append((value[0] - d[0], value[1] - d[1], value[2] - d[2]))
 
     def _learn_spread(
-        self, z: tuple[float, float, float], pred: tuple[float, float, float] | None
+        self, z: tuple[float, float, float], pred: tuple[float, float, float] | None, up: bool
     ) -> None:
         if pred is None:
             return
         ee, en, eu = z[0] - pred[0], z[1] - pred[1], z[2] - pred[2]
         w = self._ewma
         self._var_h += w * (0.5 * (ee * ee + en * en) - self._var_h)
-        self._var_u += w * (eu * eu - self._var_u)
+        if up:
+            self._var_u += w * (eu * eu - self._var_u)
 
     def _decide_accept(
         self,

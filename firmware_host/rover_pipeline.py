@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -145,9 +146,11 @@ class RoverPipeline:
                 h = epoch.alt_msl_m + (epoch.geoid_sep_m or 0.0)
             if self.frame is None:
                 self.frame = LocalFrame(epoch.lat_deg, epoch.lon_deg, h or 0.0)
-            enu = self.frame.to_enu(
-                epoch.lat_deg, epoch.lon_deg, h if h is not None else self.frame.h0_m
-            )
+            if h is None:
+                e, n, _ = self.frame.to_enu(epoch.lat_deg, epoch.lon_deg, self.frame.h0_m)
+                enu = (e, n, math.nan)  # a 2D fix: height unknown
+            else:
+                enu = self.frame.to_enu(epoch.lat_deg, epoch.lon_deg, h)
         sd = None
         if epoch.sd_lat_m is not None and epoch.sd_lon_m is not None:
             sd = (epoch.sd_lon_m, epoch.sd_lat_m, epoch.sd_alt_m or 2.0 * epoch.sd_lat_m)
@@ -235,7 +238,7 @@ class RoverPipeline:
             "course": e.course_deg,
             "e": _r(enu[0]) if enu else None,
             "n": _r(enu[1]) if enu else None,
-            "u": _r(enu[2]) if enu else None,
+            "u": _r(enu[2]) if enu and not math.isnan(enu[2]) else None,
             "pred_e": _r(pred[0]) if pred else None,
             "pred_n": _r(pred[1]) if pred else None,
             "pred_u": _r(pred[2]) if pred else None,

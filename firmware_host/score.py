@@ -43,6 +43,7 @@ class RoverScore:
     out_rms_faulty_m: float = math.nan
     out_rms_all_m: float = math.nan
     out_max_faulty_m: float = math.nan
+    dgps_rms_faulty_m: float = math.nan  # the receiver's own error at the faulty epochs
     alarms: int = 0
     delays_epochs: tuple[int, ...] = ()
 
@@ -83,6 +84,7 @@ def score_rover(
     raw_clean: list[float] = []
     out_clean: list[float] = []
     out_faulty: list[float] = []
+    dgps_faulty: list[float] = []
     event_first: dict[int, int] = {}
     event_detect: dict[int, int] = {}
     for tr in truth:
@@ -107,6 +109,7 @@ def score_rover(
             event_first.setdefault(ev, tr["k"])
             if flagged and ev not in event_detect:
                 event_detect[ev] = tr["k"]
+            dgps_faulty.append(math.hypot(tr["err_e"], tr["err_n"]))
             if out_err is None:
                 s.no_output_faulty += 1
             else:
@@ -126,5 +129,6 @@ def score_rover(
     s.out_rms_faulty_m = _rms(out_faulty)
     s.out_rms_all_m = _rms(out_clean + out_faulty)
     s.out_max_faulty_m = max(out_faulty) if out_faulty else math.nan
+    s.dgps_rms_faulty_m = _rms(dgps_faulty)
     s.delays_epochs = tuple(event_detect[e] - event_first[e] for e in sorted(event_detect))
     return s
