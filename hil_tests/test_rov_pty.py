@@ -57,7 +57,7 @@ def test_rs485_polling_over_pty_turns_to_setpoint() -> None:
 
 
 def test_rs232_streaming_over_pty() -> None:
-    stats, epochs = _run("rs232", 40, [])
+    stats, _ = _run("rs232", 40, [])
     assert stats["counts"]["telemetry"] >= 30
     assert stats["counts"]["commands"] == 40
     assert sum(stats["rejects"].values()) == 0

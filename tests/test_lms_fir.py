@@ -42,7 +42,7 @@ def test_lms_matches_numpy_reference_over_ring_rebase(bias: bool) -> None:
         e = target - d
         fir.train(e)
         w = w + 2 * mu * e * x  # eq. (5)
-        assert fir.C == pytest.approx(list(w), abs=1e-12)
+        assert pytest.approx(list(w), abs=1e-12) == fir.C
         assert fir.w_sum == pytest.approx(float(w.sum()), abs=1e-9)
 
 
@@ -57,7 +57,7 @@ def test_lms_identifies_a_known_fir() -> None:
         fir.push(float(u[k - 1]))
         y = float(h @ u[[k - 1, k - 2, k - 3, k - 4]])  # strictly causal: u(k-1) ... u(k-4)
         fir.train(y - fir.predict())
-    assert fir.C == pytest.approx(list(h), abs=1e-6)
+    assert pytest.approx(list(h), abs=1e-6) == fir.C
 
 
 def test_snr_matches_numpy_and_guards_zero_std() -> None:
@@ -70,7 +70,7 @@ def test_snr_matches_numpy_and_guards_zero_std() -> None:
             D = s[k - 9 : k + 1] - s[k - 9]
             V = np.abs((D - D.mean()) / D.std())  # eq. (10)
             ref = (V[-1] - V.mean()) ** 2 / V.std() ** 2  # eq. (11)
-            assert R == pytest.approx(ref, rel=1e-9)
+            assert pytest.approx(ref, rel=1e-9) == R
     flat = WeightDriftSnr(5)
     for _ in range(8):
         R = flat.push(0.25)
@@ -99,7 +99,7 @@ def test_detector_stores_weights_before_the_faulty_update() -> None:
     r = det.step(30.0)
     assert r.exceed and r.suspect and r.e2 > 800
     assert det.stored == before
-    assert det.fir.C != before  # the FIR itself kept learning (the paper's eq. (5))
+    assert before != det.fir.C  # the FIR itself kept learning (the paper's eq. (5))
 
 
 def test_warmup_suppresses_criterion_1() -> None:
