@@ -1,0 +1,274 @@
+"""The MAVLink router over real loopback UDP: tlog replay byte for byte, params, signing."""
+
+from __future__ import annotations
+
+import os
+import socket
+import stat
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from drivers import mavlink_io as mio
+from drivers.mavlink_framer import MavFramer, frame_target
+from firmware_host.mavparams import ParamSpec, ParamStore
+from firmware_host.router import EndpointConfig, MavlinkConfig, Router, load_signing_key
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL_TLOG = ROOT.parent / "shared" / "corpus" / "ardusub" / "small.tlog"
+GCS_ID = (255, 190)
+
+
+def _wait(cond: Callable[[], bool], what: str, deadline_s: float = 10.0) -> None:
+    end = time.monotonic() + deadline_s
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0)  # yield to the router thread; the deadline bounds the wait
+
+
+def _router(tmp_path: Path, **kw: object) -> tuple[Router, ParamStore]:
+    params = ParamStore(tmp_path / "params.toml")
+    params.register(ParamSpec("FDI_ALPHA", 0.05, 1e-6, 0.5, "false-alarm rate"))
+    params.register(ParamSpec("FDI_WINDOW", 20.0, 1.0, 500.0, "window length, epochs"))
+    cfg = MavlinkConfig(
+        autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+        gcs=(EndpointConfig("udpin:127.0.0.1:0", signing=bool(kw.get("signing"))),),
+        signing_key_file=str(kw.get("key_file", "")),
+        queue_packets=4000,
+        read_burst=256,
+        tlog_dir=str(tmp_path / "tlog"),
+    )
+    router = Router(cfg, params=params)
+    router.start()
+    return router, params
+
+
+def _port(router: Router, i: int) -> int:
+    addr = router.endpoints[i].link.local_address
+    assert addr is not None
+    return addr[1]
+
+
+@pytest.fixture()
+def tmp_key(tmp_path: Path) -> Iterator[tuple[Path, bytes]]:
+    key = bytes(range(100, 132))
+    path = tmp_path / "signing.key"
+    path.write_text(key.hex() + "\n")
+    os.chmod(path, stat.S_IRUSR | stat.S_IWUSR)
+    yield path, key
+
+
+@pytest.mark.skipif(not SMALL_TLOG.exists(), reason=f"corpus capture {SMALL_TLOG} is absent")
+def test_ardusub_dive_replayed_through_the_bridge_byte_for_byte(tmp_path: Path) -> None:
+    records = list(mio.iter_tlog(SMALL_TLOG))
+    router, _ = _router(tmp_path)
+    gcs = mio.MavEndpoint(
+        f"udpout:127.0.0.1:{_port(router, 1)}", source_system=GCS_ID[0], source_component=GCS_ID[1]
+    )
+    autopilot = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    autopilot.bind(("127.0.0.1", 0))
+    try:
+        gcs.send_heartbeat()  # the GCS is seen: (255, 190) and its address
+        _wait(lambda: router.endpoints[1].link.has_peer(), "the GCS to be seen")
+        # The oracle: what mavlink-router's rule lets through to a GCS that has seen only
+        # itself. Bad-CRC packets never pass; messages addressed to system 1 (the GCS's own
+        # commands recorded in the dive) have no route back towards a GCS.
+        seen_sys, seen = {GCS_ID[0]}, {GCS_ID}
+        expected: list[bytes] = []
+        batches: list[int] = []
+        framer = MavFramer()
+        offsets = mio.target_offsets()
+        for r in records:
+            frames = framer.feed(r.raw, boundary=True)
+            ok = False
+            for f in frames:
+                t = frame_target(f, offsets)
+                ok = (
+                    t is None
+                    or t[0] == 0
+                    or (t[1] == 0 and t[0] in seen_sys)
+                    or (t[0], t[1]) in seen
+                )
+            batches.append(len(expected))
+            if frames and ok:
+                expected.append(r.raw)
+        assert framer.stats.bad_crc == 4
+        n_valid = sum(r.msg is not None for r in records)
+        assert (len(records), n_valid, len(expected)) == (35_916, 35_912, 34_412)
+
+        got: list[bytes] = []
+        own: list[bytes] = []
+
+        def pump(n: int) -> Callable[[], bool]:
+            def done() -> bool:
+                while True:
+                    msg = gcs.recv(timeout_s=0.0)
+                    if msg is None:
+                        return len(got) >= n
+                    raw = bytes(msg.get_msgbuf())
+                    if (msg.get_srcSystem(), msg.get_srcComponent()) == (1, 191):
+                        own.append(raw)
+                    else:
+                        got.append(raw)
+
+            return done
+
+        window = 200  # flow control by acknowledgement, not by time: no loss, no sleeps
+        for start in range(0, len(records), window):
+            for r in records[start : start + window]:
+                autopilot.sendto(r.raw, ("127.0.0.1", _port(router, 0)))
+            upto = start + window
+            n = batches[upto] if upto < len(batches) else len(expected)
+            _wait(pump(n), f"the GCS to receive {n} packets")
+        assert got == expected  # byte for byte, in order, nothing more
+        assert gcs.bad_packets == 0
+        s = router.summary()
+        assert s["bad_crc"] == 4 and s["dropped_bytes"] == 283
+        assert s["autopilot"]["rx_packets"] == 35_912
+        # 1 500 packets addressed to system 1: 1 499 have no route, and one, the GCS's
+        # PARAM_REQUEST_LIST to (1, 0), is for every component of system 1: the bridge answers.
+        assert s["autopilot"]["unroutable"] == 1_499 and s["for_bridge"] == 1
+        assert s["gcs0"]["dropped_queue_full"] == 0
+        _wait(pump(len(expected)), "late own packets", 1.0)
+        assert own and all(mio.decode_packet(p) is not None for p in own)
+        kinds = {mio.decode_packet(p).get_type() for p in own}
+        assert "HEARTBEAT" in kinds
+        assert s["gcs0"]["tx_packets"] >= len(expected) + len(own)
+    finally:
+        router.close()
+        gcs.close()
+        autopilot.close()
+    # The recorder saw every framed packet once plus the bridge's own.
+    tlogs = sorted((tmp_path / "tlog").glob("*.tlog"))
+    recorded = [r.raw for p in tlogs for r in mio.iter_tlog(p)]
+    assert len(recorded) >= 35_912 + 1  # + GCS heartbeat and own packets
+
+
+def _param_value(ep: mio.MavEndpoint, name: str, deadline_s: float = 5.0) -> float | None:
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        msg = ep.recv(timeout_s=0.2)
+        if msg is not None and msg.get_type() == "PARAM_VALUE" and msg.param_id == name:
+            return float(msg.param_value)
+    return None
+
+
+def test_param_protocol_list_read_set_and_override_file(tmp_path: Path) -> None:
+    router, params = _router(tmp_path)
+    gcs = mio.MavEndpoint(f"udpout:127.0.0.1:{_port(router, 1)}", source_system=255)
+    changes: list[tuple[str, float]] = []
+    params.on_change(lambda n, v: changes.append((n, v)))
+    try:
+        gcs.send_heartbeat()
+        gcs.send_param_request_list(1, 191)
+        seen = {}
+        end = time.monotonic() + 5.0
+        while len(seen) < 2 and time.monotonic() < end:
+            msg = gcs.recv(timeout_s=0.2)
+            if msg is not None and msg.get_type() == "PARAM_VALUE":
+                seen[msg.param_id] = (msg.param_value, msg.param_index, msg.param_count)
+        assert seen["FDI_ALPHA"][1:] == (0, 2) and seen["FDI_WINDOW"][1:] == (1, 2)
+        gcs.send_param_set(1, 191, "FDI_WINDOW", 42.0)
+        assert _param_value(gcs, "FDI_WINDOW") == 42.0
+        assert params.get("FDI_WINDOW") == 42.0 and changes == [("FDI_WINDOW", 42.0)]
+        gcs.send_param_set(1, 191, "FDI_WINDOW", 1e6)  # out of bounds: refused, old value back
+        assert _param_value(gcs, "FDI_WINDOW") == 42.0
+        gcs.send_param_request_read(1, 191, "FDI_ALPHA")
+        assert _param_value(gcs, "FDI_ALPHA") == pytest.approx(0.05)
+    finally:
+        router.close()
+        gcs.close()
+    text = (tmp_path / "params.toml").read_text()
+    assert "FDI_WINDOW = 42.0" in text and "FDI_ALPHA" not in text
+    again = ParamStore(tmp_path / "params.toml")
+    assert again.register(ParamSpec("FDI_WINDOW", 20.0, 1.0, 500.0)) == 42.0
+
+
+def test_signing_signed_gcs_sets_unsigned_cannot(
+    tmp_path: Path, tmp_key: tuple[Path, bytes]
+) -> None:
+    key_file, key = tmp_key
+    assert load_signing_key(key_file) == key
+    router, params = _router(tmp_path, signing=True, key_file=key_file)
+    port = _port(router, 1)
+    signed = mio.MavEndpoint(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190)
+    signed.setup_signing(key, link_id=1)
+    unsigned = mio.MavEndpoint(f"udpout:127.0.0.1:{port}", source_system=254)
+    wrong = mio.MavEndpoint(f"udpout:127.0.0.1:{port}", source_system=253)
+    wrong.setup_signing(bytes(32), link_id=2)
+    try:
+        for ep in (signed, unsigned, wrong):
+            ep.send_heartbeat()
+        unsigned.send_param_set(1, 191, "FDI_ALPHA", 0.2)
+        wrong.send_param_set(1, 191, "FDI_ALPHA", 0.3)
+        _wait(lambda: router.stats.refused_unsigned == 2, "two refusals")
+        assert params.get("FDI_ALPHA") == 0.05
+        assert router.stats.bad_signature == 1
+        signed.send_param_set(1, 191, "FDI_ALPHA", 0.01)
+        assert _param_value(signed, "FDI_ALPHA") == pytest.approx(0.01)
+        assert params.get("FDI_ALPHA") == pytest.approx(0.01)
+        # Reads stay open to an unsigned GCS.
+        unsigned.send_param_request_read(1, 191, "FDI_ALPHA")
+        assert _param_value(unsigned, "FDI_ALPHA") == pytest.approx(0.01)
+        assert router.stats.refused_unsigned == 2
+    finally:
+        router.close()
+        for ep in (signed, unsigned, wrong):
+            ep.close()
+
+
+def test_signing_key_file_rules(tmp_path: Path) -> None:
+    from fdi.errors import ConfigError
+
+    path = tmp_path / "k"
+    path.write_text("00" * 32)
+    os.chmod(path, 0o644)
+    with pytest.raises(ConfigError, match="owner"):
+        load_signing_key(path)
+    os.chmod(path, 0o600)
+    assert load_signing_key(path) == bytes(32)
+    path.write_text("zz")
+    with pytest.raises(ConfigError, match="hexadecimal"):
+        load_signing_key(path)
+    inside = ROOT / "tests"  # a git working tree: refused even with a good key and mode
+    assert (ROOT / ".git").exists()
+    with pytest.raises(ConfigError):
+        load_signing_key(inside / "no-such.key")
+
+
+def test_flood_on_gcs_side_does_not_stall_the_autopilot_direction(tmp_path: Path) -> None:
+    router, _ = _router(tmp_path)
+    gcs = mio.MavEndpoint(f"udpout:127.0.0.1:{_port(router, 1)}", source_system=255)
+    ap = mio.MavEndpoint(
+        f"udpout:127.0.0.1:{_port(router, 0)}", source_system=1, source_component=1
+    )
+    flood = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        gcs.send_heartbeat()
+        ap.send_heartbeat()
+        _wait(lambda: router.endpoints[0].link.has_peer(), "autopilot peer")
+        junk = mio.MavPacker(255, 190).send_named_value_float("flood", 1.0, 0)
+        t_end = time.monotonic() + 1.0
+        n = 0
+        while time.monotonic() < t_end:  # as fast as one thread can: >> 10 000 packets/s
+            flood.sendto(junk, ("127.0.0.1", _port(router, 1)))
+            n += 1
+            if n % 500 == 0:
+                ap.send_statustext(6, f"ap {n}")
+        ap.send_statustext(6, "last")
+        end = time.monotonic() + 5.0
+        texts = []
+        while time.monotonic() < end and "last" not in texts:
+            msg = gcs.recv(timeout_s=0.2)
+            if msg is not None and msg.get_type() == "STATUSTEXT":
+                texts.append(msg.text)
+        assert "last" in texts
+        assert n > 10_000
+    finally:
+        router.close()
+        gcs.close()
+        ap.close()
+        flood.close()
