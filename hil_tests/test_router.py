@@ -272,3 +272,49 @@ def test_flood_on_gcs_side_does_not_stall_the_autopilot_direction(tmp_path: Path
         gcs.close()
         ap.close()
         flood.close()
+
+
+MAVPROXY = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "mavproxy.py"
+
+
+@pytest.mark.skipif(
+    not MAVPROXY.exists(), reason="MAVProxy is not installed (pip install MAVProxy)"
+)
+def test_mavproxy_sees_heartbeat_lists_and_sets_a_parameter(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    router, params = _router(tmp_path)
+    cmd = [
+        sys.executable, str(MAVPROXY), f"--master=udpout:127.0.0.1:{_port(router, 1)}",
+        "--target-system=1", "--target-component=191", "--source-system=255", "--nowait",
+        f"--state-basedir={tmp_path / 'mavproxy'}", "--default-modules=param",
+    ]  # fmt: skip
+    (tmp_path / "mavproxy").mkdir()
+    proc = subprocess.Popen(
+        cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    assert proc.stdin is not None
+    try:
+        # MAVProxy fetches the parameter list of the component it targets once it has seen
+        # its heartbeat; then "param set" is retried until the bridge's store shows the value.
+        _wait(lambda: router.stats.for_bridge >= 1, "MAVProxy's PARAM_REQUEST_LIST", 20.0)
+        next_try = 0.0
+
+        def set_param() -> bool:
+            nonlocal next_try
+            if time.monotonic() >= next_try:
+                proc.stdin.write("param show FDI*\nparam set FDI_WINDOW 33\n")  # type: ignore[union-attr]
+                proc.stdin.flush()  # type: ignore[union-attr]
+                next_try = time.monotonic() + 0.5
+            return params.get("FDI_WINDOW") == 33.0
+
+        _wait(set_param, "MAVProxy to set FDI_WINDOW", 20.0)
+    finally:
+        proc.terminate()
+        out = proc.communicate(timeout=10)[0]
+        router.close()
+    assert "Detected vehicle 1:191" in out  # our heartbeat
+    assert "Received 2 parameters" in out
+    assert "FDI_ALPHA" in out and "FDI_WINDOW" in out
+    assert router.stats.params_set >= 1
