@@ -19,7 +19,7 @@ Units are in the field names: degrees, metres, metres per second, seconds of day
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import pynmea2
@@ -33,7 +33,7 @@ MAX_LINE = 120  # NMEA 0183 says 82 characters; receivers in the wild send a lit
 SUPPORTED = frozenset({"GGA", "RMC", "VTG", "GSA", "GST", "ZDA", "GLL"})
 
 
-class Ignored(Exception):  # noqa: N818 - a control-flow signal, not an error
+class Ignored(Exception):
     """A well-formed sentence this codec does not use (proprietary or unknown type)."""
 
     def __init__(self, reason: str, sentence_type: str) -> None:
@@ -472,7 +472,7 @@ def _gll(talker: str, d: list[str]) -> Gll:
     return Gll(talker=talker, time_s=_time(_field(d, 4)), valid=valid, lat_deg=lat, lon_deg=lon)
 
 
-_DECODERS = {
+_DECODERS: dict[str, Callable[[str, list[str]], NmeaMessage]] = {
     "GGA": _gga,
     "RMC": _rmc,
     "VTG": _vtg,

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import errno
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, Protocol
 
 import serial
 import serial.rs485
@@ -20,6 +20,17 @@ import serial.rs485
 from fdi.errors import PortClosedError, PortError
 
 Parity = Literal["N", "E", "O", "M", "S"]
+
+
+class Port(Protocol):
+    """What the drivers use of a pyserial port (any ``serial_for_url`` backend has it)."""
+
+    @property
+    def port(self) -> str | None: ...
+
+    def read(self, size: int = 1) -> bytes: ...
+
+    def write(self, data: bytes, /) -> int | None: ...
 
 
 @dataclass(frozen=True)
@@ -46,7 +57,7 @@ class SerialSettings:
     rs485: RS485Config | None = None
 
 
-def open_port(settings: SerialSettings, *, do_not_open: bool = False) -> serial.SerialBase:
+def open_port(settings: SerialSettings, *, do_not_open: bool = False) -> serial.Serial:
     """Open ``settings.url`` with ``serial.serial_for_url``; raise :class:`PortError` on failure."""
     try:
         port = serial.serial_for_url(
@@ -74,19 +85,20 @@ def open_port(settings: SerialSettings, *, do_not_open: bool = False) -> serial.
     return port
 
 
-def read_some(port: serial.SerialBase, size: int = 4096) -> bytes:
+def read_some(port: Port, size: int = 4096) -> bytes:
     """Read what is waiting (at least one byte or until the port's timeout).
 
     Raises :class:`PortClosedError` when the far end went away (USB unplugged, pty master
     closed), :class:`PortError` for any other failure.
     """
     try:
-        waiting = port.in_waiting
+        waiting = int(getattr(port, "in_waiting", 0))
         if waiting:
             return bytes(port.read(min(size, waiting)))
         first = bytes(port.read(1))  # blocks up to the port's timeout
-        if first and port.in_waiting:
-            return first + bytes(port.read(min(size - 1, port.in_waiting)))
+        more = int(getattr(port, "in_waiting", 0)) if first else 0
+        if more:
+            return first + bytes(port.read(min(size - 1, more)))
         return first
     except serial.SerialException as err:
         if _looks_closed(err):
@@ -98,7 +110,7 @@ def read_some(port: serial.SerialBase, size: int = 4096) -> bytes:
         raise PortError(f"could not read from {port.port}: {err}") from err
 
 
-def write_all(port: serial.SerialBase, data: bytes) -> None:
+def write_all(port: Port, data: bytes) -> None:
     """Write ``data``; translate failures into :class:`PortError`."""
     try:
         port.write(data)

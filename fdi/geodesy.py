@@ -18,7 +18,11 @@ def lla_to_ecef(lat_deg: float, lon_deg: float, h_m: float) -> tuple[float, floa
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
     s, c = math.sin(lat), math.cos(lat)
     n = WGS84_A / math.sqrt(1.0 - WGS84_E2 * s * s)
-    return ((n + h_m) * c * math.cos(lon), (n + h_m) * c * math.sin(lon), (n * (1 - WGS84_E2) + h_m) * s)
+    return (
+        (n + h_m) * c * math.cos(lon),
+        (n + h_m) * c * math.sin(lon),
+        (n * (1 - WGS84_E2) + h_m) * s,
+    )
 
 
 def ecef_to_lla(x: float, y: float, z: float) -> tuple[float, float, float]:

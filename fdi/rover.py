@@ -279,7 +279,7 @@ class RoverIsolator:
         # Section 1: Kalman prediction and residual chi-square test (eq. 1-6).
         self.kf.predict(dt)
         F = self.kf.test(z, r)
-        chi2_fault = p.chi2_enabled and F > self.T_d
+        chi2_fault = p.chi2_enabled and self.T_d < F
 
         reasons = []
         if grey_fault:

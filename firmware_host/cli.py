@@ -16,7 +16,7 @@ import importlib
 import logging
 import sys
 from collections.abc import Sequence
-from typing import Any, Protocol
+from typing import Protocol
 
 from fdi.errors import ConfigError, FdiBridgeError
 
@@ -32,17 +32,24 @@ class Command(Protocol):
 # Top-level commands: name -> (module, help).
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("", "run a built-in demo with no hardware (rover by default)"),
-    "replay": ("firmware_host.replay", "replay a capture or NMEA log through a pty into a pipeline"),
+    "replay": (
+        "firmware_host.replay",
+        "replay a capture or NMEA log through a pty into a pipeline",
+    ),
     "record": ("firmware_host.record", "record a serial port's raw bytes to a capture file"),
     "run": ("firmware_host.run", "run on the vehicle with the configured ports"),
     "bench": ("firmware_host.bench", "benchmarks: per-epoch time, throughput, loop jitter"),
-    "mavlink": ("firmware_host.router", "MAVLink passthrough between autopilot and ground stations"),
+    "mavlink": (
+        "firmware_host.router",
+        "MAVLink passthrough between autopilot and ground stations",
+    ),
 }
 
 # ``fdi-bridge sim KIND``: KIND -> (module, help).
 SIM_COMMANDS: dict[str, tuple[str, str]] = {
     "rover": ("firmware_host.rover_sim", "generate a rover NMEA run with injected GPS faults"),
     "rov": ("firmware_host.rov_app", "ROV compass faults and fault-tolerant heading hold"),
+    "insgnss": ("firmware_host.insgnss_sim", "INS/GNSS three-zone robust filter: paper scenarios"),
 }
 
 # ``fdi-bridge demo KIND``: KIND -> module with ``run_demo(args) -> int`` and ``add_arguments``.
@@ -53,7 +60,7 @@ DEMO_COMMANDS: dict[str, tuple[str, str]] = {
 
 
 def _load(module: str) -> Command:
-    return importlib.import_module(module)  # type: ignore[return-value]
+    return importlib.import_module(module)
 
 
 def build_parser() -> argparse.ArgumentParser:

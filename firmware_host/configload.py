@@ -54,7 +54,7 @@ def _describe(tp: Any) -> str:
     if origin in (typing.Union, types.UnionType):
         return " or ".join(_describe(a) for a in get_args(tp) if a is not type(None))
     if dataclasses.is_dataclass(tp):
-        return f"a table [{tp.__name__}]"
+        return f"a table [{getattr(tp, '__name__', tp)}]"
     return str(tp)
 
 
@@ -150,7 +150,8 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     try:
         text = p.read_bytes()
     except OSError as err:
-        raise ConfigError(str(p), "(file)", "a readable TOML file", err.strerror or str(err)) from err
+        found = err.strerror or str(err)
+        raise ConfigError(str(p), "(file)", "a readable TOML file", found) from err
     try:
         return tomllib.loads(text.decode("utf-8"))
     except UnicodeDecodeError as err:

@@ -8,9 +8,9 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 
-from fdi.geodesy import LocalFrame  # noqa: E402
+from fdi.geodesy import LocalFrame
 
 
 def plot_rover(

@@ -186,7 +186,9 @@ def replay_direct(inp: ReplayInput, pipeline: RoverPipeline) -> dict[str, Any]:
     return {"bytes_total": inp.total_bytes, "bytes_written": inp.total_bytes, "pty": False}
 
 
-def build_sinks(cfg: BridgeConfig, nmea_url: str | None, mavlink_url: str | None) -> list[EpochSink]:
+def build_sinks(
+    cfg: BridgeConfig, nmea_url: str | None, mavlink_url: str | None
+) -> list[EpochSink]:
     from dataclasses import replace
 
     from firmware_host.rover_outputs import MavlinkGpsSink, NmeaSink

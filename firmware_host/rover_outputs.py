@@ -60,7 +60,7 @@ def gps_week_ms(unix_s: float) -> tuple[int, int]:
             leap = value
     gps_s = unix_s - GPS_EPOCH_UNIX + leap
     week = int(gps_s // 604800)
-    ms = int(round((gps_s - week * 604800) * 1000.0))
+    ms = round((gps_s - week * 604800) * 1000.0)
     if ms >= 604800000:
         week, ms = week + 1, ms - 604800000
     return week, ms
@@ -167,7 +167,8 @@ class MavlinkGpsSink:
     def emit(self, out: EpochOutcome) -> None:
         e, d = out.epoch, out.decision
         o = self.cfg.output
-        if out.t_s is not None and (self._next_heartbeat is None or out.t_s >= self._next_heartbeat):
+        due = self._next_heartbeat
+        if out.t_s is not None and (due is None or out.t_s >= due):
             self.endpoint.send_heartbeat()
             self._next_heartbeat = math.floor(out.t_s) + 1.0
         if d.alarm_raised:
@@ -199,12 +200,12 @@ class MavlinkGpsSink:
             c = math.radians(e.course_deg)
             vn, ve = e.speed_mps * math.cos(c), e.speed_mps * math.sin(c)
         fix = self._fix_cls(
-            time_usec=int(round(unix_s * 1e6)),
+            time_usec=round(unix_s * 1e6),
             gps_week=week,
             gps_week_ms=ms,
             fix_type=(3 if replaced else _FIX_TYPE.get(e.quality, 3)) if valid else 1,
-            lat_deg=out.lat if valid else 0.0,
-            lon_deg=out.lon if valid else 0.0,
+            lat_deg=out.lat if out.lat is not None else 0.0,
+            lon_deg=out.lon if out.lon is not None else 0.0,
             alt_m=(out.alt or 0.0) if valid else 0.0,
             hdop=e.hdop if e.hdop is not None else 99.99,
             vdop=e.vdop,

@@ -219,7 +219,7 @@ class RoverPipeline:
         kf = d.kf_enu
         return {
             "utc": e.utc_s,
-            "date": None if e.date is None else "%04d-%02d-%02d" % e.date,
+            "date": None if e.date is None else "{:04d}-{:02d}-{:02d}".format(*e.date),
             "raw_lat": e.lat_deg,
             "raw_lon": e.lon_deg,
             "raw_alt": e.alt_msl_m,

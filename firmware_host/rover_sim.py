@@ -116,7 +116,8 @@ def _speed_at(path: _Path, s: float, sc: RoverScenario) -> float:
     for ds in (-ramp, 0.0, ramp):
         _, _, _, turning = path.pose(s + ds)
         if turning:
-            best = min(best, sc.turn_speed_mps if ds == 0.0 else 0.5 * (sc.speed_mps + sc.turn_speed_mps))
+            mid = 0.5 * (sc.speed_mps + sc.turn_speed_mps)
+            best = min(best, sc.turn_speed_mps if ds == 0.0 else mid)
     return best
 
 
@@ -137,7 +138,7 @@ def plan_faults(sc: RoverScenario, n_epochs: int, rng: np.random.Generator) -> l
     t = 20.0
     while True:
         t += float(rng.uniform(sc.min_gap_s, 2 * sc.fault_every_s - sc.min_gap_s))
-        start = int(round(t * sc.rate_hz))
+        start = round(t * sc.rate_hz)
         if start >= n_epochs - int(sc.min_gap_s * sc.rate_hz):
             break
         kind = str(rng.choice(list(sc.kinds)))
@@ -147,12 +148,12 @@ def plan_faults(sc: RoverScenario, n_epochs: int, rng: np.random.Generator) -> l
         if kind == "burst":
             length = int(rng.integers(2, 6))
         elif kind == "ramp":
-            length = int(round(sc.ramp_duration_s * sc.rate_hz))
+            length = round(sc.ramp_duration_s * sc.rate_hz)
             mag = sc.ramp_rate_mps  # per second; offset grows
         elif kind == "outage":
-            length = int(round(sc.outage_s * sc.rate_hz))
+            length = round(sc.outage_s * sc.rate_hz)
         elif kind == "frozen":
-            length = int(round(sc.frozen_s * sc.rate_hz))
+            length = round(sc.frozen_s * sc.rate_hz)
         else:
             length = 1
         events.append(
@@ -166,14 +167,14 @@ def generate(sc: RoverScenario) -> Iterator[tuple[float, bytes, dict[str, object
     """Yield ``(time_s, nmea_bytes, truth_record)`` per epoch."""
     rng = np.random.default_rng(sc.seed)
     dt = 1.0 / sc.rate_hz
-    n = int(round(sc.duration_s * sc.rate_hz))
+    n = round(sc.duration_s * sc.rate_hz)
     path = _Path(sc.pass_length_m, sc.turn_radius_m)
     frame = LocalFrame(sc.origin_lat_deg, sc.origin_lon_deg, sc.origin_alt_m)
     faults = plan_faults(sc, n, rng)
     fault_at: dict[int, FaultEvent] = {}
-    for ev in faults:
-        for i in range(ev.start, ev.start + ev.length):
-            fault_at[i] = ev
+    for event in faults:
+        for i in range(event.start, event.start + event.length):
+            fault_at[i] = event
     phi = math.exp(-dt / sc.tau_s)
     q_h = sc.sigma_h_m * math.sqrt(1 - phi * phi)
     q_v = sc.sigma_v_m * math.sqrt(1 - phi * phi)
@@ -321,7 +322,7 @@ def write_run(sc: RoverScenario, out_dir: Path) -> dict[str, object]:
         nmea.write(header.encode("ascii"))
         for t, data, truth in generate(sc):
             nmea.write(data)
-            cap.write(0, data, t_us=int(round((t - sc.start_utc_s) * 1e6)) + 1_273_622_400_000_000)
+            cap.write(0, data, t_us=round((t - sc.start_utc_s) * 1e6) + 1_273_622_400_000_000)
             truth_f.write(json.dumps(truth) + "\n")
             n_epochs += 1
             n_fault += bool(truth["fault"])

@@ -25,7 +25,7 @@ def read_jsonl(path: str | Path) -> list[dict[str, Any]]:
 
 
 def _key(utc: float) -> int:
-    return int(round(utc * 1000.0))
+    return round(utc * 1000.0)
 
 
 @dataclass
