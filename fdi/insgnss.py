@@ -1,0 +1,592 @@
+"""Loosely coupled INS/GNSS: strapdown mechanisation and a 15-state error-state Kalman filter
+with the three-zone robust gate (Cai & Shao) on the GNSS innovations.
+
+Frames and units
+----------------
+- Navigation frame n: a local tangent plane fixed to the Earth at the origin, axes East, North,
+  Up (ENU), position in metres from the origin. Gravity is the spherical model
+  ``g(p) = −g0 (R/|r|)² r/|r|`` with ``r = (E, N, U + R)`` (so its direction follows the Earth's
+  curvature over tens of kilometres), the Earth rate ``ω_ie^n = Ω (0, cos L, sin L)`` gives the
+  Coriolis term. Because n is fixed to the Earth there is no transport rate. Adequate for a
+  rover or small aircraft over a few kilometres (and the paper's 25 km flight).
+- Body frame b: forward-right-down (FRD), the MAVLink/ArduPilot IMU convention. Attitude is the
+  quaternion ``q`` of ``C_b^n``; Euler angles are the aerospace ZYX (yaw from north, clockwise).
+- IMU: gyro ω̃ (rad/s) and specific force f̃ (m/s²) in b. A sample stamped ``t_k`` is taken as
+  the mean over ``(t_{k−1}, t_k]`` (what integrating IMUs report).
+
+Mechanisation (rectangular rule; the simulator inverts exactly these equations)
+--------------------------------------------------------------------------------
+(M1) ``C_{k} = Exp(−ω_ie^n Δt) · C_{k−1} · Exp((ω̃ − b̂_g) Δt)``
+(M2) ``v_{k} = v_{k−1} + (C_{k−1}(f̃ − b̂_a) + g(p_{k−1}) − 2 ω_ie^n × v_{k−1}) Δt``
+(M3) ``p_{k} = p_{k−1} + (v_{k−1} + v_{k}) Δt / 2``
+
+Error state (true minus estimate), 15 states ``δx = [δp, δv, φ, δb_a, δb_g]`` with
+``C_b^n = (I − [φ×]) Ĉ_b^n``:
+
+(E1) ``δṗ = δv``
+(E2) ``δv̇ = G δp − 2 Ω_ie δv + [f^n×] φ − Ĉ δb_a + Ĉ w_a``,  ``G = (g0/R) diag(−1, −1, 2)``
+(E3) ``φ̇ = −Ω_ie φ + Ĉ δb_g − Ĉ w_g``
+(E4) ``δḃ_a = w_ba``,  ``δḃ_g = w_bg`` (random walks)
+
+Discretised as ``Φ = I + FΔt + (FΔt)²/2``, ``Q_d = Q Δt``, propagated at ``cov_rate_hz``.
+
+GNSS update, the paper's eqs. (2)–(8) per component i (antenna at the IMU):
+(2) ``ν = z − H x̂``: position ``z − p̂`` (and velocity ``z_v − v̂``), ``H = [I 0 0 0 0]`` (and
+``[0 I 0 0 0]``); (3) ``S = H P⁻ Hᵀ + R``; (7)–(8) ``DM(i) = ν_i²/S_ii`` against T1, T2 by
+:class:`fdi.three_zone.ThreeZoneGate`, which returns the value and variance to use (or drops
+the component); then ``K = P⁻H'ᵀ(H'P⁻H'ᵀ + R')⁻¹``, ``δx̂ = K ν'``, Joseph form
+``P⁺ = (I − KH')P⁻(I − KH')ᵀ + KR'Kᵀ``, and the correction is fed back into the nominal
+state (``δx̂`` reset to 0).
+
+IMU rate: the rectangular rule integrates sampled rates, so it can only follow motion well
+below the sample rate. A rover's or small aircraft's manoeuvres (turns, bank changes) have
+content up to ~2 Hz; ten samples per period of that motion means at least 20 Hz
+(``min_imu_rate_hz``). Below it, or with a gap longer than ``max_imu_gap_s``, the filter
+raises :class:`~fdi.errors.EstimatorError` instead of producing numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from fdi.errors import EstimatorError
+from fdi.three_zone import Action, GateDecision, Strategy, ThreeZoneGate, ThreeZoneParams
+
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+FloatArray = npt.NDArray[np.float64]
+VecLike = Sequence[float] | npt.NDArray[Any]  # a 3-vector as a sequence or an array
+
+OMEGA_IE = 7.2921151467e-5  # Earth rotation rate, rad/s (WGS 84)
+EARTH_RADIUS_M = 6_371_008.8  # mean radius of the spherical Earth model, m
+STANDARD_G = 9.80665  # m/s² per g
+DEG = math.pi / 180.0
+N_STATES = 15
+_RATE_WINDOW = 10  # IMU samples whose median interval decides the rate check
+
+
+def normal_gravity(latitude_deg: float) -> float:
+    """Somigliana normal gravity on the WGS 84 ellipsoid, m/s²."""
+    s2 = math.sin(latitude_deg * DEG) ** 2
+    return 9.7803253359 * (1 + 0.00193185265241 * s2) / math.sqrt(1 - 0.00669437999013 * s2)
+
+
+# ---------------------------------------------------------------- quaternion helpers (floats)
+
+
+def quat_mul(a: Quat, b: Quat) -> Quat:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def quat_conj(q: Quat) -> Quat:
+    return (q[0], -q[1], -q[2], -q[3])
+
+
+def quat_rotate(q: Quat, v: Vec3) -> Vec3:
+    """C(q) v for a unit quaternion q."""
+    w, x, y, z = q
+    vx, vy, vz = v
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (
+        vx + w * tx + (y * tz - z * ty),
+        vy + w * ty + (z * tx - x * tz),
+        vz + w * tz + (x * ty - y * tx),
+    )
+
+
+def quat_exp(rx: float, ry: float, rz: float) -> Quat:
+    """Unit quaternion of the rotation vector (rx, ry, rz), rad."""
+    a2 = rx * rx + ry * ry + rz * rz
+    if a2 < 1e-12:
+        s = 0.5 - a2 / 48.0
+        return (1.0 - a2 / 8.0, s * rx, s * ry, s * rz)
+    a = math.sqrt(a2)
+    s = math.sin(0.5 * a) / a
+    return (math.cos(0.5 * a), s * rx, s * ry, s * rz)
+
+
+def quat_log(q: Quat) -> Vec3:
+    """Rotation vector of a unit quaternion (the inverse of :func:`quat_exp`), rad."""
+    w, x, y, z = q if q[0] >= 0 else (-q[0], -q[1], -q[2], -q[3])
+    n = math.sqrt(x * x + y * y + z * z)
+    if n < 1e-12:
+        return (2.0 * x, 2.0 * y, 2.0 * z)
+    k = 2.0 * math.atan2(n, w) / n
+    return (k * x, k * y, k * z)
+
+
+def quat_normalize(q: Quat) -> Quat:
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+_Q_NED_TO_ENU: Quat = (0.0, math.sqrt(0.5), math.sqrt(0.5), 0.0)  # 180° about (1, 1, 0)/√2
+
+
+def euler_to_quat(roll: float, pitch: float, yaw: float) -> Quat:
+    """C_b^n (body FRD → ENU) from aerospace ZYX Euler angles (rad, yaw from north)."""
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    q_ned = (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+    return quat_mul(_Q_NED_TO_ENU, q_ned)
+
+
+def quat_to_euler(q: Quat) -> Vec3:
+    """(roll, pitch, yaw) in rad of C_b^n (body FRD → ENU); yaw in (−π, π]."""
+    w, x, y, z = quat_mul(quat_conj(_Q_NED_TO_ENU), q)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return (roll, pitch, yaw)
+
+
+def quat_to_dcm(q: Quat) -> FloatArray:
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _skew(a: VecLike) -> FloatArray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+# ---------------------------------------------------------------- Earth model and mechanisation
+
+
+@dataclass(frozen=True)
+class EarthModel:
+    """Spherical Earth seen from a tangent plane at ``latitude_deg`` (see the module docstring)."""
+
+    latitude_deg: float = 34.25
+    rotation: bool = True
+
+    @property
+    def g0(self) -> float:
+        return normal_gravity(self.latitude_deg)
+
+    @property
+    def omega_ie_n(self) -> Vec3:
+        """Earth rate in ENU, rad/s."""
+        if not self.rotation:
+            return (0.0, 0.0, 0.0)
+        lat = self.latitude_deg * DEG
+        return (0.0, OMEGA_IE * math.cos(lat), OMEGA_IE * math.sin(lat))
+
+    def gravity(self, p: Vec3) -> Vec3:
+        """Gravity vector at ENU position p (m), m/s²."""
+        rx, ry, rz = p[0], p[1], p[2] + EARTH_RADIUS_M
+        r2 = rx * rx + ry * ry + rz * rz
+        k = -self.g0 * EARTH_RADIUS_M**2 / (r2 * math.sqrt(r2))
+        return (k * rx, k * ry, k * rz)
+
+
+@dataclass
+class NavState:
+    """Nominal navigation state: C_b^n as a quaternion, ENU velocity (m/s) and position (m)."""
+
+    q: Quat
+    v: Vec3
+    p: Vec3
+
+
+def mechanize(
+    s: NavState, omega_b: Vec3, f_b: Vec3, dt: float, earth: EarthModel, q_earth: Quat
+) -> Vec3:
+    """Advance ``s`` in place by one IMU interval, eqs. (M1)–(M3); returns f^n (m/s²).
+
+    ``omega_b`` and ``f_b`` are already bias-corrected; ``q_earth = Exp(−ω_ie^n Δt)``.
+    """
+    v0, p0 = s.v, s.p
+    # (M2) specific force to n with the attitude at the start of the interval
+    fn = quat_rotate(s.q, f_b)
+    g = earth.gravity(p0)
+    w = earth.omega_ie_n
+    cor = (
+        2.0 * (w[1] * v0[2] - w[2] * v0[1]),
+        2.0 * (w[2] * v0[0] - w[0] * v0[2]),
+        2.0 * (w[0] * v0[1] - w[1] * v0[0]),
+    )
+    v1 = (
+        v0[0] + (fn[0] + g[0] - cor[0]) * dt,
+        v0[1] + (fn[1] + g[1] - cor[1]) * dt,
+        v0[2] + (fn[2] + g[2] - cor[2]) * dt,
+    )
+    # (M3) trapezoidal position
+    s.p = (
+        p0[0] + 0.5 * (v0[0] + v1[0]) * dt,
+        p0[1] + 0.5 * (v0[1] + v1[1]) * dt,
+        p0[2] + 0.5 * (v0[2] + v1[2]) * dt,
+    )
+    s.v = v1
+    # (M1) attitude
+    dq = quat_exp(omega_b[0] * dt, omega_b[1] * dt, omega_b[2] * dt)
+    s.q = quat_normalize(quat_mul(quat_mul(q_earth, s.q), dq))
+    return fn
+
+
+def earth_step_quat(earth: EarthModel, dt: float) -> Quat:
+    """Exp(−ω_ie^n Δt), the rotation of the tangent frame during Δt, as used in (M1)."""
+    w = earth.omega_ie_n
+    return quat_exp(-w[0] * dt, -w[1] * dt, -w[2] * dt)
+
+
+def invert_mechanization(
+    s0: NavState, s1: NavState, dt: float, earth: EarthModel, q_earth: Quat
+) -> tuple[Vec3, Vec3]:
+    """The (ω_b, f_b) that take ``s0`` to ``s1`` through (M1)–(M2): the error-free IMU sample."""
+    dq = quat_mul(quat_mul(quat_conj(s0.q), quat_conj(q_earth)), s1.q)
+    r = quat_log(dq)
+    omega = (r[0] / dt, r[1] / dt, r[2] / dt)
+    g = earth.gravity(s0.p)
+    w = earth.omega_ie_n
+    v0, v1 = s0.v, s1.v
+    cor = (
+        2.0 * (w[1] * v0[2] - w[2] * v0[1]),
+        2.0 * (w[2] * v0[0] - w[0] * v0[2]),
+        2.0 * (w[0] * v0[1] - w[1] * v0[0]),
+    )
+    fn = tuple((v1[i] - v0[i]) / dt - g[i] + cor[i] for i in range(3))
+    f_b = quat_rotate(quat_conj(s0.q), (fn[0], fn[1], fn[2]))
+    return omega, f_b
+
+
+# ---------------------------------------------------------------- configuration
+
+
+@dataclass(frozen=True)
+class ImuErrorModel:
+    """IMU errors: 1σ turn-on bias and white-noise densities (per axis).
+
+    Defaults: a MEMS autopilot IMU after its turn-on calibration (ICM-42688 / BMI088 class).
+    """
+
+    gyro_bias_deg_h: float = field(default=30.0, metadata={"ge": 0.0, "doc": "1σ gyro bias"})
+    gyro_arw_deg_sqrt_h: float = field(
+        default=0.2, metadata={"ge": 0.0, "doc": "angle random walk"}
+    )
+    accel_bias_ug: float = field(default=2000.0, metadata={"ge": 0.0, "doc": "1σ accel bias"})
+    accel_vrw_ug_sqrt_hz: float = field(
+        default=70.0, metadata={"ge": 0.0, "doc": "accelerometer white noise density"}
+    )
+
+    @property
+    def gyro_bias_rad_s(self) -> float:
+        return self.gyro_bias_deg_h * DEG / 3600.0
+
+    @property
+    def gyro_arw_rad_sqrt_s(self) -> float:
+        return self.gyro_arw_deg_sqrt_h * DEG / 60.0
+
+    @property
+    def accel_bias_m_s2(self) -> float:
+        return self.accel_bias_ug * 1e-6 * STANDARD_G
+
+    @property
+    def accel_vrw_m_s_sqrt_s(self) -> float:
+        return self.accel_vrw_ug_sqrt_hz * 1e-6 * STANDARD_G
+
+
+@dataclass(frozen=True)
+class InsGnssParams:
+    """Filter parameters (the ``[filter]`` table of ``config/insgnss*.toml``)."""
+
+    strategy: Strategy = field(default="three_zone", metadata={"doc": "robust treatment"})
+    three_zone: ThreeZoneParams = field(default_factory=ThreeZoneParams)
+    imu: ImuErrorModel = field(default_factory=ImuErrorModel)
+    gnss_sigma_h_m: float = field(default=3.0, metadata={"gt": 0.0, "doc": "R: E/N 1σ"})
+    gnss_sigma_v_m: float = field(default=5.0, metadata={"gt": 0.0, "doc": "R: up 1σ"})
+    gnss_sigma_vel_m_s: float = field(default=0.1, metadata={"gt": 0.0, "doc": "R: velocity"})
+    use_velocity: bool = field(default=True, metadata={"doc": "use GNSS velocity when given"})
+    latitude_deg: float = field(default=34.25, metadata={"ge": -89.0, "le": 89.0})
+    earth_rotation: bool = True
+    min_imu_rate_hz: float = field(default=20.0, metadata={"ge": 10.0})
+    max_imu_gap_s: float = field(default=0.25, metadata={"gt": 0.0})
+    cov_rate_hz: float = field(default=10.0, metadata={"gt": 0.0, "doc": "P propagation rate"})
+    init_sigma_pos_m: float = field(default=3.0, metadata={"gt": 0.0})
+    init_sigma_vel_m_s: float = field(default=0.1, metadata={"gt": 0.0})
+    init_sigma_tilt_deg: float = field(default=0.5, metadata={"gt": 0.0})
+    init_sigma_yaw_deg: float = field(default=2.0, metadata={"gt": 0.0})
+
+    @property
+    def earth(self) -> EarthModel:
+        return EarthModel(self.latitude_deg, self.earth_rotation)
+
+
+# ---------------------------------------------------------------- rate checks
+
+
+def measure_imu_rate(times_s: Sequence[float]) -> float:
+    """Median sample rate (Hz) of IMU timestamps (s); 0.0 with fewer than two samples."""
+    if len(times_s) < 2:
+        return 0.0
+    dts = np.diff(np.asarray(times_s, dtype=float))
+    med = float(np.median(dts))
+    return math.inf if med <= 0 else 1.0 / med
+
+
+def check_imu_rate(rate_hz: float, min_rate_hz: float, source: str = "IMU") -> None:
+    """Raise EstimatorError if ``rate_hz`` is below what the mechanisation can use."""
+    if not rate_hz >= min_rate_hz:
+        raise EstimatorError(
+            f"{source} rate {rate_hz:.3g} Hz is below the {min_rate_hz:g} Hz this INS "
+            "mechanisation needs (it integrates sampled rates; motion above a tenth of the "
+            "sample rate would alias into attitude and velocity errors); refusing to run"
+        )
+
+
+# ---------------------------------------------------------------- the filter
+
+
+@dataclass(frozen=True)
+class EpochReport:
+    """What one GNSS update did: per component (E, N, U position, then velocity) the decision."""
+
+    t_s: float
+    decisions: tuple[GateDecision, ...]
+
+    @property
+    def rejected(self) -> int:
+        return sum(d.action is Action.REJECT for d in self.decisions)
+
+
+class InsGnssFilter:
+    """Loosely coupled 15-state error-state Kalman filter (see the module docstring).
+
+    ``x`` is the error state (always 0 between updates, its estimate is fed back), ``P`` its
+    covariance (15×15), ``y``/``S`` the last innovation and its covariance (after the gate).
+    """
+
+    def __init__(
+        self,
+        params: InsGnssParams,
+        t0_s: float,
+        position_enu_m: VecLike,
+        velocity_enu_m_s: VecLike,
+        attitude_rpy_rad: VecLike,
+    ) -> None:
+        self.params = params
+        self.earth = params.earth
+        self.nav = NavState(
+            euler_to_quat(*(float(a) for a in attitude_rpy_rad[:3])),
+            _vec3(velocity_enu_m_s),
+            _vec3(position_enu_m),
+        )
+        self.b_a: Vec3 = (0.0, 0.0, 0.0)  # accelerometer bias estimate, m/s²
+        self.b_g: Vec3 = (0.0, 0.0, 0.0)  # gyro bias estimate, rad/s
+        self.t_s = float(t0_s)
+        imu = params.imu
+        p0 = np.concatenate(
+            [
+                np.full(3, params.init_sigma_pos_m**2),
+                np.full(3, params.init_sigma_vel_m_s**2),
+                np.array([params.init_sigma_tilt_deg, params.init_sigma_tilt_deg,
+                          params.init_sigma_yaw_deg]) ** 2 * DEG**2,
+                np.full(3, max(imu.accel_bias_m_s2, 1e-6) ** 2),
+                np.full(3, max(imu.gyro_bias_rad_s, 1e-9) ** 2),
+            ]
+        )
+        self.P: FloatArray = np.diag(p0)
+        self.x: FloatArray = np.zeros(N_STATES)
+        # Continuous white-noise PSDs of (E2)–(E4); bias random walk: the 1σ bias over an hour.
+        self._q = np.concatenate(
+            [
+                np.zeros(3),
+                np.full(3, max(imu.accel_vrw_m_s_sqrt_s, 1e-6) ** 2),
+                np.full(3, max(imu.gyro_arw_rad_sqrt_s, 1e-9) ** 2),
+                np.full(3, max(imu.accel_bias_m_s2, 1e-6) ** 2 / 3600.0),
+                np.full(3, max(imu.gyro_bias_rad_s, 1e-9) ** 2 / 3600.0),
+            ]
+        )
+        self.y: FloatArray = np.zeros(0)
+        self.S: FloatArray = np.zeros((0, 0))
+        self.gates = [ThreeZoneGate(params.three_zone, params.strategy) for _ in range(6)]
+        self._cov_dt = 1.0 / params.cov_rate_hz
+        self._acc_dt = 0.0
+        self._acc_fn = [0.0, 0.0, 0.0]
+        self._dts: list[float] = []
+        self._q_earth_cache: tuple[float, Quat] = (-1.0, (1.0, 0.0, 0.0, 0.0))
+        g0 = self.earth.g0
+        self._grav_grad = np.diag([-g0, -g0, 2.0 * g0]) / EARTH_RADIUS_M
+        self._omega_skew = _skew(self.earth.omega_ie_n)
+
+    # ------------------------------------------------------------ state accessors
+
+    @property
+    def position(self) -> FloatArray:
+        return np.array(self.nav.p)
+
+    @property
+    def velocity(self) -> FloatArray:
+        return np.array(self.nav.v)
+
+    @property
+    def attitude_rpy(self) -> FloatArray:
+        return np.array(quat_to_euler(self.nav.q))
+
+    @property
+    def accel_bias(self) -> FloatArray:
+        return np.array(self.b_a)
+
+    @property
+    def gyro_bias(self) -> FloatArray:
+        return np.array(self.b_g)
+
+    # ------------------------------------------------------------ time update
+
+    def propagate(self, t_s: float, gyro_rad_s: VecLike, accel_m_s2: VecLike) -> None:
+        """Mechanise one IMU sample stamped ``t_s`` (the mean over the interval since the last).
+
+        Raises EstimatorError for time going backwards, an IMU rate below ``min_imu_rate_hz``
+        (median of the first samples) or a gap above ``max_imu_gap_s``.
+        """
+        dt = float(t_s) - self.t_s
+        p = self.params
+        if not dt > 0.0:
+            raise EstimatorError(f"IMU time did not advance: {t_s!r} after {self.t_s!r} s")
+        if dt > p.max_imu_gap_s:
+            check_imu_rate(1.0 / dt, p.min_imu_rate_hz, f"IMU (interval {dt:.3g} s)")
+            raise EstimatorError(
+                f"IMU gap of {dt:.3g} s at t = {t_s:.3f} s exceeds max_imu_gap_s = "
+                f"{p.max_imu_gap_s:g} s; the mechanisation cannot bridge it"
+            )
+        if len(self._dts) < _RATE_WINDOW:
+            self._dts.append(dt)
+            if len(self._dts) == _RATE_WINDOW:
+                check_imu_rate(1.0 / float(np.median(self._dts)), p.min_imu_rate_hz)
+        w = gyro_rad_s
+        f = accel_m_s2
+        omega = (float(w[0]) - self.b_g[0], float(w[1]) - self.b_g[1], float(w[2]) - self.b_g[2])
+        f_b = (float(f[0]) - self.b_a[0], float(f[1]) - self.b_a[1], float(f[2]) - self.b_a[2])
+        if not all(math.isfinite(c) for c in (*omega, *f_b)):
+            raise EstimatorError(f"non-finite IMU sample at t = {t_s}")
+        cached_dt, q_e = self._q_earth_cache
+        if cached_dt != dt:
+            q_e = earth_step_quat(self.earth, dt)
+            self._q_earth_cache = (dt, q_e)
+        fn = mechanize(self.nav, omega, f_b, dt, self.earth, q_e)
+        self.t_s = float(t_s)
+        a = self._acc_fn
+        a[0] += fn[0] * dt
+        a[1] += fn[1] * dt
+        a[2] += fn[2] * dt
+        self._acc_dt += dt
+        if self._acc_dt >= self._cov_dt - 1e-9:
+            self._propagate_covariance()
+
+    def _propagate_covariance(self) -> None:
+        dt = self._acc_dt
+        if dt <= 0.0:
+            return
+        fn = np.array(self._acc_fn) / dt  # mean specific force in n over the block
+        c = quat_to_dcm(self.nav.q)
+        F = np.zeros((N_STATES, N_STATES))
+        F[0:3, 3:6] = np.eye(3)  # (E1)
+        F[3:6, 0:3] = self._grav_grad  # (E2)
+        F[3:6, 3:6] = -2.0 * self._omega_skew
+        F[3:6, 6:9] = _skew(fn)
+        F[3:6, 9:12] = -c
+        F[6:9, 6:9] = -self._omega_skew  # (E3)
+        F[6:9, 12:15] = c
+        Fdt = F * dt
+        Phi = np.eye(N_STATES) + Fdt + 0.5 * (Fdt @ Fdt)
+        # P⁻ = Φ P Φᵀ + Q_d
+        self.P = Phi @ self.P @ Phi.T + np.diag(self._q * dt)
+        self._acc_dt = 0.0
+        self._acc_fn = [0.0, 0.0, 0.0]
+
+    # ------------------------------------------------------------ measurement update
+
+    def update(
+        self,
+        t_s: float,
+        position_enu_m: VecLike,
+        velocity_enu_m_s: VecLike | None = None,
+    ) -> EpochReport:
+        """GNSS fix at ``t_s`` (the filter must have been propagated to it): robust update."""
+        if abs(float(t_s) - self.t_s) > self.params.max_imu_gap_s:
+            raise EstimatorError(
+                f"GNSS fix at t = {t_s:.3f} s but the INS is at t = {self.t_s:.3f} s; "
+                "propagate the IMU up to the fix first"
+            )
+        self._propagate_covariance()
+        prm = self.params
+        z = [float(c) for c in position_enu_m[:3]]
+        zhat = list(self.nav.p)
+        r = [prm.gnss_sigma_h_m**2, prm.gnss_sigma_h_m**2, prm.gnss_sigma_v_m**2]
+        rows = [0, 1, 2]
+        if velocity_enu_m_s is not None and prm.use_velocity:
+            z += [float(c) for c in velocity_enu_m_s[:3]]
+            zhat += list(self.nav.v)
+            r += [prm.gnss_sigma_vel_m_s**2] * 3
+            rows += [3, 4, 5]
+        if not all(math.isfinite(c) for c in z):
+            raise EstimatorError(f"non-finite GNSS observation at t = {t_s}: {z}")
+        P = self.P
+        idx = np.array(rows)
+        # (2) ν = z − H x̂ ; (3) S = H P⁻ Hᵀ + R  (H selects position / velocity states)
+        nu = np.array(z) - np.array(zhat)
+        s_diag = P[idx, idx] + np.array(r)
+        # (7)–(8) per-dimension three-zone gate
+        decisions = tuple(
+            self.gates[k].step(z[j], float(nu[j]), float(s_diag[j]), r[j])
+            for j, k in enumerate(rows)
+        )
+        keep = [j for j, d in enumerate(decisions) if d.action is not Action.REJECT]
+        if keep:
+            sel = idx[keep]
+            y = np.array([decisions[j].value - zhat[j] for j in keep])  # ν' with the gate's value
+            Rm = np.diag([decisions[j].variance for j in keep])
+            PHt = P[:, sel]  # P Hᵀ
+            S = P[np.ix_(sel, sel)] + Rm
+            K = np.linalg.solve(S, PHt.T).T  # K = P Hᵀ S⁻¹
+            dx = K @ y
+            IKH = np.eye(N_STATES)
+            IKH[:, sel] -= K
+            self.P = IKH @ P @ IKH.T + K @ Rm @ K.T  # Joseph form
+            self.P = 0.5 * (self.P + self.P.T)
+            self.y, self.S = y, S
+            self._inject(dx)
+        else:
+            self.y, self.S = np.zeros(0), np.zeros((0, 0))
+        return EpochReport(float(t_s), decisions)
+
+    def _inject(self, dx: FloatArray) -> None:
+        """Feed the error estimate back into the nominal state; δx̂ ← 0."""
+        n = self.nav
+        n.p = (n.p[0] + dx[0], n.p[1] + dx[1], n.p[2] + dx[2])
+        n.v = (n.v[0] + dx[3], n.v[1] + dx[4], n.v[2] + dx[5])
+        # C_b^n = (I − [φ×]) Ĉ  →  Ĉ ← Exp(−φ) Ĉ
+        n.q = quat_normalize(quat_mul(quat_exp(-dx[6], -dx[7], -dx[8]), n.q))
+        self.b_a = (self.b_a[0] + dx[9], self.b_a[1] + dx[10], self.b_a[2] + dx[11])
+        self.b_g = (self.b_g[0] + dx[12], self.b_g[1] + dx[13], self.b_g[2] + dx[14])
+        self.x = np.zeros(N_STATES)
+
+
+def _vec3(a: VecLike) -> Vec3:
+    return (float(a[0]), float(a[1]), float(a[2]))
