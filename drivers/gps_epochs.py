@@ -122,6 +122,11 @@ class _Pending:
 
 _TIMED = (Gga, Rmc, Gll, Gst, Zda)
 _TIMED_NAMES = frozenset(t.__name__.upper() for t in _TIMED)
+# message class -> (sentence type, _Pending slot, carries a fix time)
+_KINDS: dict[type, tuple[str, str, bool]] = {
+    t: (t.__name__.upper(), t.__name__.lower(), t in _TIMED)
+    for t in (Gga, Rmc, Gll, Gst, Zda, Vtg, Gsa)
+}
 
 
 class EpochAssembler:
@@ -141,10 +146,10 @@ class EpochAssembler:
         return self._ender
 
     def feed(self, msg: NmeaMessage) -> Iterator[GpsEpoch]:
-        kind = type(msg).__name__.upper()
-        msg_time = msg.time_s if isinstance(msg, _TIMED) else None
+        kind, slot, timed = _KINDS[type(msg)]
+        msg_time: float | None = getattr(msg, "time_s", None)
         cur = self._cur
-        if cur is not None and isinstance(msg, _TIMED):
+        if cur is not None and timed:
             new_time = (
                 msg_time is not None
                 and cur.utc_s is not None
@@ -165,7 +170,6 @@ class EpochAssembler:
             cur = self._cur = _Pending(utc_s=msg_time)
         elif cur.utc_s is None and msg_time is not None:
             cur.utc_s = msg_time
-        slot = kind.lower()
         if getattr(cur, slot) is not None:
             self.duplicates += 1  # e.g. GNGGA and GPGGA of the same fix: keep the first
         else:

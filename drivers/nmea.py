@@ -19,6 +19,7 @@ Units are in the field names: degrees, metres, metres per second, seconds of day
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -31,6 +32,10 @@ KMH_MPS = 1000.0 / 3600.0
 MAX_LINE = 120  # NMEA 0183 says 82 characters; receivers in the wild send a little more
 
 SUPPORTED = frozenset({"GGA", "RMC", "VTG", "GSA", "GST", "ZDA", "GLL"})
+_LINE_STOP = re.compile(rb"[\r\n$]")
+_LINE_END = re.compile(rb"[\r\n]")
+_NON_PRINTABLE = re.compile(rb"[^\x20-\x7e]")
+_BLANKS = b" \t\x00"
 
 
 class Ignored(Exception):
@@ -71,43 +76,68 @@ class NmeaFramer:
         self._skipping = False  # after too_long: drop until the next '$'
 
     def feed(self, data: bytes) -> Iterator[bytes | Rejected]:
+        # Scans with ``re``/``bytes.find`` rather than byte by byte: the framer is the hot
+        # path of an offline replay (tens of thousands of epochs a second).
         buf = self._buf
-        for byte in data:
-            if byte == 0x24:  # '$'
-                if self._garbage:
-                    yield Rejected("garbage", bytes(self._garbage))
-                    self._garbage.clear()
-                if self._in_line and buf:
-                    yield Rejected("truncated", bytes(buf))
-                buf.clear()
-                buf.append(byte)
-                self._in_line = True
-                self._skipping = False
-            elif byte in (0x0D, 0x0A):
-                if self._in_line:
-                    line = bytes(buf)
-                    buf.clear()
-                    self._in_line = False
-                    if all(0x20 <= c < 0x7F for c in line):
-                        yield line
-                    else:
-                        yield Rejected("bad_chars", line)
-                elif self._garbage:
-                    yield Rejected("garbage", bytes(self._garbage))
-                    self._garbage.clear()
-                self._skipping = False
-            elif self._in_line:
-                buf.append(byte)
-                if len(buf) >= self.max_line:
+        i, n = 0, len(data)
+        while i < n:
+            if self._in_line:
+                m = _LINE_STOP.search(data, i)
+                end = m.start() if m is not None else n
+                room = self.max_line - len(buf)
+                if end - i >= room:
+                    buf += data[i : i + room]
                     yield Rejected("too_long", bytes(buf))
                     buf.clear()
                     self._in_line = False
                     self._skipping = True
-            elif not self._skipping and byte not in (0x20, 0x09, 0x00):
-                self._garbage.append(byte)
-                if len(self._garbage) >= self.max_line:
+                    i += room
+                    continue
+                buf += data[i:end]
+                if m is None:
+                    return
+                i = end + 1
+                if data[end] == 0x24:  # '$' inside a line: the line was cut short
+                    yield Rejected("truncated", bytes(buf))
+                    buf.clear()
+                    buf.append(0x24)
+                    continue
+                line = bytes(buf)
+                buf.clear()
+                self._in_line = False
+                yield Rejected("bad_chars", line) if _NON_PRINTABLE.search(line) else line
+            else:
+                j = data.find(b"$", i)
+                stop = n if j < 0 else j
+                if stop > i:
+                    yield from self._between_lines(data[i:stop])
+                if j < 0:
+                    return
+                if self._garbage:
                     yield Rejected("garbage", bytes(self._garbage))
                     self._garbage.clear()
+                buf.clear()
+                buf.append(0x24)
+                self._in_line = True
+                self._skipping = False
+                i = j + 1
+
+    def _between_lines(self, seg: bytes) -> Iterator[Rejected]:
+        """Bytes outside any line: garbage (blanks and line ends excepted)."""
+        parts = _LINE_END.split(seg)
+        for k, part in enumerate(parts):
+            if not self._skipping:
+                junk = part.translate(None, _BLANKS)
+                if junk:
+                    self._garbage += junk
+                    while len(self._garbage) >= self.max_line:
+                        yield Rejected("garbage", bytes(self._garbage[: self.max_line]))
+                        del self._garbage[: self.max_line]
+            if k < len(parts) - 1:  # a line end follows this part
+                if self._garbage:
+                    yield Rejected("garbage", bytes(self._garbage))
+                    self._garbage.clear()
+                self._skipping = False
 
     def flush(self) -> Iterator[Rejected]:
         """End of stream: whatever is pending is a truncated line (or garbage)."""
@@ -293,8 +323,7 @@ def _latlon(value: str, hemi: str, is_lat: bool) -> float | None:
     return -result if hemi in ("S", "W") else result
 
 
-def _field(data: list[str], i: int) -> str:
-    return data[i].strip() if i < len(data) else ""
+_PAD = [""] * 20  # decoders index fields directly; a short sentence reads empty fields
 
 
 # --------------------------------------------------------------------------- codec
@@ -314,78 +343,88 @@ def parse_sentence(line: bytes) -> NmeaMessage:
     except ValueError as err:
         raise DecodeError("no_checksum", line[star:].decode("ascii", "replace")) from err
     body = line[1:star]
-    if checksum(body) != given:
-        raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
     address = body.split(b",", 1)[0].decode("ascii")
-    if address.startswith("P"):
-        raise Ignored("proprietary", address)
-    if len(address) != 5 or not address.isalpha():
-        raise DecodeError("parse_error", f"address {address!r}")
-    talker, kind = address[:2], address[2:]
-    if kind not in SUPPORTED:
+    kind = address[2:]
+    if address.startswith("P") or kind not in SUPPORTED:
+        if checksum(body) != given:
+            raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
+        if address.startswith("P"):
+            raise Ignored("proprietary", address)
+        if len(address) != 5 or not address.isalpha():
+            raise DecodeError("parse_error", f"address {address!r}")
         raise Ignored("unknown_sentence", address)
+    talker = address[:2]
+    if not talker.isalpha():
+        raise DecodeError("parse_error", f"address {address!r}")
+    # pynmea2 splits the sentence and, with check=True, verifies the checksum (once: we do
+    # not compute it again on this path). Its field conversions are not used.
     try:
         msg = pynmea2.parse(line.decode("ascii"), check=True)
+    except pynmea2.ChecksumError as err:
+        raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace")) from err
     except (pynmea2.ParseError, ValueError, AttributeError, TypeError) as err:
+        if checksum(body) != given:  # classify by the first thing wrong with it
+            raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace")) from err
         raise DecodeError("parse_error", str(err)[:60]) from err
-    data: list[str] = list(msg.data)
-    return _DECODERS[kind](talker, data)
+    data: list[str] = msg.data
+    n = len(data)
+    return _DECODERS[kind](talker, [f.strip() for f in data] + _PAD, n)
 
 
-def _gga(talker: str, d: list[str]) -> Gga:
-    if len(d) < 9:
-        raise DecodeError("short", f"GGA has {len(d)} fields")
-    quality = _int(_field(d, 5), "quality")
+def _gga(talker: str, d: list[str], n: int) -> Gga:
+    if n < 9:
+        raise DecodeError("short", f"GGA has {n} fields")
+    quality = _int(d[5], "quality")
     if quality is None:
         quality = 0
     if not 0 <= quality <= 9:
         raise DecodeError("bad_field", f"quality={quality}")
-    sats = _int(_field(d, 6), "sats")
+    sats = _int(d[6], "sats")
     if sats is not None and not 0 <= sats <= 99:
         raise DecodeError("bad_field", f"sats={sats}")
     return Gga(
         talker=talker,
-        time_s=_time(_field(d, 0)),
-        lat_deg=_latlon(_field(d, 1), _field(d, 2), True),
-        lon_deg=_latlon(_field(d, 3), _field(d, 4), False),
+        time_s=_time(d[0]),
+        lat_deg=_latlon(d[1], d[2], True),
+        lon_deg=_latlon(d[3], d[4], False),
         quality=quality,
         num_sats=sats,
-        hdop=_nonneg(_field(d, 7), "hdop"),
-        alt_msl_m=_float(_field(d, 8), "alt"),
-        geoid_sep_m=_float(_field(d, 10), "geoid_sep"),
-        dgps_age_s=_nonneg(_field(d, 12), "dgps_age"),
-        dgps_station=_field(d, 13) or None,
+        hdop=_nonneg(d[7], "hdop"),
+        alt_msl_m=_float(d[8], "alt"),
+        geoid_sep_m=_float(d[10], "geoid_sep"),
+        dgps_age_s=_nonneg(d[12], "dgps_age"),
+        dgps_station=d[13] or None,
     )
 
 
-def _rmc(talker: str, d: list[str]) -> Rmc:
-    if len(d) < 9:
-        raise DecodeError("short", f"RMC has {len(d)} fields")
-    status = _field(d, 1)
+def _rmc(talker: str, d: list[str], n: int) -> Rmc:
+    if n < 9:
+        raise DecodeError("short", f"RMC has {n} fields")
+    status = d[1]
     if status not in ("A", "V", ""):
         raise DecodeError("bad_field", f"status={status!r}")
-    mode = _field(d, 11) or None
+    mode = d[11] or None
     valid = status == "A" and mode != "N"
-    speed_kn = _nonneg(_field(d, 6), "speed")
-    course = _float(_field(d, 7), "course")
+    speed_kn = _nonneg(d[6], "speed")
+    course = _float(d[7], "course")
     if course is not None and not 0.0 <= course <= 360.0:
         raise DecodeError("bad_field", f"course={course}")
     try:
-        lat = _latlon(_field(d, 2), _field(d, 3), True)
-        lon = _latlon(_field(d, 4), _field(d, 5), False)
+        lat = _latlon(d[2], d[3], True)
+        lon = _latlon(d[4], d[5], False)
     except DecodeError:
         if valid:
             raise
         lat = lon = None  # void RMC with junk placeholders (seen: lat "36000.0000")
     return Rmc(
         talker=talker,
-        time_s=_time(_field(d, 0)),
+        time_s=_time(d[0]),
         valid=valid,
         lat_deg=lat,
         lon_deg=lon,
         speed_mps=None if speed_kn is None else speed_kn * KNOT_MPS,
         course_deg=course,
-        date=_date(_field(d, 8)) if valid else _safe_date(_field(d, 8)),
+        date=_date(d[8]) if valid else _safe_date(d[8]),
         mode=mode,
     )
 
@@ -397,82 +436,82 @@ def _safe_date(text: str) -> tuple[int, int, int] | None:
         return None
 
 
-def _vtg(talker: str, d: list[str]) -> Vtg:
+def _vtg(talker: str, d: list[str], n: int) -> Vtg:
     # Modern form: course,T,course_m,M,speed_kn,N,speed_kmh,K[,mode]
-    course = _float(_field(d, 0), "course")
+    course = _float(d[0], "course")
     if course is not None and not 0.0 <= course <= 360.0:
         raise DecodeError("bad_field", f"course={course}")
-    speed_kmh = _nonneg(_field(d, 6), "speed_kmh")
-    speed_kn = _nonneg(_field(d, 4), "speed_kn")
+    speed_kmh = _nonneg(d[6], "speed_kmh")
+    speed_kn = _nonneg(d[4], "speed_kn")
     if speed_kmh is not None:
         speed = speed_kmh * KMH_MPS
     elif speed_kn is not None:
         speed = speed_kn * KNOT_MPS
     else:
         speed = None
-    mode = _field(d, 8) or None
+    mode = d[8] or None
     if mode == "N":
         course = speed = None
     return Vtg(talker=talker, course_deg=course, speed_mps=speed, mode=mode)
 
 
-def _gsa(talker: str, d: list[str]) -> Gsa:
-    if len(d) < 17:
-        raise DecodeError("short", f"GSA has {len(d)} fields")
-    fix = _int(_field(d, 1), "fix_mode")
+def _gsa(talker: str, d: list[str], n: int) -> Gsa:
+    if n < 17:
+        raise DecodeError("short", f"GSA has {n} fields")
+    fix = _int(d[1], "fix_mode")
     return Gsa(
         talker=talker,
         fix_mode=fix,
-        pdop=_nonneg(_field(d, 14), "pdop"),
-        hdop=_nonneg(_field(d, 15), "hdop"),
-        vdop=_nonneg(_field(d, 16), "vdop"),
+        pdop=_nonneg(d[14], "pdop"),
+        hdop=_nonneg(d[15], "hdop"),
+        vdop=_nonneg(d[16], "vdop"),
     )
 
 
-def _gst(talker: str, d: list[str]) -> Gst:
-    if len(d) < 8:
-        raise DecodeError("short", f"GST has {len(d)} fields")
+def _gst(talker: str, d: list[str], n: int) -> Gst:
+    if n < 8:
+        raise DecodeError("short", f"GST has {n} fields")
     return Gst(
         talker=talker,
-        time_s=_time(_field(d, 0)),
-        rms_m=_nonneg(_field(d, 1), "rms"),
-        sd_lat_m=_nonneg(_field(d, 5), "sd_lat"),
-        sd_lon_m=_nonneg(_field(d, 6), "sd_lon"),
-        sd_alt_m=_nonneg(_field(d, 7), "sd_alt"),
+        time_s=_time(d[0]),
+        rms_m=_nonneg(d[1], "rms"),
+        sd_lat_m=_nonneg(d[5], "sd_lat"),
+        sd_lon_m=_nonneg(d[6], "sd_lon"),
+        sd_alt_m=_nonneg(d[7], "sd_alt"),
     )
 
 
-def _zda(talker: str, d: list[str]) -> Zda:
-    if len(d) < 4:
-        raise DecodeError("short", f"ZDA has {len(d)} fields")
-    day, month, year = _int(_field(d, 1), "day"), _int(_field(d, 2), "month"), _int(
-        _field(d, 3), "year"
+def _zda(talker: str, d: list[str], n: int) -> Zda:
+    if n < 4:
+        raise DecodeError("short", f"ZDA has {n} fields")
+    day, month, year = _int(d[1], "day"), _int(d[2], "month"), _int(
+        d[3], "year"
     )
     date: tuple[int, int, int] | None = None
     if day is not None and month is not None and year is not None:
         if not (1 <= day <= 31 and 1 <= month <= 12 and 1980 <= year <= 2200):
             raise DecodeError("bad_field", f"date={day}/{month}/{year}")
         date = (year, month, day)
-    return Zda(talker=talker, time_s=_time(_field(d, 0)), date=date)
+    return Zda(talker=talker, time_s=_time(d[0]), date=date)
 
 
-def _gll(talker: str, d: list[str]) -> Gll:
-    if len(d) < 6:
-        raise DecodeError("short", f"GLL has {len(d)} fields")
-    status = _field(d, 5)
-    mode = _field(d, 6) or None
+def _gll(talker: str, d: list[str], n: int) -> Gll:
+    if n < 6:
+        raise DecodeError("short", f"GLL has {n} fields")
+    status = d[5]
+    mode = d[6] or None
     valid = status == "A" and mode != "N"
     try:
-        lat = _latlon(_field(d, 0), _field(d, 1), True)
-        lon = _latlon(_field(d, 2), _field(d, 3), False)
+        lat = _latlon(d[0], d[1], True)
+        lon = _latlon(d[2], d[3], False)
     except DecodeError:
         if valid:
             raise
         lat = lon = None
-    return Gll(talker=talker, time_s=_time(_field(d, 4)), valid=valid, lat_deg=lat, lon_deg=lon)
+    return Gll(talker=talker, time_s=_time(d[4]), valid=valid, lat_deg=lat, lon_deg=lon)
 
 
-_DECODERS: dict[str, Callable[[str, list[str]], NmeaMessage]] = {
+_DECODERS: dict[str, Callable[[str, list[str], int], NmeaMessage]] = {
     "GGA": _gga,
     "RMC": _rmc,
     "VTG": _vtg,

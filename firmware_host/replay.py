@@ -180,8 +180,13 @@ def replay_through_pty(
 
 def replay_direct(inp: ReplayInput, pipeline: RoverPipeline) -> dict[str, Any]:
     """The same without a pty (for benchmarks and tests of the pipeline alone)."""
-    for _, data in inp.chunks:
-        pipeline.feed(data)
+    block = bytearray()
+    for _, data in inp.chunks:  # blocks of up to 64 KiB, as a port read would return them
+        block += data
+        if len(block) >= 65536:
+            pipeline.feed(bytes(block))
+            block.clear()
+    pipeline.feed(bytes(block))
     pipeline.finish()
     return {"bytes_total": inp.total_bytes, "bytes_written": inp.total_bytes, "pty": False}
 

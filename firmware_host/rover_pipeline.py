@@ -174,7 +174,7 @@ class RoverPipeline:
                 glat, glon, gh = self.frame.to_lla(*d.out_enu)
                 lat, lon = glat, glon
                 alt = gh - (epoch.geoid_sep_m or 0.0) if epoch.alt_msl_m is not None else None
-        record = self._record(epoch, d, enu, lat, lon, alt)
+        record = self._record(epoch, d, enu, lat, lon, alt) if self.jsonl is not None else {}
         outcome = EpochOutcome(epoch, d, lat, lon, alt, t_s, record)
         self.last_outcome = outcome
         # Counters.
