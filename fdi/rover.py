@@ -40,6 +40,8 @@ from typing import Literal
 from fdi.chi2 import threshold
 from fdi.grey import gm11_predict_shifted
 from fdi.kalman import GpsKalman
+from fdi.three_zone import Action as ZoneAction
+from fdi.three_zone import ThreeZoneGate, ThreeZoneParams, Zone
 
 Action = Literal["accept", "replace", "alarm", "no_fix"]
 
@@ -73,6 +75,8 @@ class RoverDetectorParams:
     # Isolation and alarm.
     max_consecutive: int = field(default=5, metadata={"ge": 0})
     recover_epochs: int = field(default=5, metadata={"ge": 1})
+    # Strategies three_zone and combined (Cai & Shao): per-axis zones on the Kalman innovation.
+    three_zone: ThreeZoneParams = field(default_factory=ThreeZoneParams)
     # Quality screens (0 disables).
     min_sats: int = field(default=4, metadata={"ge": 0})
     max_hdop: float = field(default=0.0, metadata={"ge": 0.0})
@@ -112,6 +116,7 @@ class Decision:
     alarm: bool
     alarm_raised: bool  # the alarm was raised at this epoch
     kf_enu: tuple[float, float, float] | None
+    zones: tuple[int, ...] | None = None  # three_zone/combined: per axis 0/1/2 (e, n[, u])
 
 
 class RoverIsolator:
@@ -135,6 +140,11 @@ class RoverIsolator:
         self._var_h = params.gate_sigma0_m**2
         self._var_u = (2.0 * params.gate_sigma0_m) ** 2
         self._ewma = 1.0 / params.gate_tau_epochs
+        self._zone_gates = (
+            [ThreeZoneGate(params.three_zone, "three_zone") for _ in range(3)]
+            if params.strategy != "grey"
+            else []
+        )
 
     # -------------------------------------------------------------- helpers
 
@@ -144,6 +154,8 @@ class RoverIsolator:
         self._disp = [0.0, 0.0, 0.0]
         self._win.append(z)
         self.kf.reset(z, r)
+        for gate in self._zone_gates:
+            gate.reset()
         self._consec = 0
 
     def _r(self, fix: FixInput) -> tuple[float, float, float]:
@@ -281,6 +293,10 @@ class RoverIsolator:
         F = self.kf.test(z, r)
         chi2_fault = p.chi2_enabled and self.T_d < F
 
+        if p.strategy != "grey":
+            return self._step_zones(fix, z, r, d, pred, res_h, res_u, up_known, F, quality,
+                                    gate_h, gate_u)
+
         reasons = []
         if grey_fault:
             reasons.append("grey")
@@ -359,6 +375,90 @@ class RoverIsolator:
             kf_enu=self.kf.position,
         )
 
+    def _step_zones(
+        self,
+        fix: FixInput,
+        z: tuple[float, float, float],
+        r: tuple[float, float, float],
+        d: list[float],
+        pred: tuple[float, float, float] | None,
+        res_h: float | None,
+        res_u: float | None,
+        up_known: bool,
+        F: float,
+        quality: list[str],
+        gate_h: float,
+        gate_u: float,
+    ) -> Decision:
+        """Cai & Shao's three zones per axis, eq. (7)-(8), on the Kalman innovation.
+
+        DM(i) = D_i² / S_ii: below T1 accept; T1..T2 (deviation) use it with R_ii inflated;
+        above T2 (over-limit) replace it, by the least-squares fit of the axis's previous n
+        epochs (``three_zone``) or by the grey prediction (``combined``). A fix is judged
+        faulty when an axis is over the limit (or a quality screen fails).
+        """
+        p = self.p
+        values = list(z)
+        variances = list(r)
+        zones: list[int] = []
+        replaced = rejected = False
+        kfD, kfS = self.kf.D, self.kf.S
+        for i in range(3 if up_known else 2):
+            ext = None
+            if p.strategy == "combined" and pred is not None:
+                ext = (pred[i], self._var_h if i < 2 else self._var_u)
+            g = self._zone_gates[i].step(z[i], kfD[i], kfS[i], r[i], external=ext)
+            zones.append(int(g.zone))
+            if g.action is ZoneAction.REJECT:
+                rejected = True
+            elif g.action is ZoneAction.REPLACE:
+                replaced = True
+            values[i], variances[i] = g.value, g.variance
+        over = any(zn == Zone.OVER_LIMIT for zn in zones)
+        reasons = (["over_limit"] if over else []) + quality
+        if quality and not over:
+            if pred is None:
+                rejected = True
+            else:
+                values, variances, replaced = list(pred), list(r), True
+        reason = "+".join(reasons) or ("deviation" if Zone.DEVIATION in zones else "")
+        if rejected or (replaced and self._consec >= p.max_consecutive):
+            return self._raise_alarm(z, r, reason or "over_limit", pred, res_h, res_u, F,
+                                     gate_h, gate_u)
+        out = (values[0], values[1], values[2])
+        var = (variances[0], variances[1], variances[2])
+        if replaced:
+            self._consec += 1
+            self._good_run = 0
+        else:
+            self._consec = 0
+            self._last_accept_t = fix.t_s
+            if res_h is not None:
+                self._learn_spread(z, pred, res_u is not None)
+        self._window_append(out, d)
+        self.kf.update(out, var)
+        if not replaced:
+            dec = self._decide_accept(z, pred, res_h, res_u, F, gate_h, gate_u, reason)
+            return _with_zones(dec, zones, over or bool(quality))
+        return Decision(
+            action="alarm" if self._alarm else "replace",
+            fault=True,
+            reason=reason,
+            out_enu=None if self._alarm else out,
+            pred_enu=pred,
+            grey_res_h=res_h,
+            grey_res_u=res_u,
+            grey_gate_h=gate_h,
+            grey_gate_u=gate_u,
+            chi2=F,
+            chi2_threshold=self.T_d,
+            consecutive=self._consec,
+            alarm=self._alarm,
+            alarm_raised=False,
+            kf_enu=self.kf.position,
+            zones=tuple(zones),
+        )
+
     # -------------------------------------------------------------- pieces
 
     def _window_append(self, value: tuple[float, float, float], d: list[float]) -> None:
@@ -428,3 +528,9 @@ class RoverIsolator:
             alarm_raised=False,
             kf_enu=self.kf.position if self.kf.initialised else None,
         )
+
+
+def _with_zones(dec: Decision, zones: list[int], fault: bool) -> Decision:
+    from dataclasses import replace
+
+    return replace(dec, zones=tuple(zones), fault=fault)

@@ -249,6 +249,7 @@ class RoverPipeline:
             "chi2": _r(d.chi2),
             "chi2_threshold": _r(d.chi2_threshold),
             "consecutive": d.consecutive,
+            "zones": None if d.zones is None else list(d.zones),
             "kf_e": _r(kf[0]) if kf else None,
             "kf_n": _r(kf[1]) if kf else None,
             "kf_u": _r(kf[2]) if kf else None,
