@@ -71,4 +71,5 @@ class NmeaStream:
             "ignored": dict(sorted(self.ignored.items())),
             "duplicates": self.assembler.duplicates,
             "orphans": self.assembler.orphans,
+            "late": self.assembler.late,
         }

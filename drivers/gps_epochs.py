@@ -70,6 +70,7 @@ class _Pending:
             # A GGA that says "fix" while the RMC of the same time says "void" is not a fix.
             if rmc is not None and not rmc.valid:
                 valid = False
+                lat = lon = None
         elif rmc is not None:
             talker = rmc.talker
             valid = rmc.valid and rmc.lat_deg is not None and rmc.lon_deg is not None
@@ -139,6 +140,10 @@ class EpochAssembler:
         self._ender_votes: tuple[str | None, int] = (None, 0)
         self.duplicates = 0
         self.orphans = 0
+        self.late = 0
+        self._last_closed: float | None = None
+        self._last_closed_types: frozenset[str] = frozenset()
+        self._banned: set[str] = set()
 
     @property
     def ender(self) -> str | None:
@@ -149,6 +154,25 @@ class EpochAssembler:
         kind, slot, timed = _KINDS[type(msg)]
         msg_time: float | None = getattr(msg, "time_s", None)
         cur = self._cur
+        if (
+            timed
+            and msg_time is not None
+            and cur is None
+            and self._last_closed is not None
+            and abs(msg_time - self._last_closed) <= TIME_EPS_S
+        ):
+            # A sentence of an epoch already closed on the learned ender: the ender was wrong
+            # for this receiver (e.g. 10 Hz GGA with RMC/ZDA once a second after it). Stop
+            # trusting it; from now on epochs close when the fix time changes.
+            if kind in self._last_closed_types:
+                self.duplicates += 1  # e.g. GPGGA after the GNGGA that closed the epoch
+                return
+            self.late += 1
+            if self._ender is not None:
+                self._banned.add(self._ender)
+                self._ender = None
+                self._ender_votes = (None, 0)
+            return
         if cur is not None and timed:
             new_time = (
                 msg_time is not None
@@ -190,12 +214,16 @@ class EpochAssembler:
     def _close(self) -> GpsEpoch:
         assert self._cur is not None
         epoch = self._cur.build(self._last_date)
+        self._last_closed = epoch.utc_s
+        self._last_closed_types = frozenset(self._cur.types)
         if epoch.date is not None:
             self._last_date = epoch.date
         self._cur = None
         return epoch
 
     def _vote_ender(self, kind: str) -> None:
+        if kind in self._banned:
+            return
         candidate, votes = self._ender_votes
         votes = votes + 1 if candidate == kind else 1
         self._ender_votes = (kind, votes)

@@ -326,6 +326,14 @@ def _latlon(value: str, hemi: str, is_lat: bool) -> float | None:
 _PAD = [""] * 20  # decoders index fields directly; a short sentence reads empty fields
 
 
+def _given(line: bytes, star: int) -> int:
+    """The checksum the sentence carries (``*HH``); DecodeError when it is not hex."""
+    try:
+        return int(line[star + 1 :], 16)
+    except ValueError as err:
+        raise DecodeError("no_checksum", line[star:].decode("ascii", "replace")) from err
+
+
 # --------------------------------------------------------------------------- codec
 
 
@@ -335,18 +343,16 @@ def parse_sentence(line: bytes) -> NmeaMessage:
     Raises :class:`DecodeError` (reasons ``no_checksum``, ``bad_checksum``, ``parse_error``,
     ``bad_field``, ``short``) or :class:`Ignored` (``proprietary``, ``unknown_sentence``).
     """
-    star = line.rfind(b"*")
-    if star < 0 or len(line) - star != 3:
+    if not line.isascii():
+        raise DecodeError("parse_error", "non-ASCII bytes")
+    star = len(line) - 3
+    if star < 1 or line[star] != 0x2A:  # '*' followed by two characters ends every sentence
         raise DecodeError("no_checksum", line[:20].decode("ascii", "replace"))
-    try:
-        given = int(line[star + 1 :], 16)
-    except ValueError as err:
-        raise DecodeError("no_checksum", line[star:].decode("ascii", "replace")) from err
-    body = line[1:star]
-    address = body.split(b",", 1)[0].decode("ascii")
+    comma = line.find(b",", 1, star)
+    address = line[1 : comma if comma > 0 else star].decode("ascii")
     kind = address[2:]
-    if address.startswith("P") or kind not in SUPPORTED:
-        if checksum(body) != given:
+    if address[:1] == "P" or kind not in SUPPORTED:
+        if checksum(line[1:star]) != _given(line, star):
             raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
         if address.startswith("P"):
             raise Ignored("proprietary", address)
@@ -363,12 +369,12 @@ def parse_sentence(line: bytes) -> NmeaMessage:
     except pynmea2.ChecksumError as err:
         raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace")) from err
     except (pynmea2.ParseError, ValueError, AttributeError, TypeError) as err:
-        if checksum(body) != given:  # classify by the first thing wrong with it
+        if checksum(line[1:star]) != _given(line, star):  # classify by what is wrong first
             raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace")) from err
         raise DecodeError("parse_error", str(err)[:60]) from err
     data: list[str] = msg.data
     n = len(data)
-    return _DECODERS[kind](talker, [f.strip() for f in data] + _PAD, n)
+    return _DECODERS[kind](talker, data + _PAD, n)
 
 
 def _gga(talker: str, d: list[str], n: int) -> Gga:

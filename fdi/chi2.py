@@ -82,7 +82,7 @@ def chi2_ppf(p: float, dof: int) -> float:
         nx = x - f / pdf if pdf > 0 else 0.5 * (lo + hi)
         if not lo < nx < hi:
             nx = 0.5 * (lo + hi)
-        if abs(nx - x) <= 1e-12 * max(1.0, x):
+        if abs(nx - x) <= 1e-13 * x:  # relative: lower-tail quantiles can be tiny
             return nx
         x = nx
     return x

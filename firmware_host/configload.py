@@ -62,12 +62,12 @@ def _convert(value: Any, tp: Any, file: str, key: str) -> Any:
     origin = get_origin(tp)
     if origin in (typing.Union, types.UnionType):
         args = [a for a in get_args(tp) if a is not type(None)]
-        errors: list[ConfigError] = []
         for arg in args:
             try:
                 return _convert(value, arg, file, key)
-            except ConfigError as err:
-                errors.append(err)
+            except ConfigError:
+                if isinstance(value, dict) and dataclasses.is_dataclass(arg):
+                    raise  # a table for a table-typed key: its own error is the precise one
         raise ConfigError(file, key, _describe(tp), _found(value))
     if tp is bool:
         if isinstance(value, bool):

@@ -30,6 +30,7 @@ def record(
     sleep: Callable[[float], None] = time.sleep,
     stop: Callable[[], bool] = lambda: False,
     backoff_max_s: float = 5.0,
+    on_open: Callable[[], None] | None = None,
 ) -> dict[str, int]:
     """Record until ``duration_s``, ``max_bytes`` or ``stop()``; return counters."""
     channel = Channel(name="port", url=settings.url, baudrate=settings.baudrate,
@@ -48,8 +49,10 @@ def record(
                 break
             if port is None:
                 try:
-                    port = open_port(settings)
+                    port = open_port(settings)  # pyserial flushes the input on open
                     backoff = 0.1
+                    if on_open is not None:
+                        on_open()
                 except PortError as err:
                     if reopen == 0:
                         log.warning("%s", err)

@@ -73,12 +73,6 @@ def test_agrees_with_scipy() -> None:
             assert chi2_ppf(p, dof) == pytest.approx(expected, rel=1e-8), (p, dof)
 
 
-@pytest.mark.xfail(
-    reason="fdi/chi2.py chi2_ppf stops when |Δx| <= 1e-12·max(1, x): an absolute 1e-12 for "
-    "x < 1, so 1-dof quantiles below ~1e-11 are returned far from converged "
-    "(p=1e-9: 9.09e-13 instead of 1.57e-18), against the docstring's ~1e-10 relative",
-    strict=True,
-)
 @pytest.mark.parametrize("p", [1e-6, 1e-9])
 def test_small_lower_quantiles_of_one_dof_are_relatively_accurate(p: float) -> None:
     # For 1 dof, P(x) = erf(sqrt(x/2)) = sqrt(2x/π)(1 − x/6 + …), so x = π p²/2 (1 + O(p²)).

@@ -437,13 +437,6 @@ def test_ignored(raw: bytes, why: str, kind: str) -> None:
     assert (info.value.reason, info.value.sentence_type) == (why, kind)
 
 
-@pytest.mark.xfail(
-    reason="drivers/nmea.py parse_sentence decodes the address with .decode('ascii') outside "
-    "any try: a non-ASCII byte before the first comma (checksum valid) raises "
-    "UnicodeDecodeError instead of DecodeError('parse_error')",
-    raises=UnicodeDecodeError,
-    strict=True,
-)
 @pytest.mark.parametrize("body", [b"\xff", b"GP\xc7GA,1"])
 def test_non_ascii_address_is_a_decode_error(body: bytes) -> None:
     raw = b"$" + body + b"*" + f"{checksum(body):02X}".encode()
