@@ -12,11 +12,14 @@ a URL in the mavutil / MAVProxy spelling:
 anything else            a pyserial URL or device path, opened with ``baud``
 =======================  =========================================================
 
-``read()`` returns ``[(chunk, stream_key, boundary)]``: ``stream_key`` names the byte stream the
-chunk belongs to (one framer per stream: a UDP peer, a TCP client, the serial line) and
-``boundary`` is True when the chunk ended a datagram. ``write(data)`` returns False when the
+``read(max_chunks)`` yields ``(chunk, stream_key, boundary)`` one at a time as it reads them,
+so the router forwards a datagram before it reads the next one: ``stream_key`` names the byte
+stream the chunk belongs to (one framer per stream: a UDP peer, a TCP client, the serial line)
+and ``boundary`` is True when the chunk ended a datagram. ``write(data)`` returns False when the
 link cannot take the bytes now (kernel buffer full): the router keeps them in its bounded
-queue. OS errors are translated into :class:`~fdi.errors.PortError` at open time; at run time a
+queue and waits for :meth:`Link.write_filenos` to become writable. Stream links (TCP, serial)
+keep a short backlog of their own (a partial write); :meth:`Link.flush` pushes it on.
+OS errors are translated into :class:`~fdi.errors.PortError` at open time; at run time a
 failing peer is dropped and counted, never raised into the forwarding loop.
 """
 
@@ -26,7 +29,7 @@ import errno
 import socket
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Hashable
+from collections.abc import Hashable, Iterator
 
 from drivers.transport import SerialSettings, open_port
 from fdi.errors import PortError
@@ -64,10 +67,23 @@ class Link(ABC):
         """File descriptors to wait on (may change as TCP clients come and go)."""
 
     @abstractmethod
-    def read(self, max_chunks: int) -> list[Chunk]: ...
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        """Yield at most ``max_chunks`` chunks that can be read now, without blocking."""
 
     @abstractmethod
     def write(self, data: bytes) -> bool: ...
+
+    def backlog(self) -> bool:
+        """True when the link holds bytes of its own that a :meth:`flush` should push on."""
+        return False
+
+    def write_filenos(self) -> list[int]:
+        """Descriptors whose writability unblocks the link's backlog (default: all of them)."""
+        return self.filenos()
+
+    def flush(self) -> None:
+        """Write what the link holds back (a partial TCP or serial write); never blocks."""
+        return None  # datagram links hold nothing back
 
     @abstractmethod
     def close(self) -> None: ...
@@ -93,6 +109,7 @@ class UdpServerLink(Link):
         except OSError as err:
             raise PortError(f"could not bind {url!r}: {err}") from err
         self.peers: dict[tuple[str, int], float] = {}
+        self.dropped = 0  # datagrams a peer lost because the socket's send buffer was full
 
     @property
     def local_address(self) -> tuple[str, int]:
@@ -102,36 +119,49 @@ class UdpServerLink(Link):
     def filenos(self) -> list[int]:
         return [self.sock.fileno()]
 
-    def read(self, max_chunks: int) -> list[Chunk]:
-        out: list[Chunk] = []
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
         now = self._clock()
+        recvfrom = self.sock.recvfrom
+        peers = self.peers
         for _ in range(max_chunks):
             try:
-                data, addr = self.sock.recvfrom(65535)
+                data, addr = recvfrom(65535)
             except BlockingIOError:
-                break
+                return
             except OSError:
                 self.errors += 1  # e.g. ICMP port unreachable reported on a later call
-                break
-            if addr not in self.peers and len(self.peers) >= MAX_UDP_PEERS:
-                oldest = min(self.peers, key=self.peers.__getitem__)
-                del self.peers[oldest]
-            self.peers[addr] = now
-            out.append((data, addr, True))
-        return out
+                return
+            if addr not in peers and len(peers) >= MAX_UDP_PEERS:
+                oldest = min(peers, key=peers.__getitem__)
+                del peers[oldest]
+            peers[addr] = now
+            yield data, addr, True
 
     def write(self, data: bytes) -> bool:
+        peers = self.peers
+        if len(peers) == 1:  # the usual case: one ground station
+            addr = next(iter(peers))
+            if self._clock() - peers[addr] > UDP_PEER_TIMEOUT_S:
+                del peers[addr]
+                return True
+            return self._sendto(data, addr)
         now = self._clock()
-        for addr, seen in list(self.peers.items()):
+        for addr, seen in list(peers.items()):
             if now - seen > UDP_PEER_TIMEOUT_S:
-                del self.peers[addr]
-                continue
-            try:
-                self.sock.sendto(data, addr)
-            except OSError as err:
-                if err.errno in _WOULD_BLOCK:
-                    return False
-                self.errors += 1
+                del peers[addr]
+            elif not self._sendto(data, addr):
+                # One peer's buffer is full: that peer loses this datagram (as on the air);
+                # returning False would send it again to the peers that already have it.
+                self.dropped += 1
+        return True
+
+    def _sendto(self, data: bytes, addr: tuple[str, int]) -> bool:
+        try:
+            self.sock.sendto(data, addr)
+        except OSError as err:
+            if err.errno in _WOULD_BLOCK:
+                return False
+            self.errors += 1
         return True
 
     def has_peer(self) -> bool:
@@ -160,18 +190,17 @@ class UdpClientLink(Link):
     def filenos(self) -> list[int]:
         return [self.sock.fileno()]
 
-    def read(self, max_chunks: int) -> list[Chunk]:
-        out: list[Chunk] = []
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        recvfrom = self.sock.recvfrom
         for _ in range(max_chunks):
             try:
-                data, addr = self.sock.recvfrom(65535)
+                data, addr = recvfrom(65535)
             except BlockingIOError:
-                break
+                return
             except OSError:
                 self.errors += 1  # ICMP port unreachable while nobody listens yet
-                break
-            out.append((data, addr, True))
-        return out
+                return
+            yield data, addr, True
 
     def write(self, data: bytes) -> bool:
         try:
@@ -202,8 +231,7 @@ class _TcpBase(Link):
     def filenos(self) -> list[int]:
         return [c.sock.fileno() for c in self.conns]
 
-    def _read_conns(self, max_chunks: int) -> list[Chunk]:
-        out: list[Chunk] = []
+    def _read_conns(self, max_chunks: int) -> Iterator[Chunk]:
         for c in list(self.conns):
             for _ in range(max_chunks):
                 try:
@@ -215,8 +243,7 @@ class _TcpBase(Link):
                 if not data:
                     self._lost(c)
                     break
-                out.append((data, c.key, False))
-        return out
+                yield data, c.key, False
 
     def _lost(self, c: _TcpConn) -> None:
         self.errors += 1
@@ -228,17 +255,44 @@ class _TcpBase(Link):
         ok = True
         for c in list(self.conns):
             if len(c.out) > MAX_TCP_BACKLOG:
-                ok = False
+                self._send(c)
+                if len(c.out) > MAX_TCP_BACKLOG:
+                    ok = False  # this client is slow: the router keeps the packet queued
+                    continue
+            if c.out:
+                c.out += data
+                self._send(c)
                 continue
-            c.out += data
             try:
-                sent = c.sock.send(c.out)
-                del c.out[:sent]
+                sent = c.sock.send(data)
             except BlockingIOError:
-                pass
+                sent = 0
             except OSError:
                 self._lost(c)
+                continue
+            if sent < len(data):
+                c.out += data[sent:]
         return ok
+
+    def _send(self, c: _TcpConn) -> None:
+        try:
+            sent = c.sock.send(c.out)
+            del c.out[:sent]
+        except BlockingIOError:
+            pass
+        except OSError:
+            self._lost(c)
+
+    def backlog(self) -> bool:
+        return any(c.out for c in self.conns)
+
+    def flush(self) -> None:
+        for c in list(self.conns):
+            if c.out:
+                self._send(c)
+
+    def write_filenos(self) -> list[int]:
+        return [c.sock.fileno() for c in self.conns if c.out]
 
     def close(self) -> None:
         for c in self.conns:
@@ -268,7 +322,7 @@ class TcpServerLink(_TcpBase):
     def filenos(self) -> list[int]:
         return [self.listener.fileno(), *super().filenos()]
 
-    def read(self, max_chunks: int) -> list[Chunk]:
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
         while True:
             try:
                 sock, addr = self.listener.accept()
@@ -299,7 +353,7 @@ class TcpClientLink(_TcpBase):
             raise PortError(f"could not connect to {url!r}: {err}") from err
         self.conns = [_TcpConn(sock, ("tcp", host, port))]
 
-    def read(self, max_chunks: int) -> list[Chunk]:
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
         return self._read_conns(max_chunks)
 
 
@@ -319,14 +373,14 @@ class SerialLink(Link):
         except (AttributeError, OSError, ValueError, NotImplementedError):
             return []  # loop:// and friends: the router polls them
 
-    def read(self, max_chunks: int) -> list[Chunk]:
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
         try:
             waiting = int(getattr(self.port, "in_waiting", 0))
             data = bytes(self.port.read(waiting or 1)) if waiting or self.filenos() else b""
         except Exception:  # serial.SerialException, OSError: count, never raise in the loop
             self.errors += 1
-            return []
-        return [(data, self._key, False)] if data else []
+            return iter(())
+        return iter([(data, self._key, False)] if data else ())
 
     def write(self, data: bytes) -> bool:
         if len(self._out) > MAX_TCP_BACKLOG:
@@ -335,6 +389,15 @@ class SerialLink(Link):
         self._out += data
         self._flush()
         return True
+
+    def backlog(self) -> bool:
+        return bool(self._out)
+
+    def flush(self) -> None:
+        self._flush()
+
+    def write_filenos(self) -> list[int]:
+        return self.filenos() if self._out else []
 
     def _flush(self) -> None:
         if not self._out:

@@ -14,10 +14,18 @@ GPS_INPUT / MANUAL_CONTROL for the pipelines, and answers the parameter protocol
 (or badly signed, or replayed) COMMAND_LONG / COMMAND_INT / PARAM_SET addressed to the bridge's
 component are refused and counted; reads (PARAM_REQUEST_*) stay open.
 
-Flow control: each endpoint has a bounded queue of outgoing packets; when it is full the oldest
-packet is dropped and counted, reads are capped per endpoint and round, so a flood on one link
-stalls neither the other direction nor the thread that runs the detectors (that thread only
-enqueues, through :meth:`Router.send_gps_input` and friends, and never blocks on a socket).
+Forwarding is event-driven: one ``select`` (epoll) waits on every link's descriptors, a
+wake-up socket for the pipelines' packets, and the next periodic job's deadline. A datagram is
+framed, routed and written to its destinations before the next one is read, so a packet waits
+for nothing but the packets ahead of it. A write that the kernel refuses (buffer full) puts the
+packet in the destination's bounded queue, and the loop waits for that link to become writable;
+when a queue is full the oldest packet is dropped and counted. Reads are capped per endpoint
+and round (``read_burst``), so a flood on one link stalls neither the other direction nor the
+thread that runs the detectors (that thread only hands packets over, through
+:meth:`Router.send_gps_input` and friends, and never blocks on a socket). Packets for a UDP
+server endpoint nobody has spoken to yet are dropped and counted (``no_peer``): there is
+nowhere to send them, and a ground station that connects later wants fresh telemetry, not a
+backlog.
 
 The loop owns time: ``clock`` (monotonic seconds) is an argument; :meth:`Router.tick` runs the
 periodic jobs for a given time so tests drive it with :class:`~firmware_host.loop.FakeClock`.
@@ -182,6 +190,7 @@ class EndpointStats:
     rx_packets: int = 0
     tx_packets: int = 0
     dropped_queue_full: int = 0
+    no_peer: int = 0  # packets for this endpoint while nobody was there to take them
     unroutable: int = 0  # targeted packets from here that no other endpoint could take
 
 
@@ -200,17 +209,35 @@ class Endpoint:
         self.seen: set[tuple[int, int]] = set()
         self.stats = EndpointStats()
 
+    def send(self, raw: bytes) -> None:
+        """Write ``raw`` now when nothing waits before it; else queue it behind the others."""
+        if self.queue:
+            self.enqueue(raw)
+        elif not self.link.has_peer():
+            self.stats.no_peer += 1
+        elif self.link.write(raw):
+            self.stats.tx_packets += 1
+        else:
+            self.enqueue(raw)
+
     def enqueue(self, raw: bytes) -> None:
         if len(self.queue) >= self.queue_max:
             self.queue.popleft()
             self.stats.dropped_queue_full += 1
         self.queue.append(raw)
 
+    def blocked(self) -> bool:
+        """True when packets or bytes wait for the link to become writable."""
+        return bool(self.queue) or self.link.backlog()
+
     def flush(self) -> None:
-        q = self.queue
         link = self.link
-        if not link.has_peer():
-            return  # a UDP server nobody has talked to yet: keep (bounded) until someone does
+        if link.backlog():
+            link.flush()
+        q = self.queue
+        if q and not link.has_peer():
+            self.stats.no_peer += len(q)  # the peer went away (TCP client closed)
+            q.clear()
         while q:
             if not link.write(q[0]):
                 break
@@ -304,7 +331,7 @@ class Router:
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
         self._sel.register(self._wake_r, selectors.EVENT_READ, None)
-        self._registered: dict[int, Endpoint] = {}
+        self._registered: dict[int, tuple[int, Endpoint]] = {}
         self._outbox: deque[tuple[bytes, Endpoint | None]] = deque(maxlen=cfg.queue_packets)
         self._texts: deque[tuple[int, str]] = deque(maxlen=64)
         self._values: dict[str, float] = {}
@@ -320,7 +347,10 @@ class Router:
 
     def _post(self, raw: bytes, dest: Endpoint | None) -> None:
         self._outbox.append((raw, dest))
-        with contextlib.suppress(OSError):  # wake-up pipe full: the loop is awake anyway
+        self._wake()
+
+    def _wake(self) -> None:
+        with contextlib.suppress(OSError):  # wake-up socket full: the loop is awake anyway
             self._wake_w.send(b"\0")
 
     def send_gps_input(self, fix: mio.GpsInputFix) -> bytes:
@@ -349,6 +379,7 @@ class Router:
             if len(self._texts) == self._texts.maxlen:
                 self.stats.statustext_dropped += 1
             self._texts.append((severity, text))
+        self._wake()
 
     def set_named_value(self, name: str, value: float) -> None:
         """Latest value of a detector statistic, sent as NAMED_VALUE_FLOAT at ``stats_hz``."""
@@ -357,55 +388,99 @@ class Router:
 
     # -- the loop ----------------------------------------------------------------------------
 
-    def _sync_selector(self) -> None:
-        want: dict[int, Endpoint] = {}
+    def _sync_selector(self) -> bool:
+        """Register each link's descriptors: read always, write while it is blocked.
+
+        Returns True when some endpoint has no descriptor to wait on (``loop://``): the loop
+        then polls it every few milliseconds.
+        """
+        want: dict[int, tuple[int, Endpoint]] = {}
+        polled = False
         for ep in self.endpoints:
-            for fd in ep.link.filenos():
-                want[fd] = ep
-        for fd in list(self._registered):
+            fds = ep.link.filenos()
+            if not fds:
+                polled = True
+            for fd in fds:
+                want[fd] = (selectors.EVENT_READ, ep)
+            if ep.blocked():
+                for fd in ep.link.write_filenos():
+                    want[fd] = (selectors.EVENT_READ | selectors.EVENT_WRITE, ep)
+        registered = self._registered
+        if want == registered:
+            return polled
+        for fd in list(registered):
             if fd not in want:
                 with contextlib.suppress(KeyError, ValueError, OSError):
                     self._sel.unregister(fd)
-                del self._registered[fd]
-        for fd, ep in want.items():
-            if fd not in self._registered:
-                self._sel.register(fd, selectors.EVENT_READ, ep)
-                self._registered[fd] = ep
+                del registered[fd]
+        for fd, entry in want.items():
+            old = registered.get(fd)
+            if old == entry:
+                continue
+            if old is None:
+                self._sel.register(fd, entry[0], entry[1])
+            else:
+                self._sel.modify(fd, entry[0], entry[1])
+            registered[fd] = entry
+        return polled
+
+    def _next_due(self, now: float) -> float:
+        """Seconds until the next periodic job (heartbeat, statistics, a paced STATUSTEXT)."""
+        due = self._next_hb
+        if self.cfg.stats_hz > 0 and self._values:
+            due = min(due, self._next_stats)
+        if self._texts:
+            rate = self.cfg.statustext_per_s
+            due = min(due, now + max(0.0, 1.0 - self._text_tokens) / rate)
+        return max(0.0, due - now)
 
     def poll(self, timeout_s: float = 0.05) -> None:
-        """One round: wait for input (at most ``timeout_s``), route, send, run periodic jobs."""
-        self._sync_selector()
-        polled = any(not ep.link.filenos() for ep in self.endpoints)
-        wait = min(timeout_s, 0.005) if polled else timeout_s
-        if self._outbox or any(ep.queue and ep.link.has_peer() for ep in self.endpoints):
+        """One round: wait for input (at most ``timeout_s``), route, send, run periodic jobs.
+
+        The wait ends at the first of: a datagram or bytes on any link, a link that was blocked
+        becoming writable, a packet handed over by a pipeline thread, the next periodic job.
+        """
+        polled = self._sync_selector()
+        now = self.clock()
+        wait = min(timeout_s, self._next_due(now))
+        if polled:
+            wait = min(wait, 0.005)
+        if self._outbox:
             wait = 0.0
         events = self._sel.select(wait)
-        ready: list[Endpoint] = []
-        for key, _ in events:
-            if key.data is None:
-                try:
+        self._drain_outbox()
+        done: list[Endpoint] = []
+        for key, mask in events:
+            ep = key.data
+            if ep is None:
+                with contextlib.suppress(BlockingIOError):
                     while self._wake_r.recv(4096):
                         pass
-                except BlockingIOError:
-                    pass
-            elif key.data not in ready:
-                ready.append(key.data)
+                continue
+            if mask & selectors.EVENT_WRITE:
+                ep.flush()
+            if mask & selectors.EVENT_READ and ep not in done:
+                done.append(ep)
+                self._read(ep)
         if polled:
-            ready += [ep for ep in self.endpoints if not ep.link.filenos() and ep not in ready]
-        for ep in ready:
-            self._read(ep)
+            for ep in self.endpoints:
+                if not ep.link.filenos() and ep not in done:
+                    self._read(ep)
         self._drain_outbox()
         self.tick(self.clock())
         for ep in self.endpoints:
-            ep.flush()
+            if ep.blocked():
+                ep.flush()
 
     def _read(self, src: Endpoint) -> None:
+        framers = src.framers
+        route = self._route
         for data, key, boundary in src.link.read(self.cfg.read_burst):
-            framer = src.framers.get(key)
+            framer = framers.get(key)
             if framer is None:
-                framer = src.framers[key] = MavFramer(on_drop=self._on_drop)
+                framer = framers[key] = MavFramer(on_drop=self._on_drop)
             for frame in framer.feed(data, boundary=boundary):
-                self._route(src, frame)
+                route(src, frame)
 
     def _on_drop(self, data: bytes, reason: str) -> None:
         self.stats.dropped_bytes += len(data)
@@ -427,7 +502,7 @@ class Router:
             if dst is src:
                 continue
             if target is None or dst.accepts(target):
-                dst.enqueue(raw)
+                dst.send(raw)
                 sent = True
         if sent:
             self.stats.forwarded += 1
@@ -510,10 +585,10 @@ class Router:
         if self.tlog is not None:
             self.tlog.write(raw)
         if dest is not None:
-            dest.enqueue(raw)
+            dest.send(raw)
             return
         for ep in self.endpoints:
-            ep.enqueue(raw)
+            ep.send(raw)
 
     def _drain_outbox(self) -> None:
         while self._outbox:
@@ -568,6 +643,8 @@ class Router:
 
     def close(self) -> None:
         self._stop.set()
+        if hasattr(self, "_wake_w"):
+            self._wake()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=2.0)
         for ep in self.endpoints:
@@ -595,128 +672,6 @@ def _param_name(raw: Any) -> str:
 
 
 # ---------------------------------------------------------------------------------------------
-# Benchmark
-
-
-def bench_forwarding(rate_pps: int, seconds: float) -> dict[str, float | int]:
-    """Latency added per forwarded packet over loopback UDP, at ``rate_pps`` for ``seconds``.
-
-    A sender process writes NAMED_VALUE_FLOAT packets (each numbered in ``time_boot_ms``) on
-    absolute deadlines to the router's autopilot port; a receiver in the same process reads
-    them on the GCS side and timestamps them with the same clock. The router runs in this
-    process. ``direct_p50_ms`` is the same measurement without the router (the floor).
-    """
-    import multiprocessing as mp
-
-    ctx = mp.get_context("spawn")
-    cfg = MavlinkConfig(
-        autopilot=EndpointConfig("udpin:127.0.0.1:0"),
-        gcs=(EndpointConfig("udpin:127.0.0.1:0"),),
-        stats_hz=0.0,
-        queue_packets=max(2000, rate_pps),
-        read_burst=256,
-    )
-    router = Router(cfg)
-    try:
-        ap_port = router.endpoints[0].link.local_address
-        gcs_port = router.endpoints[1].link.local_address
-        assert ap_port is not None and gcs_port is not None
-        router.start()
-        parent, child = ctx.Pipe()
-        proc = ctx.Process(
-            target=_bench_traffic, args=(child, ap_port[1], gcs_port[1], rate_pps, seconds)
-        )
-        proc.start()
-        result: dict[str, float | int] = parent.recv()
-        proc.join(timeout=10)
-        s = router.summary()
-        result["router_queue_drops"] = int(s["gcs0"]["dropped_queue_full"])
-        result["router_bad_crc"] = int(s["bad_crc"])
-    finally:
-        router.close()
-    result["rate_pps"] = rate_pps
-    return result
-
-
-def _bench_traffic(conn: Any, ap_port: int, gcs_port: int, rate_pps: int, seconds: float) -> None:
-    import numpy as np
-
-    from drivers.mavlink_framer import x25crc
-
-    template = mio.MavPacker(1, 1).send_named_value_float("bench", 0.0, 0)
-    extra = mio.crc_extra(251)
-    assert extra is not None
-    n = max(1, int(rate_pps * seconds))
-
-    def packet(i: int) -> bytes:
-        body = bytearray(template[:-2])
-        body[4] = i & 0xFF  # sequence
-        body[10:14] = struct.pack("<I", i)  # time_boot_ms carries the packet number
-        return bytes(body) + struct.pack("<H", x25crc(bytes(body[1:]) + bytes([extra])))
-
-    packets = [packet(i) for i in range(n)]
-    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-    rx.bind(("127.0.0.1", 0))
-    rx.settimeout(1.0)
-    # Tell the router's GCS server where we are (it answers peers that have spoken).
-    rx.sendto(mio.MavPacker(255, 190).send_heartbeat(), ("127.0.0.1", gcs_port))
-    sent_at = np.zeros(n)
-    recv_at = np.full(n, np.nan)
-
-    def drain() -> int:
-        got = 0
-        while True:
-            try:
-                data = rx.recv(65535)
-            except (BlockingIOError, TimeoutError):
-                return got
-            t = time.perf_counter()
-            got += 1
-            if len(data) >= 14 and data[0] == 0xFD and data[7] == 251:
-                i = struct.unpack_from("<I", data, 10)[0]
-                if i < n:
-                    recv_at[i] = t
-
-    # Floor: the same path without the router (sender straight to the receiver).
-    direct = []
-    for i in range(200):
-        t0 = time.perf_counter()
-        tx.sendto(packets[i % n], rx.getsockname())
-        rx.recv(65535)
-        direct.append(time.perf_counter() - t0)
-    # One thread sends on absolute deadlines and, while it waits, polls the receiving socket
-    # (a second thread would be starved by the busy wait and timestamp late).
-    rx.setblocking(False)
-    period = 1.0 / rate_pps
-    start = time.perf_counter() + 0.05
-    for i in range(n):
-        deadline = start + i * period
-        while time.perf_counter() < deadline:
-            drain()
-        sent_at[i] = time.perf_counter()
-        tx.sendto(packets[i], ("127.0.0.1", ap_port))
-    quiet_until = time.perf_counter() + 0.5
-    while time.perf_counter() < quiet_until:
-        if drain():
-            quiet_until = time.perf_counter() + 0.5
-    ok = ~np.isnan(recv_at)
-    lat_ms = (recv_at[ok] - sent_at[ok]) * 1e3
-    conn.send(
-        {
-            "sent": n,
-            "received": int(ok.sum()),
-            "lost": int(n - ok.sum()),
-            "p50_ms": float(np.percentile(lat_ms, 50)) if lat_ms.size else float("nan"),
-            "p99_ms": float(np.percentile(lat_ms, 99)) if lat_ms.size else float("nan"),
-            "max_ms": float(lat_ms.max()) if lat_ms.size else float("nan"),
-            "direct_p50_ms": float(np.percentile(np.asarray(direct) * 1e3, 50)),
-        }
-    )
-
-
-# ---------------------------------------------------------------------------------------------
 # CLI
 
 
@@ -730,6 +685,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--bench", action="store_true", help="measure forwarding latency at 1 000 and 10 000 pkt/s"
     )
+    parser.add_argument("--bench-rate", type=int, action="append", help="packets/s (repeatable)")
+    parser.add_argument("--bench-seconds", type=float, default=5.0, help="seconds per run")
+    parser.add_argument("--bench-runs", type=int, default=1, help="runs per rate")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -737,8 +695,11 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     if args.bench:
-        for rate in (1000, 10000):
-            print(json.dumps(bench_forwarding(rate, 3.0)))
+        from firmware_host.router_bench import bench_forwarding
+
+        for rate in args.bench_rate or (1000, 10000):
+            for _ in range(max(1, args.bench_runs)):
+                print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
         return 0
     cfg = load_mavlink_config(args.config) if args.config else MavlinkConfig()
     changes: dict[str, Any] = {}
