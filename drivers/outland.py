@@ -20,10 +20,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
-import serial
-
 from drivers.framecodec import Framer, Protocol, decode, encode
-from drivers.transport import read_some, write_all
+from drivers.transport import Port, read_some, write_all
 from fdi.errors import DecodeError
 
 Wiring = Literal["rs232", "rs485"]
@@ -103,7 +101,7 @@ class OutlandLink:
 
     def __init__(
         self,
-        port: serial.SerialBase,
+        port: Port,
         proto: Protocol,
         wiring: Wiring = "rs232",
         node: int = 1,

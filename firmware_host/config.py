@@ -14,6 +14,7 @@ from pathlib import Path
 from drivers.transport import SerialSettings
 from fdi.rover import RoverDetectorParams
 from firmware_host.configload import load_file
+from firmware_host.recorder import RecorderConfig
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
 
@@ -53,6 +54,7 @@ class RoverConfig:
     output: RoverOutputs = field(default_factory=RoverOutputs)
     max_line: int = field(default=120, metadata={"ge": 82, "le": 4096})
     silence_s: float = field(default=2.0, metadata={"gt": 0.0})
+    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1})  # reopen backoff cap
 
 
 @dataclass(frozen=True)
@@ -60,6 +62,7 @@ class BridgeConfig:
     name: str = "rover-default"
     description: str = ""
     rover: RoverConfig = field(default_factory=RoverConfig)
+    recorder: RecorderConfig = field(default_factory=RecorderConfig)
 
 
 def load_config(path: str | Path | None) -> BridgeConfig:

@@ -21,7 +21,7 @@ import numpy as np
 
 from drivers.framecodec import load_protocol
 from drivers.outland import OutlandLink, Telemetry
-from drivers.transport import open_port
+from drivers.transport import SerialSettings, open_port
 from firmware_host.loop import FixedRateLoop
 from firmware_host.rov_config import RovConfig, load_rov_config, protocol_path
 from firmware_host.rov_control import RovController, epoch_record
@@ -92,11 +92,13 @@ def run_rov(
     ft: bool = True,
     max_steps: int | None = None,
     on_epoch: EpochSink | None = None,
+    opener: Callable[[SerialSettings], Any] = open_port,
 ) -> dict[str, Any]:
     """Drive a real vehicle (or a pty) on ``config.link`` until ``stop_event`` is set.
 
     Returns the loop's timing summary plus the link's counters. ``base_dir`` resolves a relative
-    protocol path (default: the project's ``config/``).
+    protocol path (default: the project's ``config/``). ``opener`` opens the link's port
+    (``fdi-bridge run`` passes one that reopens a lost port: :mod:`firmware_host.reconnect`).
     """
     base = Path(base_dir) if base_dir is not None else load_rov_config(None)[1]
     proto = load_protocol(protocol_path(config, base))
@@ -106,7 +108,7 @@ def run_rov(
                                                    config.link.reply_timeout_s / 5))
     else:
         settings = replace(settings, timeout_s=0.0)
-    port = open_port(settings)
+    port = opener(settings)
     link = OutlandLink(port, proto, config.link.wiring, config.link.address,
                        config.link.reply_timeout_s, clock=clock)
     ctl = RovController(config, ft=ft)

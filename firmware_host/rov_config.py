@@ -15,6 +15,7 @@ from fdi.heading_ft import FtConfig
 from fdi.lms_fir import DetectorConfig
 from fdi.pid import PidConfig
 from firmware_host.configload import load_file
+from firmware_host.recorder import RecorderConfig
 
 Wiring = Literal["rs232", "rs485"]
 
@@ -28,6 +29,7 @@ class LinkConfig:
     protocol: str = "protocols/outland1000.toml"
     address: int = field(default=1, metadata={"ge": 0, "le": 255})
     reply_timeout_s: float = field(default=0.05, metadata={"gt": 0.0, "lt": 1.0})
+    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1})  # reopen backoff cap
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,7 @@ class RovConfig:
     pid: PidConfig = field(default_factory=PidConfig)
     link: LinkConfig = field(default_factory=LinkConfig)
     sim: SimConfig = field(default_factory=SimConfig)
+    recorder: RecorderConfig = field(default_factory=RecorderConfig)
 
 
 def project_root() -> Path:
