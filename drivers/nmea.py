@@ -536,24 +536,23 @@ def with_checksum(body: str) -> bytes:
     return f"${body}*{checksum(body):02X}\r\n".encode("ascii")
 
 
-def format_lat(lat_deg: float) -> tuple[str, str]:
-    hemi = "N" if lat_deg >= 0 else "S"
-    a = abs(lat_deg)
+def _format_angle(value: float, deg_digits: int, hemis: str) -> tuple[str, str]:
+    """Degrees -> (``d..dmm.mmmmmmmm``, hemisphere letter), minutes to 8 decimals."""
+    hemi = hemis[0] if value >= 0 else hemis[1]
+    a = abs(value)
     d = int(a)
     m = (a - d) * 60.0
     if round(m, 8) >= 60.0:
         d, m = d + 1, 0.0
-    return f"{d:02d}{m:011.8f}", hemi
+    return f"{d:0{deg_digits}d}{m:011.8f}", hemi
+
+
+def format_lat(lat_deg: float) -> tuple[str, str]:
+    return _format_angle(lat_deg, 2, "NS")
 
 
 def format_lon(lon_deg: float) -> tuple[str, str]:
-    hemi = "E" if lon_deg >= 0 else "W"
-    a = abs(lon_deg)
-    d = int(a)
-    m = (a - d) * 60.0
-    if round(m, 8) >= 60.0:
-        d, m = d + 1, 0.0
-    return f"{d:03d}{m:011.8f}", hemi
+    return _format_angle(lon_deg, 3, "EW")
 
 
 def format_time(time_s: float) -> str:

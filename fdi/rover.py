@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 from fdi.chi2 import threshold
@@ -68,9 +68,6 @@ class RoverDetectorParams:
     gate_sigmas: float = field(default=6.0, metadata={"ge": 0.0})  # 0: fixed gate
     gate_tau_epochs: float = field(default=50.0, metadata={"ge": 1.0})
     gate_sigma0_m: float = field(default=0.1, metadata={"gt": 0.0})
-    # While the window coasts on its own predictions, their error grows: widen the gates by
-    # this much per second since the last accepted fix (0 in the paper).
-    gate_growth_mps: float = field(default=0.0, metadata={"ge": 0.0})
     test_up: bool = True
     # Isolation and alarm.
     max_consecutive: int = field(default=5, metadata={"ge": 0})
@@ -131,7 +128,6 @@ class RoverIsolator:
         self._disp = [0.0, 0.0, 0.0]  # Doppler-integrated displacement
         self._last_v: tuple[float, float] | None = None
         self._last_t: float | None = None
-        self._last_accept_t: float | None = None
         self._last_up = 0.0
         self._up_seen = False
         self._consec = 0
@@ -149,7 +145,6 @@ class RoverIsolator:
     # -------------------------------------------------------------- helpers
 
     def _restart(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
-        self._last_accept_t = self._last_t
         self._win.clear()
         self._disp = [0.0, 0.0, 0.0]
         self._win.append(z)
@@ -204,12 +199,14 @@ class RoverIsolator:
     def step(self, fix: FixInput) -> Decision:
         p = self.p
         gate_h, gate_u = self._gates()
+        t = _Tests(gate_h, gate_u)
         if fix.enu is None:
-            return self._no_fix("no_fix", gate_h, gate_u)
+            return self._decision("no_fix", False, "no_fix", None, t)
         dt = None if self._last_t is None else fix.t_s - self._last_t
         if dt is not None and -p.max_gap_s <= dt <= 0.0:
             # A stale or repeated epoch: its fix is not passed on.
-            return self._no_fix("time_backwards" if dt < 0 else "duplicate_time", gate_h, gate_u)
+            reason = "time_backwards" if dt < 0 else "duplicate_time"
+            return self._decision("no_fix", False, reason, None, t)
         z = fix.enu
         r = self._r(fix)
         # A 2D fix (no altitude: RMC/GLL only) has NaN up: hold the last known height with a
@@ -245,135 +242,62 @@ class RoverIsolator:
         if restart_reason:
             self._last_v = v
             if quality:  # nothing to replace it with: not passed on
-                return self._raise_alarm(z, r, "+".join(quality), None, None, None, None,
-                                         gate_h, gate_u)
+                return self._raise_alarm(z, r, "+".join(quality), t)
             self._restart(z, r)
-            return self._decide_accept(z, None, None, None, None, gate_h, gate_u, restart_reason)
+            return self._accept(z, t, restart_reason)
         assert dt is not None
 
-        # Doppler displacement over the interval (trapezoid); None breaks the Doppler chain.
+        # Doppler displacement over the interval (trapezoid); no Doppler breaks the chain.
         lv = self._last_v
-        if p.predictor == "doppler" and v is not None and lv is not None:
-            self._disp[0] += 0.5 * (v[0] + lv[0]) * dt
-            self._disp[1] += 0.5 * (v[1] + lv[1]) * dt
-            chain_ok = True
-        else:
-            chain_ok = p.predictor == "raw"
-            if not chain_ok:
-                # No Doppler this epoch: the window's Doppler-free values no longer line up.
+        if p.predictor == "doppler":
+            if v is not None and lv is not None:
+                self._disp[0] += 0.5 * (v[0] + lv[0]) * dt
+                self._disp[1] += 0.5 * (v[1] + lv[1]) * dt
+            else:
+                # The window's Doppler-free values no longer line up: start it again.
                 self._win.clear()
                 self._disp = [0.0, 0.0, 0.0]
         self._last_v = v
         d = self._disp
 
-        # Section 2: grey prediction and residual ε(k) (eq. 18).
-        if p.gate_growth_mps > 0.0 and self._consec and self._last_accept_t is not None:
-            coast = p.gate_growth_mps * (fix.t_s - self._last_accept_t)
-            gate_h += coast
-            gate_u += coast
+        # Section 2: grey prediction and residual ε(k) = x⁰(k) − x̂⁰(k) (eq. 18).
         y_hat = self._predict()
-        pred: tuple[float, float, float] | None = None
-        res_h = res_u = None
         grey_fault = False
         if y_hat is not None:
             pred = (y_hat[0] + d[0], y_hat[1] + d[1], y_hat[2] + d[2])
+            t.pred = pred
             ee, en, eu = z[0] - pred[0], z[1] - pred[1], z[2] - pred[2]
             if p.gate_axes == "horizontal":
-                res_h = math.hypot(ee, en)
-                grey_fault = res_h > gate_h
+                t.res_h = math.hypot(ee, en)
             else:
-                res_h = max(abs(ee), abs(en))
-                grey_fault = res_h > gate_h
-            res_u = abs(eu) if up_known else None
-            if p.test_up and res_u is not None and res_u > gate_u:
+                t.res_h = max(abs(ee), abs(en))
+            grey_fault = t.res_h > gate_h
+            t.res_u = abs(eu) if up_known else None
+            if p.test_up and t.res_u is not None and t.res_u > gate_u:
                 grey_fault = True
 
         # Section 1: Kalman prediction and residual chi-square test (eq. 1-6).
         self.kf.predict(dt)
-        F = self.kf.test(z, r)
-        chi2_fault = p.chi2_enabled and self.T_d < F
+        t.F = self.kf.test(z, r)
+        chi2_fault = p.chi2_enabled and self.T_d < t.F
 
         if p.strategy != "grey":
-            return self._step_zones(fix, z, r, d, pred, res_h, res_u, up_known, F, quality,
-                                    gate_h, gate_u)
+            return self._step_zones(fix, z, r, d, up_known, quality, t)
 
-        reasons = []
-        if grey_fault:
-            reasons.append("grey")
-        if chi2_fault:
-            reasons.append("chi2")
-        reasons += quality
-        fault = bool(reasons)
-
-        if not fault:
-            self._consec = 0
-            self._last_accept_t = fix.t_s
-            if res_h is not None:
-                self._learn_spread(z, pred, res_u is not None)
+        reasons = (["grey"] if grey_fault else []) + (["chi2"] if chi2_fault else []) + quality
+        if not reasons:
+            self._accepted(fix, z, t)
             self._window_append(z, d)
             self.kf.update(z, r)
-            return self._decide_accept(z, pred, res_h, res_u, F, gate_h, gate_u, "")
-
+            return self._accept(z, t, "")
         # Isolation: replace the faulty fix by its prediction before the filter update.
-        if pred is not None and self._consec < p.max_consecutive:
-            self._consec += 1
-            self._good_run = 0
-            self._window_append(pred, d)
-            self.kf.update(pred, r)
-            return Decision(
-                action="alarm" if self._alarm else "replace",
-                fault=True,
-                reason="+".join(reasons),
-                out_enu=None if self._alarm else pred,
-                pred_enu=pred,
-                grey_res_h=res_h,
-                grey_res_u=res_u,
-                grey_gate_h=gate_h,
-                grey_gate_u=gate_u,
-                chi2=F,
-                chi2_threshold=self.T_d,
-                consecutive=self._consec,
-                alarm=self._alarm,
-                alarm_raised=False,
-                kf_enu=self.kf.position,
-            )
+        if t.pred is not None and self._consec < p.max_consecutive:
+            self._window_append(t.pred, d)
+            self.kf.update(t.pred, r)
+            return self._replace(t.pred, t, "+".join(reasons))
         # Too many in a row (or nothing to replace with): alarm, stop automatic navigation,
         # restart on the receiver's data.
-        return self._raise_alarm(z, r, "+".join(reasons), pred, res_h, res_u, F, gate_h, gate_u)
-
-    def _raise_alarm(
-        self,
-        z: tuple[float, float, float],
-        r: tuple[float, float, float],
-        reason: str,
-        pred: tuple[float, float, float] | None,
-        res_h: float | None,
-        res_u: float | None,
-        F: float | None,
-        gate_h: float,
-        gate_u: float,
-    ) -> Decision:
-        raised = not self._alarm
-        self._alarm = True
-        self._good_run = 0
-        self._restart(z, r)
-        return Decision(
-            action="alarm",
-            fault=True,
-            reason=reason,
-            out_enu=None,
-            pred_enu=pred,
-            grey_res_h=res_h,
-            grey_res_u=res_u,
-            grey_gate_h=gate_h,
-            grey_gate_u=gate_u,
-            chi2=F,
-            chi2_threshold=self.T_d,
-            consecutive=self._consec,
-            alarm=True,
-            alarm_raised=raised,
-            kf_enu=self.kf.position,
-        )
+        return self._raise_alarm(z, r, "+".join(reasons), t)
 
     def _step_zones(
         self,
@@ -381,14 +305,9 @@ class RoverIsolator:
         z: tuple[float, float, float],
         r: tuple[float, float, float],
         d: list[float],
-        pred: tuple[float, float, float] | None,
-        res_h: float | None,
-        res_u: float | None,
         up_known: bool,
-        F: float,
         quality: list[str],
-        gate_h: float,
-        gate_u: float,
+        t: _Tests,
     ) -> Decision:
         """Cai & Shao's three zones per axis, eq. (7)-(8), on the Kalman innovation.
 
@@ -398,6 +317,7 @@ class RoverIsolator:
         faulty when an axis is over the limit (or a quality screen fails).
         """
         p = self.p
+        pred = t.pred
         values = list(z)
         variances = list(r)
         zones: list[int] = []
@@ -414,7 +334,7 @@ class RoverIsolator:
             elif g.action is ZoneAction.REPLACE:
                 replaced = True
             values[i], variances[i] = g.value, g.variance
-        over = any(zn == Zone.OVER_LIMIT for zn in zones)
+        over = Zone.OVER_LIMIT in zones
         reasons = (["over_limit"] if over else []) + quality
         if quality and not over:
             if pred is None:
@@ -423,41 +343,95 @@ class RoverIsolator:
                 values, variances, replaced = list(pred), list(r), True
         reason = "+".join(reasons) or ("deviation" if Zone.DEVIATION in zones else "")
         if rejected or (replaced and self._consec >= p.max_consecutive):
-            return self._raise_alarm(z, r, reason or "over_limit", pred, res_h, res_u, F,
-                                     gate_h, gate_u)
+            return self._raise_alarm(z, r, reason or "over_limit", t)
         out = (values[0], values[1], values[2])
-        var = (variances[0], variances[1], variances[2])
-        if replaced:
-            self._consec += 1
-            self._good_run = 0
-        else:
-            self._consec = 0
-            self._last_accept_t = fix.t_s
-            if res_h is not None:
-                self._learn_spread(z, pred, res_u is not None)
         self._window_append(out, d)
-        self.kf.update(out, var)
-        if not replaced:
-            dec = self._decide_accept(z, pred, res_h, res_u, F, gate_h, gate_u, reason)
-            return _with_zones(dec, zones, over or bool(quality))
+        self.kf.update(out, (variances[0], variances[1], variances[2]))
+        if replaced:
+            return self._replace(out, t, reason, tuple(zones))
+        self._accepted(fix, z, t)
+        return self._accept(z, t, reason, tuple(zones), fault=over or bool(quality))
+
+    # -------------------------------------------------------------- outcomes
+
+    def _decision(
+        self,
+        action: Action,
+        fault: bool,
+        reason: str,
+        out: tuple[float, float, float] | None,
+        t: _Tests,
+        *,
+        alarm_raised: bool = False,
+        zones: tuple[int, ...] | None = None,
+    ) -> Decision:
         return Decision(
-            action="alarm" if self._alarm else "replace",
-            fault=True,
+            action=action,
+            fault=fault,
             reason=reason,
-            out_enu=None if self._alarm else out,
-            pred_enu=pred,
-            grey_res_h=res_h,
-            grey_res_u=res_u,
-            grey_gate_h=gate_h,
-            grey_gate_u=gate_u,
-            chi2=F,
+            out_enu=out,
+            pred_enu=t.pred,
+            grey_res_h=t.res_h,
+            grey_res_u=t.res_u,
+            grey_gate_h=t.gate_h,
+            grey_gate_u=t.gate_u,
+            chi2=t.F,
             chi2_threshold=self.T_d,
             consecutive=self._consec,
             alarm=self._alarm,
-            alarm_raised=False,
-            kf_enu=self.kf.position,
-            zones=tuple(zones),
+            alarm_raised=alarm_raised,
+            kf_enu=self.kf.position if self.kf.initialised else None,
+            zones=zones,
         )
+
+    def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests) -> None:
+        """Bookkeeping for a fix passed on as it is: the run of replacements ends."""
+        self._consec = 0
+        if t.pred is not None:
+            self._learn_spread(z, t.pred, t.res_u is not None)
+
+    def _accept(
+        self,
+        z: tuple[float, float, float],
+        t: _Tests,
+        reason: str,
+        zones: tuple[int, ...] | None = None,
+        fault: bool = False,
+    ) -> Decision:
+        if self._alarm:
+            self._good_run += 1
+            if self._good_run >= self.p.recover_epochs:
+                self._alarm = False
+                reason = reason or "recovered"
+        action: Action = "alarm" if self._alarm else "accept"
+        return self._decision(action, fault, reason, None if self._alarm else z, t, zones=zones)
+
+    def _replace(
+        self,
+        out: tuple[float, float, float],
+        t: _Tests,
+        reason: str,
+        zones: tuple[int, ...] | None = None,
+    ) -> Decision:
+        self._consec += 1
+        self._good_run = 0
+        action: Action = "alarm" if self._alarm else "replace"
+        return self._decision(action, True, reason, None if self._alarm else out, t, zones=zones)
+
+    def _raise_alarm(
+        self,
+        z: tuple[float, float, float],
+        r: tuple[float, float, float],
+        reason: str,
+        t: _Tests,
+    ) -> Decision:
+        raised = not self._alarm
+        self._alarm = True
+        self._good_run = 0
+        consecutive = self._consec
+        self._restart(z, r)
+        dec = self._decision("alarm", True, reason, None, t, alarm_raised=raised)
+        return replace(dec, consecutive=consecutive) if consecutive else dec
 
     # -------------------------------------------------------------- pieces
 
@@ -465,72 +439,22 @@ class RoverIsolator:
         self._win.append((value[0] - d[0], value[1] - d[1], value[2] - d[2]))
 
     def _learn_spread(
-        self, z: tuple[float, float, float], pred: tuple[float, float, float] | None, up: bool
+        self, z: tuple[float, float, float], pred: tuple[float, float, float], up: bool
     ) -> None:
-        if pred is None:
-            return
         ee, en, eu = z[0] - pred[0], z[1] - pred[1], z[2] - pred[2]
         w = self._ewma
         self._var_h += w * (0.5 * (ee * ee + en * en) - self._var_h)
         if up:
             self._var_u += w * (eu * eu - self._var_u)
 
-    def _decide_accept(
-        self,
-        z: tuple[float, float, float],
-        pred: tuple[float, float, float] | None,
-        res_h: float | None,
-        res_u: float | None,
-        F: float | None,
-        gate_h: float,
-        gate_u: float,
-        reason: str,
-    ) -> Decision:
-        if self._alarm:
-            self._good_run += 1
-            if self._good_run >= self.p.recover_epochs:
-                self._alarm = False
-                reason = reason or "recovered"
-        alarm = self._alarm
-        return Decision(
-            action="alarm" if alarm else "accept",
-            fault=False,
-            reason=reason,
-            out_enu=None if alarm else z,
-            pred_enu=pred,
-            grey_res_h=res_h,
-            grey_res_u=res_u,
-            grey_gate_h=gate_h,
-            grey_gate_u=gate_u,
-            chi2=F,
-            chi2_threshold=self.T_d,
-            consecutive=0,
-            alarm=alarm,
-            alarm_raised=False,
-            kf_enu=self.kf.position if self.kf.initialised else None,
-        )
 
-    def _no_fix(self, reason: str, gate_h: float, gate_u: float) -> Decision:
-        return Decision(
-            action="no_fix",
-            fault=False,
-            reason=reason,
-            out_enu=None,
-            pred_enu=None,
-            grey_res_h=None,
-            grey_res_u=None,
-            grey_gate_h=gate_h,
-            grey_gate_u=gate_u,
-            chi2=None,
-            chi2_threshold=self.T_d,
-            consecutive=self._consec,
-            alarm=self._alarm,
-            alarm_raised=False,
-            kf_enu=self.kf.position if self.kf.initialised else None,
-        )
+@dataclass(slots=True)
+class _Tests:
+    """One epoch's test statistics, carried into its :class:`Decision`."""
 
-
-def _with_zones(dec: Decision, zones: list[int], fault: bool) -> Decision:
-    from dataclasses import replace
-
-    return replace(dec, zones=tuple(zones), fault=fault)
+    gate_h: float
+    gate_u: float
+    pred: tuple[float, float, float] | None = None
+    res_h: float | None = None
+    res_u: float | None = None
+    F: float | None = None
