@@ -458,3 +458,17 @@ class _Tests:
     res_h: float | None = None
     res_u: float | None = None
     F: float | None = None
+
+    def update_params(self, params: RoverDetectorParams) -> None:
+        """Use ``params`` from the next :meth:`step` on (an operator's change, at run time).
+
+        The state is kept: the window keeps its newest values (up to the new length), the
+        filter its estimate; T_d is recomputed from α (eq. 6), and the gate's learning rate
+        from ``gate_tau_epochs``.
+        """
+        self.p = params
+        self.T_d = threshold(params.alpha, 3)  # eq. (6), m = 3
+        self.kf.q = params.q_accel
+        if self._win.maxlen != params.window:
+            self._win = deque(self._win, maxlen=params.window)
+        self._ewma = 1.0 / params.gate_tau_epochs
