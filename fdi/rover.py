@@ -447,18 +447,6 @@ class RoverIsolator:
         if up:
             self._var_u += w * (eu * eu - self._var_u)
 
-
-@dataclass(slots=True)
-class _Tests:
-    """One epoch's test statistics, carried into its :class:`Decision`."""
-
-    gate_h: float
-    gate_u: float
-    pred: tuple[float, float, float] | None = None
-    res_h: float | None = None
-    res_u: float | None = None
-    F: float | None = None
-
     def update_params(self, params: RoverDetectorParams) -> None:
         """Use ``params`` from the next :meth:`step` on (an operator's change, at run time).
 
@@ -472,3 +460,15 @@ class _Tests:
         if self._win.maxlen != params.window:
             self._win = deque(self._win, maxlen=params.window)
         self._ewma = 1.0 / params.gate_tau_epochs
+
+
+@dataclass(slots=True)
+class _Tests:
+    """One epoch's test statistics, carried into its :class:`Decision`."""
+
+    gate_h: float
+    gate_u: float
+    pred: tuple[float, float, float] | None = None
+    res_h: float | None = None
+    res_u: float | None = None
+    F: float | None = None
