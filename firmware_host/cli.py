@@ -38,6 +38,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "record": ("firmware_host.record", "record a serial port's raw bytes to a capture file"),
     "run": ("firmware_host.run", "run on the vehicle with the configured ports"),
+    "eval": ("firmware_host.eval", "score detectors against the truth, beside the baselines"),
     "bench": ("firmware_host.bench", "benchmarks: per-epoch time, throughput, loop jitter"),
     "mavlink": (
         "firmware_host.router",

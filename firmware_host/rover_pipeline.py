@@ -29,6 +29,7 @@ import numpy as np
 from drivers.gps import NmeaStream
 from drivers.gps_epochs import GpsEpoch
 from drivers.ratelog import RateLimitedLog
+from fdi.gate_health import GateHealth
 from fdi.geodesy import LocalFrame
 from fdi.rover import Decision, FixInput, RoverIsolator
 from firmware_host.config import RoverConfig
@@ -86,6 +87,8 @@ class RoverPipeline:
         self.ratelog = ratelog or RateLimitedLog(log)
         self.stream = NmeaStream(cfg.max_line, self.ratelog)
         self.isolator = RoverIsolator(cfg.detector)
+        # Is the chi-square gate doing anything? (min jump: 3 sigma, the smallest fault)
+        self.gate_health = GateHealth(min_jump_m=3.0 * cfg.detector.sigma_m)
         self.frame: LocalFrame | None = None
         if cfg.reference is not None:
             ref = cfg.reference
@@ -166,6 +169,7 @@ class RoverPipeline:
             hdop=epoch.hdop,
         )
         d = self.isolator.step(fix)
+        self.gate_health.update(d, self.isolator.kf.S if d.chi2 is not None else None)
         lat = lon = alt = None
         if d.out_enu is not None and self.frame is not None:
             if d.action == "accept":
@@ -187,6 +191,10 @@ class RoverPipeline:
             self.alarms_raised += 1
             log.warning("GPS alarm at utc %s: %d faults in a row; stop automatic navigation",
                         epoch.utc_s, self.cfg.detector.max_consecutive)
+        if self.epochs % 100 == 0:
+            health = self.gate_health.report()
+            if health.messages:
+                self.ratelog.warning("gate health", "; ".join(health.messages))
         if self.jsonl is not None:
             self.jsonl.write(json.dumps(record, separators=(",", ":")) + "\n")
         for sink in self.sinks:
@@ -279,4 +287,5 @@ class RoverPipeline:
                 "chi2_threshold": round(self.isolator.T_d, 4),
                 "predictor": self.cfg.detector.predictor,
             },
+            "gate_health": self.gate_health.report().as_dict(),
         }
