@@ -303,6 +303,7 @@ def run_rov_bridge(
     opener: Opener = open_port,
     max_steps: int | None = None,
     ft: bool = True,
+    on_epoch: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
     """The ROV config at ``path`` through :func:`run_rov`, with a resilient, recorded link."""
     from firmware_host.rov_app import run_rov
@@ -324,8 +325,10 @@ def run_rov_bridge(
 
     monitor = RovFailsafeMonitor(cfg.period_s)
 
-    def on_epoch(rec: dict[str, Any]) -> None:
+    def each_epoch(rec: dict[str, Any]) -> None:
         monitor.observe(rec)
+        if on_epoch is not None:
+            on_epoch(rec)
         if jsonl is not None:
             jsonl.write(json.dumps(rec, separators=(",", ":")) + "\n")
         if recorder is not None:
@@ -333,7 +336,7 @@ def run_rov_bridge(
 
     try:
         out = run_rov(cfg, clock, sleep, stop_event, base_dir=base, ft=ft, max_steps=max_steps,
-                      on_epoch=on_epoch, opener=resilient)
+                      on_epoch=each_epoch, opener=resilient)
     finally:
         for p in ports:
             p.close()
