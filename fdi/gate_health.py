@@ -17,10 +17,14 @@ both:
   carries one (a horizontal residual gate wider than ``min_jump_m`` cannot see that jump).
 
 The mean is over a sliding window of ``window`` epochs (the live figure) and over the whole run
-(the summary). The band ``[dof/band, dof·band]`` is deliberately wide (default band 3): DGPS
-innovations are correlated in time, so the iid confidence interval of a mean of χ² samples would
-be far too narrow to mean anything here. Fed from :class:`fdi.rover.Decision` (``chi2``,
-``chi2_threshold``, ``grey_gate_h``) plus the filter's ``S`` for the same epoch.
+(the summary), of the epochs the detector *accepted*: a 7 m jump gives F in the hundreds, and a
+handful of faults would otherwise set the mean, so flagged epochs are counted apart
+(``flagged_fraction``). A filter whose S is too small shows either way: a high accepted mean, or
+more than ``max_flagged`` of the window flagged. The band ``[dof/band, dof·band]`` is
+deliberately wide (default band 3): DGPS innovations are correlated in time, so the iid
+confidence interval of a mean of χ² samples would be far too narrow to mean anything here.
+Fed from :class:`fdi.rover.Decision` (``chi2``, ``chi2_threshold``, ``grey_gate_h``,
+``fault``) plus the filter's ``S`` for the same epoch.
 """
 
 from __future__ import annotations
@@ -45,6 +49,9 @@ class DecisionLike(Protocol):
     @property
     def grey_gate_h(self) -> float: ...
 
+    @property
+    def fault(self) -> bool: ...
+
 
 @dataclass(frozen=True)
 class GateHealthReport:
@@ -53,8 +60,9 @@ class GateHealthReport:
     status: Status
     epochs: int  # epochs with a χ² statistic
     dof: int
-    mean_nis: float | None  # over the whole run
-    mean_nis_window: float | None  # over the last ``window`` epochs
+    mean_nis: float | None  # over the whole run's accepted epochs
+    mean_nis_window: float | None  # over the accepted epochs among the last ``window``
+    flagged_fraction: float | None  # share of the last ``window`` tested epochs flagged
     min_detectable_jump_m: float | None  # J_min of the χ² gate at the last epoch
     grey_gate_h_m: float | None  # the grey gate at the last epoch
     min_jump_m: float
@@ -71,6 +79,7 @@ class GateHealthReport:
             "dof": self.dof,
             "mean_nis": r(self.mean_nis),
             "mean_nis_window": r(self.mean_nis_window),
+            "flagged_fraction": r(self.flagged_fraction),
             "min_detectable_jump_m": r(self.min_detectable_jump_m),
             "grey_gate_h_m": r(self.grey_gate_h_m),
             "min_jump_m": self.min_jump_m,
@@ -89,6 +98,7 @@ class GateHealth:
         window: int = 200,
         min_epochs: int = 50,
         band: float = 3.0,
+        max_flagged: float = 0.25,
     ) -> None:
         if dof < 1 or window < 1 or band <= 1.0 or min_jump_m <= 0.0:
             raise ValueError("dof >= 1, window >= 1, band > 1 and min_jump_m > 0 are required")
@@ -97,11 +107,15 @@ class GateHealth:
         self.window = window
         self.min_epochs = min_epochs
         self.band = band
+        self.max_flagged = max_flagged
         self._win: deque[float] = deque(maxlen=window)
+        self._flags: deque[bool] = deque(maxlen=window)
+        self._flag_sum = 0
         self._win_sum = 0.0
         self._sum = 0.0
         self._n = 0
         self._inert = 0
+        self._tested = 0
         self._j_min: float | None = None
         self._grey_gate: float | None = None
         self._t_d: float | None = None
@@ -116,28 +130,44 @@ class GateHealth:
         self._t_d = decision.chi2_threshold
         if decision.grey_gate_h is not None and math.isfinite(decision.grey_gate_h):
             self._grey_gate = decision.grey_gate_h
+        if S is not None:
+            self._j_min = math.sqrt(decision.chi2_threshold * max(S[0], S[1]))
+            self._inert += self._j_min > self.min_jump_m
+            self._tested += 1
+        if len(self._flags) == self.window:
+            self._flag_sum -= self._flags[0]
+        self._flags.append(decision.fault)
+        self._flag_sum += decision.fault
+        if decision.fault:
+            return
         self._n += 1
         self._sum += F
         if len(self._win) == self.window:
             self._win_sum -= self._win[0]
         self._win.append(F)
         self._win_sum += F
-        if S is not None:
-            self._j_min = math.sqrt(decision.chi2_threshold * max(S[0], S[1]))
-            self._inert += self._j_min > self.min_jump_m
 
     def report(self) -> GateHealthReport:
         n = self._n
         mean = self._sum / n if n else None
         wmean = self._win_sum / len(self._win) if self._win else None
-        inert_frac = self._inert / n if n and self._j_min is not None else None
+        inert_frac = self._inert / self._tested if self._tested else None
+        flagged = self._flag_sum / len(self._flags) if self._flags else None
         msgs: list[str] = []
         status: Status = "ok"
-        if n < self.min_epochs or wmean is None:
+        if len(self._flags) < self.min_epochs:
             status = "warming_up"
         else:
             lo, hi = self.dof / self.band, self.dof * self.band
-            if wmean < lo:
+            if flagged is not None and flagged > self.max_flagged:
+                status = "nis_high"
+                msgs.append(
+                    f"{100 * flagged:.0f} % of the last {len(self._flags)} epochs flagged: S is "
+                    "too small for the data (or the receiver is failing)"
+                )
+            elif wmean is None:
+                pass
+            elif wmean < lo:
                 status = "nis_low"
                 msgs.append(
                     f"mean normalised innovation squared {wmean:.3g} over the last "
@@ -171,6 +201,7 @@ class GateHealth:
             dof=self.dof,
             mean_nis=mean,
             mean_nis_window=wmean,
+            flagged_fraction=flagged,
             min_detectable_jump_m=self._j_min,
             grey_gate_h_m=self._grey_gate,
             min_jump_m=self.min_jump_m,
