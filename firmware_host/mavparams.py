@@ -90,8 +90,9 @@ class ParamStore:
         """Register every int/float field of a (frozen) config dataclass as ``PREFIX_FIELD``.
 
         Bounds come from the field metadata (``ge``/``gt``/``le``/``lt``, as in
-        :mod:`firmware_host.configload`), the doc from ``metadata["doc"]``. Returns
-        ``{field: param name}``; see :meth:`dataclass_view`.
+        :mod:`firmware_host.configload`; a strict bound becomes the next float inside it), the
+        doc from ``metadata["doc"]``. A name longer than 16 characters is cut (trailing ``_``
+        removed). Returns ``{field: param name}``; see :meth:`dataclass_view`.
         """
         if not dataclasses.is_dataclass(obj) or isinstance(obj, type):
             raise TypeError("register_dataclass needs a dataclass instance")
@@ -100,10 +101,14 @@ class ParamStore:
             value = getattr(obj, fld.name)
             if isinstance(value, bool) or not isinstance(value, int | float):
                 continue
-            name = f"{prefix}_{fld.name}".upper()[:PARAM_ID_MAX]
+            name = f"{prefix}_{fld.name}".upper()[:PARAM_ID_MAX].rstrip("_")
             meta = fld.metadata
-            lo = float(meta.get("ge", meta.get("gt", -math.inf)))
-            hi = float(meta.get("le", meta.get("lt", math.inf)))
+            lo = float(meta["ge"]) if "ge" in meta else -math.inf
+            if "gt" in meta:
+                lo = math.nextafter(float(meta["gt"]), math.inf)
+            hi = float(meta["le"]) if "le" in meta else math.inf
+            if "lt" in meta:
+                hi = math.nextafter(float(meta["lt"]), -math.inf)
             self.register(ParamSpec(name, float(value), lo, hi, str(meta.get("doc", ""))))
             names[fld.name] = name
         return names

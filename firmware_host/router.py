@@ -360,16 +360,27 @@ class Router:
         self._post(raw, self.autopilot)
         return raw
 
-    def send_manual_control(self, x: int, y: int, z: int, r: int, buttons: int = 0) -> bytes:
-        """MANUAL_CONTROL to the autopilot from the pilot's (GCS) system id (ArduSub)."""
+    def send_manual_control(
+        self, x: int, y: int, z: int, r: int, buttons: int = 0, target_system: int | None = None
+    ) -> bytes:
+        """MANUAL_CONTROL to the autopilot from the pilot's (GCS) system id (ArduSub).
+
+        ``target_system`` is the vehicle's system id (default: the bridge's own, as on a
+        companion computer that shares the vehicle's id).
+        """
+        target = self.cfg.system_id if target_system is None else target_system
         with self._lock:
-            raw = self._pilot.send_manual_control(self.cfg.system_id, x, y, z, r, buttons)
+            raw = self._pilot.send_manual_control(target, x, y, z, r, buttons)
         self._post(raw, self.autopilot)
         return raw
 
-    def request_mode(self, mode: str, vehicle: str = "rover") -> bytes:
+    def request_mode(
+        self, mode: str, vehicle: str = "rover", target_system: int | None = None
+    ) -> bytes:
+        """COMMAND_LONG DO_SET_MODE (``"HOLD"``) to the autopilot (system ``target_system``)."""
+        target = self.cfg.system_id if target_system is None else target_system
         with self._lock:
-            raw = self._own.request_mode(self.cfg.system_id, mode, vehicle)
+            raw = self._own.request_mode(target, mode, vehicle)
         self._post(raw, self.autopilot)
         return raw
 
@@ -717,11 +728,50 @@ def run(args: argparse.Namespace) -> int:
     params = ParamStore(cfg.param_file or None)
     router = Router(cfg, params=params)
     log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
+    rover = _start_rover(args.config, router) if args.config else None
     deadline = time.monotonic() + args.seconds if args.seconds > 0 else None
+    summary: dict[str, Any] = {}
     try:
         while deadline is None or time.monotonic() < deadline:
             router.poll(0.05)
+    except KeyboardInterrupt:
+        pass
     finally:
+        if rover is not None:
+            summary["rover"] = rover()
         router.close()
-        print(json.dumps(router.summary()))
+        summary["router"] = router.summary()
+        print(json.dumps(summary))
     return 0
+
+
+def _start_rover(path: str, router: Router) -> Callable[[], dict[str, Any]] | None:
+    """With a ``[rover]`` table in the config, run the rover pipeline on its receiver port.
+
+    Returns a function that stops it and gives its summary; None without a ``[rover]`` table.
+    """
+    from firmware_host.config import BridgeConfig
+    from firmware_host.mavlink_rover import attach_rover, run_rover_reader
+    from firmware_host.rover_pipeline import RoverPipeline
+
+    table = read_toml(path)
+    if "rover" not in table:
+        return None
+    rest = {k: v for k, v in table.items() if k != "mavlink"}
+    bridge = load_dataclass(BridgeConfig, rest, str(path))
+    pipeline = RoverPipeline(bridge.rover)
+    attach_rover(pipeline, router)
+    stop = threading.Event()
+    thread = threading.Thread(
+        target=run_rover_reader, args=(pipeline, stop), name="rover", daemon=True
+    )
+    thread.start()
+    log.info("rover pipeline on %s, corrected fixes to the autopilot", bridge.rover.port.url)
+
+    def finish() -> dict[str, Any]:
+        stop.set()
+        thread.join(timeout=2.0)
+        pipeline.finish()
+        return pipeline.summary()
+
+    return finish

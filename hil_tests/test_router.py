@@ -284,7 +284,24 @@ def test_mavproxy_sees_heartbeat_lists_and_sets_a_parameter(tmp_path: Path) -> N
     import subprocess
     import sys
 
-    router, params = _router(tmp_path)
+    from firmware_host.config import RoverConfig
+    from firmware_host.mavlink_rover import attach_rover
+    from firmware_host.rover_pipeline import RoverPipeline
+    from firmware_host.rover_sim import RoverScenario, write_run
+
+    params = ParamStore(tmp_path / "params.toml")
+    router = Router(
+        MavlinkConfig(
+            autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+            gcs=(EndpointConfig("udpin:127.0.0.1:0"),),
+        ),
+        params=params,
+    )
+    pipeline = RoverPipeline(RoverConfig())
+    attach_rover(pipeline, router)  # the rover detector's thresholds are the parameters
+    n_params = len(params)
+    assert params.get("FDI_WINDOW") == 12.0 and n_params >= 10
+    router.start()
     cmd = [
         sys.executable, str(MAVPROXY), f"--master=udpout:127.0.0.1:{_port(router, 1)}",
         "--target-system=1", "--target-component=191", "--source-system=255", "--nowait",
@@ -315,6 +332,13 @@ def test_mavproxy_sees_heartbeat_lists_and_sets_a_parameter(tmp_path: Path) -> N
         out = proc.communicate(timeout=10)[0]
         router.close()
     assert "Detected vehicle 1:191" in out  # our heartbeat
-    assert "Received 2 parameters" in out
+    assert f"Received {n_params} parameters" in out
     assert "FDI_ALPHA" in out and "FDI_WINDOW" in out
     assert router.stats.params_set >= 1
+    # The detector uses the new value from its next epoch: a 33-epoch grey window.
+    assert pipeline.isolator.p.window == 12
+    write_run(RoverScenario(rate_hz=1.0, duration_s=5.0, seed=1), tmp_path / "run")
+    assert pipeline.feed((tmp_path / "run" / "rover.nmea").read_bytes()) >= 4
+    assert pipeline.isolator.p.window == 33
+    assert pipeline.isolator._win.maxlen == 33
+    assert "FDI_WINDOW = 33.0" in (tmp_path / "params.toml").read_text()
