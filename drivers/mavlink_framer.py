@@ -266,7 +266,7 @@ class MavFramer:
             if hlen == HEADER_V2:
                 frame = MavFrame(raw, 2, raw[4], raw[5], raw[6], msgid, signed, extra is not None)
             else:
-                frame = MavFrame(raw, 1, raw[2], raw[3], raw[4], msgid, False, True)
+                frame = MavFrame(raw, 1, raw[2], raw[3], raw[4], msgid, False, extra is not None)
             st.frames += 1
             if extra is None:
                 st.unchecked += 1
