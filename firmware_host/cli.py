@@ -40,6 +40,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("firmware_host.run", "run on the vehicle with the configured ports"),
     "eval": ("firmware_host.eval", "score detectors against the truth, beside the baselines"),
     "bench": ("firmware_host.bench", "benchmarks: per-epoch time, throughput, loop jitter"),
+    "doctor": ("firmware_host.doctor", "start-up checks: config, ports, permissions, endpoints"),
+    "fuzz": ("firmware_host.fuzz", "seeded mutation fuzzer for the NMEA/Outland/MAVLink input"),
+    "soak": ("firmware_host.soak", "rover + ROV together, accelerated, faults and port drops"),
     "mavlink": (
         "firmware_host.router",
         "MAVLink passthrough between autopilot and ground stations",

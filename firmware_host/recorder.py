@@ -157,6 +157,8 @@ class FlightRecorder:
     def flush(self) -> None:
         """Write the buffer, fsync the file, rotate when it is full."""
         self._last_sync = self.clock()
+        if self._fd is None:
+            self._open()  # the file exists from the first flush on, data or not
         self._drain()
         if self._fd is not None:
             try:

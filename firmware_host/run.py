@@ -1,9 +1,9 @@
 """``fdi-bridge run --config FILE``: the bridge on the vehicle, with the configured ports.
 
 The config file says which vehicle: a file with a ``[rover]`` table runs the rover (GPS fault
-isolation, :class:`RoverBridge`); a file with a ``[link]`` table (the vehicle link of
-``config/rov.toml``) runs the ROV heading hold (:func:`firmware_host.rov_app.run_rov`). A file
-with both or neither is a configuration error.
+isolation, :class:`RoverBridge`); a file with the ROV's keys (``[link]``, ``[detector]``,
+``period_s`` ..., as ``config/rov.toml``) runs the ROV heading hold
+(:func:`firmware_host.rov_app.run_rov`). A file with both or neither is a configuration error.
 
 Reliability (``docs/reliability.md``):
 
@@ -66,7 +66,13 @@ def resolve_config_path(name: str | Path) -> Path:
 
 
 def vehicle_of(path: str | Path) -> Vehicle:
-    """``rover`` for a file with a ``[rover]`` table, ``rov`` for one with a ``[link]`` table."""
+    """``rover`` for a file with a ``[rover]`` table; ``rov`` for one with the ROV's own keys
+    (``[link]``, ``[detector]``, ``[ft]``, ``[pid]``, ``period_s``, ``setpoint_deg`` ...; ``[sim]``
+    and ``[recorder]`` are shared and do not count). Both or neither: a ConfigError."""
+    import dataclasses
+
+    from firmware_host.rov_config import RovConfig
+
     p = resolve_config_path(path)
     try:
         with open(p, "rb") as fh:
@@ -77,12 +83,15 @@ def vehicle_of(path: str | Path) -> Vehicle:
         raise ConfigError(str(p), "(file)", "a readable TOML file", str(err.strerror)) from err
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(str(p), "(syntax)", "valid TOML", str(err)) from err
+    rov_keys = {f.name for f in dataclasses.fields(RovConfig)} - {"sim", "recorder"}
     rover = isinstance(table.get("rover"), dict)
-    rov = isinstance(table.get("link"), dict)
-    if rover == rov:
-        found = "both" if rover else "neither"
-        raise ConfigError(str(p), "[rover] / [link]",
-                          "a [rover] table (rover) or a [link] table (ROV), not both", found)
+    rov = sorted(rov_keys & set(table))
+    if rover and rov:
+        raise ConfigError(str(p), ", ".join(["rover", *rov]),
+                          "the keys of one vehicle: [rover] or the ROV's", "both")
+    if not rover and not rov:
+        raise ConfigError(str(p), "[rover] / [link]", "a [rover] table (rover) or the ROV's "
+                          "keys ([link], [detector], period_s ...)", "neither")
     return "rover" if rover else "rov"
 
 
@@ -354,7 +363,7 @@ def run_rov_bridge(
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True,
-                        help="config file or preset name; [rover] -> rover, [link] -> ROV")
+                        help="config file or preset name; [rover] -> rover, [link] etc. -> ROV")
     parser.add_argument("--out", type=Path, default=None, help="write epochs.jsonl/summary.json")
     parser.add_argument("--nmea-out", default=None, help="rover: corrected NMEA to this URL")
     parser.add_argument("--mavlink", default=None, help="rover: GPS_INPUT to this MAVLink URL")

@@ -1,0 +1,93 @@
+"""``fdi-bridge doctor``: each check finds what it should, and the exit status says so."""
+
+from __future__ import annotations
+
+import grp
+import os
+import socket
+from pathlib import Path
+
+import pytest
+
+from drivers.ptypair import PtyPair
+from firmware_host.cli import main
+from firmware_host.doctor import Report, check_device, check_mavlink_url, diagnose
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _rover_toml(tmp_path: Path, url: str, extra: str = "") -> Path:
+    p = tmp_path / "rover.toml"
+    p.write_text(f'[rover.port]\nurl = "{url}"\n{extra}')
+    return p
+
+
+def test_all_good_on_a_pty(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with PtyPair(link=tmp_path / "gps") as pty:
+        cfg = _rover_toml(tmp_path, pty.url, '[rover.output]\nmavlink_url = "udpout:127.0.0.1:14550"\n'
+                          f'[recorder]\ndir = "{tmp_path / "rec"}"\n')
+        assert main(["doctor", "--config", str(cfg)]) == 0
+    out = capsys.readouterr().out
+    assert "GPS input" in out and "readable and writable" in out
+    assert "no problems found" in out and "PROBLEM" not in out
+
+
+def test_missing_device_and_bad_endpoint_fail(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = _rover_toml(tmp_path, str(tmp_path / "ttyUSB7"),
+                      '[rover.output]\nmavlink_url = "udpout:127.0.0.1:notaport"\n')
+    assert main(["doctor", "--config", str(cfg)]) == 1
+    out = capsys.readouterr().out
+    problems = [line for line in out.splitlines() if line.startswith("PROBLEM")]
+    assert len(problems) == 2
+    assert "ttyUSB7 does not exist" in problems[0]
+    assert "notaport" in problems[1]
+
+
+def test_permission_problem_names_the_group() -> None:
+    rep = Report()
+    with PtyPair() as pty:
+        gid = os.stat(pty.slave_path).st_gid
+        check_device(rep, "GPS input", pty.slave_path, access=lambda p, m: False,
+                     groups=lambda: [])
+    group = grp.getgrgid(gid).gr_name
+    assert len(rep.problems) == 1
+    assert f"join group {group!r}" in rep.problems[0]
+    assert f"usermod -aG {group}" in rep.problems[0]
+
+
+def test_udp_port_in_use_is_found_on_localhost_only() -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        rep = Report()
+        check_mavlink_url(rep, "MAVLink", f"udpin:127.0.0.1:{port}")
+        assert rep.problems and "already in use" in rep.problems[0]
+    rep = Report()
+    check_mavlink_url(rep, "MAVLink", f"udpin:0.0.0.0:{port}")  # free again: ok
+    assert not rep.problems and rep.ok
+
+
+def test_bad_config_and_unwritable_recorder(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[rover.detector]\nalpha = 1.5\n")
+    rep = diagnose(bad, list_ports=lambda: [])
+    assert len(rep.problems) == 1 and "rover.detector.alpha" in rep.problems[0]
+    neither = tmp_path / "neither.toml"
+    neither.write_text("name = 'x'\n")
+    rep = diagnose(neither, list_ports=lambda: [])
+    assert "neither" in rep.problems[0]
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with PtyPair() as pty:
+        cfg = _rover_toml(tmp_path, pty.slave_path, f'[recorder]\ndir = "{blocker / "rec"}"\n')
+        rep = diagnose(cfg, list_ports=lambda: ["/dev/ttyFAKE0"])
+    assert rep.ports == ["/dev/ttyFAKE0"]
+    assert len(rep.problems) == 1 and "recorder" in rep.problems[0]
+
+
+def test_rov_config_checks_the_link(tmp_path: Path) -> None:
+    rep = diagnose(ROOT / "config" / "rov.toml", list_ports=lambda: [],
+                   record_dir=str(tmp_path))
+    assert rep.ok[0].endswith("(rov)")
+    assert any("ROV link" in p for p in rep.problems) or any("ROV link" in o for o in rep.ok)

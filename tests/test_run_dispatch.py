@@ -1,0 +1,93 @@
+"""``fdi-bridge run --config FILE`` picks the vehicle from the file: [rover] or [link]."""
+
+from __future__ import annotations
+
+import json
+import threading
+from pathlib import Path
+
+import pytest
+
+from drivers.ptypair import PtyPair
+from fdi.errors import ConfigError
+from firmware_host.cli import main
+from firmware_host.rover_sim import RoverScenario, generate
+from firmware_host.run import vehicle_of
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_vehicle_rule(tmp_path: Path) -> None:
+    assert vehicle_of("rover") == "rover"
+    assert vehicle_of("rover-paper") == "rover"
+    assert vehicle_of("rov") == "rov"
+    assert vehicle_of(ROOT / "config" / "rov-paper.toml") == "rov"
+    both = tmp_path / "both.toml"
+    both.write_text("[rover]\n[link]\n")
+    with pytest.raises(ConfigError, match="both"):
+        vehicle_of(both)
+    neither = tmp_path / "neither.toml"
+    neither.write_text("[recorder]\ndir = '/tmp/x'\n")
+    with pytest.raises(ConfigError, match="neither"):
+        vehicle_of(neither)
+    with pytest.raises(ConfigError, match="no such file"):
+        vehicle_of(tmp_path / "missing.toml")
+
+
+def test_run_rover_from_the_cli_with_recorder(tmp_path: Path) -> None:
+    sc = RoverScenario(rate_hz=10.0, duration_s=5.0, seed=2)
+    epochs = [d for _, d, _ in generate(sc)]
+    with PtyPair(link=tmp_path / "gps") as pty:
+        cfg = tmp_path / "r.toml"
+        cfg.write_text(f'[rover.port]\nurl = "{pty.url}"\ntimeout_s = 0.02\n')
+        done = threading.Event()
+        rc: list[int] = []
+
+        def go() -> None:
+            rc.append(main(["run", "--config", str(cfg), "--out", str(tmp_path / "out"),
+                            "--record", str(tmp_path / "rec"), "--duration", "1.5"]))
+            done.set()
+
+        th = threading.Thread(target=go)
+        th.start()
+        for data in epochs:  # the receiver, at 50 Hz (pyserial flushes input on open)
+            if done.wait(0.02):
+                break
+            pty.write(data)
+        th.join(20.0)
+    assert rc == [0]
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["vehicle"] == "rover"
+    assert summary["port"]["losses"] == 0 and summary["epochs"] >= 10
+    assert summary["recorder"]["bytes_by_channel"]["gps rx"] == summary["input"]["bytes_in"]
+    assert list((tmp_path / "rec").glob("fdi-*.cap"))
+
+
+def test_run_rov_from_the_cli(tmp_path: Path) -> None:
+    from drivers.framecodec import load_protocol
+    from firmware_host.rov_config import SimConfig
+    from firmware_host.rov_sim import RovPlant, RovSimServer, serve_pty
+
+    proto = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
+    with PtyPair(link=tmp_path / "rov") as pty:
+        stop = threading.Event()
+        srv = RovSimServer(RovPlant(SimConfig()), proto, "rs232", node=1, period_s=0.05)
+        th = threading.Thread(target=serve_pty, args=(pty, srv, stop), daemon=True)
+        th.start()
+        cfg = tmp_path / "rov.toml"
+        cfg.write_text(
+            "period_s = 0.05\n[link]\nwiring = \"rs232\"\n"
+            f"protocol = \"{ROOT / 'config' / 'protocols' / 'outland1000.toml'}\"\n"
+            f"[link.port]\nurl = \"{pty.url}\"\nbaudrate = 115200\n")
+        try:
+            rc = main(["run", "--config", str(cfg), "--out", str(tmp_path / "out"),
+                       "--duration", "1.0"])
+        finally:
+            stop.set()
+            th.join(2.0)
+    assert rc == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["vehicle"] == "rov"
+    assert summary["counts"]["telemetry"] >= 5
+    lines = (tmp_path / "out" / "epochs.jsonl").read_text().splitlines()
+    assert len(lines) >= 15
