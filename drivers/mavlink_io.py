@@ -303,6 +303,15 @@ class _Encoders:
         msg = self._mav.manual_control_encode(target_system, x, y, z, r, buttons)
         return self._emit(msg)
 
+    def send_attitude(
+        self, time_boot_ms: int, roll_rad: float, pitch_rad: float, yaw_rad: float
+    ) -> bytes:
+        """ATTITUDE (angles in rad; rates sent as zero), as an autopilot reports its heading."""
+        msg = self._mav.attitude_encode(
+            int(time_boot_ms) & 0xFFFFFFFF, roll_rad, pitch_rad, yaw_rad, 0.0, 0.0, 0.0
+        )
+        return self._emit(msg)
+
     def send_param_set(
         self, target_system: int, target_component: int, name: str, value: float
     ) -> bytes:

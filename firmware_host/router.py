@@ -335,6 +335,7 @@ class Router:
         self._outbox: deque[tuple[bytes, Endpoint | None]] = deque(maxlen=cfg.queue_packets)
         self._texts: deque[tuple[int, str]] = deque(maxlen=64)
         self._values: dict[str, float] = {}
+        self._listeners: dict[int, list[Callable[[MavFrame], None]]] = {}
         self._t0 = clock()
         self._next_hb = self._t0
         self._next_stats = self._t0
@@ -391,6 +392,12 @@ class Router:
                 self.stats.statustext_dropped += 1
             self._texts.append((severity, text))
         self._wake()
+
+    def listen(self, message: str, callback: Callable[[MavFrame], None]) -> None:
+        """Call ``callback(frame)`` (in the router's thread) for each ``message`` (a name such as
+        ``"ATTITUDE"``) that arrives from the autopilot. Register before :meth:`start`; the
+        callback must be quick (it runs in the forwarding path) and must not raise."""
+        self._listeners.setdefault(mio.message_id(message), []).append(callback)
 
     def set_named_value(self, name: str, value: float) -> None:
         """Latest value of a detector statistic, sent as NAMED_VALUE_FLOAT at ``stats_hz``."""
@@ -517,6 +524,9 @@ class Router:
                 sent = True
         if sent:
             self.stats.forwarded += 1
+        if self._listeners and src is self.autopilot:
+            for cb in self._listeners.get(frame.msgid, ()):
+                cb(frame)
         mine = target is not None and self._addressed_to_me(target)
         if mine and frame.msgid in _FOR_BRIDGE_IDS:
             self.stats.for_bridge += 1

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import stat
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -311,11 +313,17 @@ def test_mavproxy_sees_heartbeat_lists_and_sets_a_parameter(tmp_path: Path) -> N
     proc = subprocess.Popen(
         cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )
-    assert proc.stdin is not None
+    assert proc.stdin is not None and proc.stdout is not None
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")),  # type: ignore[union-attr]
+                              daemon=True)  # fmt: skip
+    reader.start()
     try:
         # MAVProxy fetches the parameter list of the component it targets once it has seen
-        # its heartbeat; then "param set" is retried until the bridge's store shows the value.
-        _wait(lambda: router.stats.for_bridge >= 1, "MAVProxy's PARAM_REQUEST_LIST", 20.0)
+        # its heartbeat; once it says it has them all, "param set" is retried until the
+        # bridge's store shows the value.
+        _wait(lambda: any(f"Received {n_params} parameters" in x for x in list(lines)),
+              f"MAVProxy to receive the {n_params} parameters", 20.0)  # fmt: skip
         next_try = 0.0
 
         def set_param() -> bool:
@@ -328,9 +336,17 @@ def test_mavproxy_sees_heartbeat_lists_and_sets_a_parameter(tmp_path: Path) -> N
 
         _wait(set_param, "MAVProxy to set FDI_WINDOW", 20.0)
     finally:
+        with contextlib.suppress(OSError):
+            proc.stdin.close()  # MAVProxy's console thread ends with its input
         proc.terminate()
-        out = proc.communicate(timeout=10)[0]
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+        reader.join(timeout=5)
         router.close()
+    out = "".join(lines)
     assert "Detected vehicle 1:191" in out  # our heartbeat
     assert f"Received {n_params} parameters" in out
     assert "FDI_ALPHA" in out and "FDI_WINDOW" in out
@@ -342,3 +358,145 @@ def test_mavproxy_sees_heartbeat_lists_and_sets_a_parameter(tmp_path: Path) -> N
     assert pipeline.isolator.p.window == 33
     assert pipeline.isolator._win.maxlen == 33
     assert "FDI_WINDOW = 33.0" in (tmp_path / "params.toml").read_text()
+
+
+@pytest.mark.skipif(not SMALL_TLOG.exists(), reason=f"corpus capture {SMALL_TLOG} is absent")
+def test_ground_station_side_of_the_dive_reaches_the_autopilot_and_tlogs_rotate(
+    tmp_path: Path,
+) -> None:
+    """The GCS's own 1 767 packets of the dive, played from the GCS side, reach the autopilot.
+
+    The autopilot stand-in has shown the components the GCS addresses (1:1 the autopilot, 1:100
+    the camera manager, 1:194 and 1:220 as in the dive), so every packet has a route. The tlog
+    is rotated at 16 KiB and its files, read in order, hold exactly what went through.
+    """
+    from drivers.mavlink_framer import MavFramer
+
+    records = [r for r in mio.iter_tlog(SMALL_TLOG) if r.msg is not None]
+    from_gcs = [r.raw for r in records if (r.msg.get_srcSystem(), r.msg.get_srcComponent())
+                == GCS_ID]  # fmt: skip
+    assert len(from_gcs) == 1_767
+    params = ParamStore()
+    cfg = MavlinkConfig(
+        autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+        gcs=(EndpointConfig("udpin:127.0.0.1:0"),),
+        tlog_dir=str(tmp_path / "tlog"),
+        tlog_max_bytes=16 * 1024,
+        stats_hz=0.0,
+    )
+    router = Router(cfg, params=params)
+    router.start()
+    ap = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    ap.bind(("127.0.0.1", 0))
+    ap.settimeout(0.0)
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    hello = [mio.MavPacker(1, c).send_heartbeat() for c in (1, 100, 194, 220)]
+    got: list[bytes] = []
+    own: list[bytes] = []
+    framer = MavFramer()
+
+    def pump(n: int) -> Callable[[], bool]:
+        def done() -> bool:
+            while True:
+                try:
+                    data = ap.recv(65535)
+                except BlockingIOError:
+                    return len(got) >= n
+                for f in framer.feed(data, boundary=True):
+                    (own if (f.sysid, f.compid) == (1, 191) else got).append(f.raw)
+
+        return done
+
+    try:
+        for raw in hello:
+            ap.sendto(raw, ("127.0.0.1", _port(router, 0)))
+        _wait(lambda: router.endpoints[0].seen >= {(1, 1), (1, 100), (1, 194), (1, 220)},
+              "the autopilot's components")  # fmt: skip
+        window = 100
+        for start in range(0, len(from_gcs), window):
+            for raw in from_gcs[start : start + window]:
+                gcs.sendto(raw, ("127.0.0.1", _port(router, 1)))
+            n = min(start + window, len(from_gcs))
+            _wait(pump(n), f"the autopilot to receive {n} packets")
+        s = router.summary()
+    finally:
+        router.close()
+        ap.close()
+        gcs.close()
+    assert got == from_gcs  # byte for byte, in order, each once
+    assert s["gcs0"]["rx_packets"] == 1_767 and s["gcs0"]["unroutable"] == 0
+    assert s["for_bridge"] == 1  # the PARAM_REQUEST_LIST to (1, 0): nothing to list, no answer
+    assert s["autopilot"]["dropped_queue_full"] == 0 and s["bad_crc"] == 0
+    # Rotation by size: several files, none over the limit, together everything in order.
+    assert router.tlog is not None
+    files = router.tlog.files  # in the order written
+    assert sorted(files) == sorted((tmp_path / "tlog").glob("*.tlog"))
+    assert len(files) >= 3  # ~60 kB of packets and stamps
+    assert all(f.stat().st_size <= 16 * 1024 for f in files)
+    recorded = [r.raw for f in files for r in mio.iter_tlog(f)]
+    passed = [p for p in recorded if p not in hello]
+    through = [p for p in passed if mio.decode_packet(p).get_srcSystem() == 255]
+    assert through == from_gcs
+    stamps = [r.t_us for f in files for r in mio.iter_tlog(f)]
+    assert stamps == sorted(stamps)
+
+
+def test_tcp_links_ground_station_server_and_autopilot_client(tmp_path: Path) -> None:
+    """A GCS on a TCP server link (``tcpin:``), the autopilot on a TCP client link (``tcp:``,
+    as SITL listens on 5760): byte streams framed across segment boundaries, both ways."""
+    from drivers.mavlink_framer import MavFramer
+
+    listener = socket.create_server(("127.0.0.1", 0))
+    ap_port = listener.getsockname()[1]
+    params = ParamStore()
+    params.register(ParamSpec("FDI_ALPHA", 0.05, 1e-6, 0.5))
+    cfg = MavlinkConfig(
+        autopilot=EndpointConfig(f"tcp:127.0.0.1:{ap_port}"),
+        gcs=(EndpointConfig("tcpin:127.0.0.1:0"),),
+        stats_hz=0.0,
+    )
+    router = Router(cfg, params=params)
+    ap, _ = listener.accept()
+    listener.close()
+    router.start()
+    gcs = mio.MavEndpoint(f"tcp:127.0.0.1:{_port(router, 1)}", source_system=255,
+                          source_component=190)  # fmt: skip
+    try:
+        _wait(lambda: router.endpoints[1].link.has_peer(), "the TCP ground station")
+        packer = mio.MavPacker(1, 1)
+        sent = [packer.send_heartbeat() if i % 10 == 0 else packer.send_statustext(6, f"ap {i}")
+                for i in range(500)]  # fmt: skip
+        stream = b"".join(sent)
+        for i in range(0, len(stream), 997):  # segments that cut packets anywhere
+            ap.sendall(stream[i : i + 997])
+        got: list[bytes] = []
+
+        def from_ap() -> bool:
+            msg = gcs.recv(timeout_s=0.05)
+            if msg is not None and msg.get_srcComponent() == 1:
+                got.append(bytes(msg.get_msgbuf()))
+            return len(got) >= len(sent)
+
+        _wait(from_ap, "500 packets over TCP")
+        assert got == sent
+        # GCS -> bridge (parameter protocol) and GCS -> autopilot (a command) over TCP.
+        gcs.send_param_request_read(1, 191, "FDI_ALPHA")
+        assert _param_value(gcs, "FDI_ALPHA") == pytest.approx(0.05)
+        cmd = mio.MavPacker(255, 190).send_command_ack(400, 0, 1, 1)
+        gcs.send_raw(cmd)
+        framer = MavFramer()
+        seen: list[bytes] = []
+        ap.settimeout(0.05)
+
+        def at_ap() -> bool:
+            with contextlib.suppress(TimeoutError):
+                seen.extend(f.raw for f in framer.feed(ap.recv(65535)))
+            return any(f.startswith(cmd[:3]) and f[5:] == cmd[5:] for f in seen)
+
+        _wait(at_ap, "the GCS's packet at the autopilot")
+        assert router.summary()["gcs0"]["link_errors"] == 0
+    finally:
+        router.close()
+        gcs.close()
+        ap.close()
