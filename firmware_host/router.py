@@ -106,6 +106,19 @@ def load_mavlink_config(path: str | Path) -> MavlinkConfig:
     return load_dataclass(MavlinkConfig, table, str(path), "mavlink")
 
 
+def load_vehicle_config(path: str | Path) -> Any:
+    """The rest of the file at ``path`` as a :class:`~firmware_host.config.BridgeConfig` when it
+    has a ``[rover]`` table (the one-process mode), else None. ``[mavlink]`` is left out: it is
+    :func:`load_mavlink_config`'s."""
+    from firmware_host.config import BridgeConfig
+
+    table = read_toml(path)
+    if "rover" not in table:
+        return None
+    rest = {k: v for k, v in table.items() if k != "mavlink"}
+    return load_dataclass(BridgeConfig, rest, str(path))
+
+
 def load_signing_key(path: str | Path) -> bytes:
     """A 32-byte MAVLink signing key from a file holding 64 hexadecimal characters.
 
@@ -760,15 +773,12 @@ def _start_rover(path: str, router: Router) -> Callable[[], dict[str, Any]] | No
 
     Returns a function that stops it and gives its summary; None without a ``[rover]`` table.
     """
-    from firmware_host.config import BridgeConfig
     from firmware_host.mavlink_rover import attach_rover, run_rover_reader
     from firmware_host.rover_pipeline import RoverPipeline
 
-    table = read_toml(path)
-    if "rover" not in table:
+    bridge = load_vehicle_config(path)
+    if bridge is None:
         return None
-    rest = {k: v for k, v in table.items() if k != "mavlink"}
-    bridge = load_dataclass(BridgeConfig, rest, str(path))
     pipeline = RoverPipeline(bridge.rover)
     attach_rover(pipeline, router)
     stop = threading.Event()
