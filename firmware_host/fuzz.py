@@ -23,6 +23,7 @@ A failure is an input that breaks one of these; the first few are kept (hex) in 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import logging
 import time
@@ -56,7 +57,7 @@ def _require(cond: bool, what: str) -> None:
 
 def _chunks(data: bytes, cuts: list[int]) -> list[bytes]:
     points = sorted({c % (len(data) + 1) for c in cuts} | {0, len(data)})
-    return [data[a:b] for a, b in zip(points, points[1:], strict=False)]
+    return [data[a:b] for a, b in itertools.pairwise(points)]
 
 
 # --------------------------------------------------------------------------- corpora
@@ -155,7 +156,7 @@ def mutate(rng: np.random.Generator, corpus: list[bytes], sync: bytes, len_offse
             if len_offsets:
                 off = len_offsets[int(rng.integers(len(len_offsets)))]
                 base = data.find(sync[:1])
-                if 0 <= base and base + off < len(data):
+                if base >= 0 and base + off < len(data):
                     data[base + off] = int(rng.choice([255, 254, 128, 65, 33]))
         elif op == 6:  # random bytes inserted
             data[i:i] = bytes(rng.integers(0, 256, int(rng.integers(1, 32)), dtype=np.uint8))
@@ -219,7 +220,7 @@ def check_nmea(data: bytes, cuts: list[int], max_line: int = 120) -> Counter[str
         except Ignored as ign:
             reasons["ignored_" + ign.reason] += 1
             continue
-        for v in msg.__slots__:  # type: ignore[attr-defined]
+        for v in msg.__slots__:
             x = getattr(msg, v)
             if isinstance(x, float):
                 _require(math.isfinite(x), f"{v} not finite")

@@ -377,7 +377,7 @@ def _recorder(cfg: RecorderConfig, override: Path | None, note: str) -> FlightRe
     directory = str(override) if override is not None else cfg.dir
     if not directory:
         return None
-    return FlightRecorder(directory, cfg, note=note)
+    return FlightRecorder(directory, cfg, note=note, background_sync=True)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -278,7 +278,7 @@ def run_soak(
         record_dir = Path(tmp.name)
     rec_cfg = RecorderConfig(dir=str(record_dir), file_max_mb=2.0, dir_max_mb=8.0)
     recorder = FlightRecorder(record_dir, rec_cfg, note="fdi-bridge soak", clock=clock,
-                              wall_us=wall_us)
+                              wall_us=wall_us, background_sync=True)
 
     # The rover bridge (the same class `fdi-bridge run` uses).
     from drivers.mavlink_io import MavPacker

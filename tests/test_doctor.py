@@ -24,7 +24,8 @@ def _rover_toml(tmp_path: Path, url: str, extra: str = "") -> Path:
 
 def test_all_good_on_a_pty(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with PtyPair(link=tmp_path / "gps") as pty:
-        cfg = _rover_toml(tmp_path, pty.url, '[rover.output]\nmavlink_url = "udpout:127.0.0.1:14550"\n'
+        cfg = _rover_toml(tmp_path, pty.url,
+                          '[rover.output]\nmavlink_url = "udpout:127.0.0.1:14550"\n'
                           f'[recorder]\ndir = "{tmp_path / "rec"}"\n')
         assert main(["doctor", "--config", str(cfg)]) == 0
     out = capsys.readouterr().out

@@ -8,6 +8,7 @@ path, and poll (with a deadline) until data flows again; nothing sleeps to wait 
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import threading
@@ -107,7 +108,7 @@ def test_backoff_is_capped_and_loss_reported_once(caplog: pytest.LogCaptureFixtu
     assert len(lost) == 1 and "lost" in lost[0].getMessage()
     # Attempts after the loss: +0.1, then gaps 0.1 0.2 0.4 0.8 1.0 1.0 ... (capped at 1.0 s).
     opens = [t - t_loss for t in dev.opens[1:]]
-    gaps = [round(b - a, 2) for a, b in zip(opens, opens[1:], strict=False)]
+    gaps = [round(b - a, 2) for a, b in itertools.pairwise(opens)]
     assert opens[0] == pytest.approx(0.1, abs=0.011)
     assert gaps[:4] == pytest.approx([0.1, 0.2, 0.4, 0.8], abs=0.011)
     assert all(g == pytest.approx(1.0, abs=0.011) for g in gaps[4:]) and len(gaps) >= 8

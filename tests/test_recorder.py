@@ -109,6 +109,22 @@ def test_rotation_and_directory_cap(tmp_path: Path) -> None:
     assert len(data) > 0 and set(data) == {0}
 
 
+def test_background_sync_rotates_and_closes_cleanly(tmp_path: Path) -> None:
+    clock = FakeClock()
+    cfg = RecorderConfig(file_max_mb=0.02, dir_max_mb=10.0, flush_interval_s=0.1)
+    rec = FlightRecorder(tmp_path, cfg, clock=clock, background_sync=True)
+    ch = rec.add_channel(Channel("gps rx", direction="rx"))
+    for k in range(500):
+        clock.now = k * 0.05
+        rec.write(ch, bytes([k % 256]) * 300)
+    rec.close()
+    assert rec._syncer is not None and not rec._syncer.is_alive()
+    files = rec.recordings()
+    assert len(files) == rec.files_opened >= 5 and rec.syncs >= len(files)
+    data = b"".join(r.data for _, r in read_session(files))
+    assert data == b"".join(bytes([k % 256]) * 300 for k in range(500))
+
+
 def test_truncated_last_record_is_skipped(tmp_path: Path) -> None:
     clock = FakeClock()
     rec = _recorder(tmp_path, clock)
