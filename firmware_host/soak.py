@@ -242,6 +242,7 @@ def run_soak(
     flip_p: float = 0.01,
     garbage_p: float = 0.005,
     progress: Callable[[float], None] | None = None,
+    background_sync: bool = True,
 ) -> dict[str, Any]:
     """Run the soak for ``minutes`` simulated minutes; return the figures (see module doc)."""
     duration = minutes * 60.0
@@ -278,7 +279,7 @@ def run_soak(
         record_dir = Path(tmp.name)
     rec_cfg = RecorderConfig(dir=str(record_dir), file_max_mb=2.0, dir_max_mb=8.0)
     recorder = FlightRecorder(record_dir, rec_cfg, note="fdi-bridge soak", clock=clock,
-                              wall_us=wall_us, background_sync=True)
+                              wall_us=wall_us, background_sync=background_sync)
 
     # The rover bridge (the same class `fdi-bridge run` uses).
     from drivers.mavlink_io import MavPacker
@@ -316,6 +317,8 @@ def run_soak(
     try:
         while k < steps:
             clock.now = k * rover_period  # absolute deadlines: next = k * period
+            gps.pump()  # the devices' own work (simulation) is not timed as the bridge's
+            rov.pump()
             t0 = perf()
             rover.step()
             dt = perf() - t0
