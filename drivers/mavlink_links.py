@@ -39,6 +39,10 @@ Chunk = tuple[bytes, Hashable, bool]
 DEFAULT_SERVER_HOST = "127.0.0.1"
 MAX_UDP_PEERS = 16
 UDP_PEER_TIMEOUT_S = 30.0
+# Receive buffer asked for on UDP sockets (the kernel caps it at net.core.rmem_max): ~1 s of a
+# 1 000 packet/s link, so a burst that arrives while the loop is descheduled is not dropped by
+# the kernel before the router's own (counted) queues see it.
+UDP_RCVBUF_BYTES = 1 << 20
 _WOULD_BLOCK = (errno.EAGAIN, errno.EWOULDBLOCK, errno.ENOBUFS)
 
 
@@ -104,6 +108,7 @@ class UdpServerLink(Link):
         try:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF_BYTES)
             self.sock.bind((host, port))
             self.sock.setblocking(False)
         except OSError as err:
@@ -176,6 +181,7 @@ class UdpClientLink(Link):
         self.url = url
         try:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF_BYTES)
             self.sock.setblocking(False)
             self.target = (socket.gethostbyname(host), port)
             self.sock.bind(("0.0.0.0" if host not in ("127.0.0.1", "localhost") else host, 0))
