@@ -114,6 +114,8 @@ def test_rov_dropout_holds_then_neutral_then_resumes(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     caplog.set_level(logging.WARNING)
+    for name in ("firmware_host.rov_control", "fdi_bridge.failsafe"):  # whatever set them
+        caplog.set_level(logging.WARNING, logger=name)
     clock = FakeClock()
     proto = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
     plant = RovPlant(SimConfig(), [parse_fault("dropout@20-24")])
