@@ -318,6 +318,7 @@ class Router:
         self._key = signing_key
         if signing_key is not None:
             self._own.setup_signing(signing_key, link_id=0)
+            self._pilot.setup_signing(signing_key, link_id=1)  # an ArduSub that checks signatures
         self._sig_last: dict[tuple[int, int, int], int] = {}
         self.tlog = tlog
         if tlog is None and cfg.tlog_dir:
