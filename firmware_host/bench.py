@@ -23,6 +23,7 @@ With the defaults it runs in about two and a half minutes (the two 60 s loops do
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import json
 import os
@@ -76,7 +77,7 @@ def bench_rover(duration_s: float = 600.0, rate_hz: float = 10.0) -> dict[str, A
             t0 = time.perf_counter()
             replay_direct(inp, pipe)
             best = max(best, pipe.epochs / (time.perf_counter() - t0))
-            proc = pipe.proc_s
+            proc = list(pipe.proc_s)
         per[strat] = {"epoch_ms": _pct(proc), "throughput_eps_no_pty": best}
     out["strategies"] = per
     cfg = _cfg()
@@ -222,9 +223,17 @@ def bench_loop(rate_hz: float, duration_s: float) -> dict[str, Any]:
                 if d > 0:
                     time.sleep(d)
 
-        def drain() -> None:  # the autosteer unit reading the corrected NMEA
+        # The autosteer unit: opens the output pty's slave by its path and reads it.
+        out_fd = os.open(out_pty.slave_path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+
+        def drain() -> None:
+            import select
+
             while not stop.is_set():
-                out_pty.read(timeout_s=0.05)
+                ready, _, _ = select.select([out_fd], [], [], 0.05)
+                if ready:
+                    with contextlib.suppress(BlockingIOError):
+                        os.read(out_fd, 65536)
 
         threads = [threading.Thread(target=f, daemon=True) for f in (feed, drain)]
         for t in threads:
@@ -245,6 +254,7 @@ def bench_loop(rate_hz: float, duration_s: float) -> dict[str, Any]:
                 t.join(timeout=2.0)
             port.close()
             sink.close()
+            os.close(out_fd)
     s = stats.summary()
     return {"rate_hz": rate_hz, "duration_s": duration_s, "steps": s["steps"],
             "overruns": s["overruns"], "epochs": pipe.epochs,
