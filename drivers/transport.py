@@ -57,7 +57,9 @@ class SerialSettings:
     rs485: RS485Config | None = None
 
 
-def open_port(settings: SerialSettings, *, do_not_open: bool = False) -> serial.Serial:
+def open_port(
+    settings: SerialSettings, *, do_not_open: bool = False, write_timeout_s: float | None = None
+) -> serial.Serial:
     """Open ``settings.url`` with ``serial.serial_for_url``; raise :class:`PortError` on failure."""
     try:
         port = serial.serial_for_url(
@@ -67,6 +69,7 @@ def open_port(settings: SerialSettings, *, do_not_open: bool = False) -> serial.
             parity=settings.parity,
             stopbits=settings.stopbits,
             timeout=settings.timeout_s,
+            write_timeout=write_timeout_s,
             do_not_open=True,
         )
         if settings.rs485 is not None:

@@ -13,8 +13,10 @@ than the receiver's period.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Any, SupportsIndex, overload
 
 import numpy as np
 
@@ -39,12 +41,44 @@ class FakeClock:
         self.now += seconds
 
 
+KEEP_SAMPLES = 65536
+
+
+class RecentSamples(deque[float]):
+    """The last ``KEEP_SAMPLES`` timing samples (bounded memory on a run of days), with the
+    count and the maximum over the whole run. Percentiles are over the samples kept."""
+
+    def __init__(self, values: Iterable[float] = (), maxlen: int = KEEP_SAMPLES) -> None:
+        super().__init__((), maxlen)
+        self.total = 0
+        self.peak = 0.0
+        for v in values:
+            self.append(v)
+
+    def append(self, value: float) -> None:
+        super().append(value)
+        self.total += 1
+        if value > self.peak:
+            self.peak = value
+
+    @overload
+    def __getitem__(self, index: SupportsIndex) -> float: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[float]: ...
+
+    def __getitem__(self, index: Any) -> Any:
+        if isinstance(index, slice):
+            return list(self)[index]
+        return super().__getitem__(index)
+
+
 @dataclass
 class TimingStats:
     """Processing times (s) and start jitter (s) of a loop, with overrun count."""
 
-    proc_s: list[float] = field(default_factory=list)
-    jitter_s: list[float] = field(default_factory=list)
+    proc_s: RecentSamples = field(default_factory=RecentSamples)
+    jitter_s: RecentSamples = field(default_factory=RecentSamples)
     overruns: int = 0
     steps: int = 0
 
@@ -56,7 +90,7 @@ class TimingStats:
                 arr = np.asarray(values) * 1e3
                 out[f"{name}_p50_ms"] = float(np.percentile(arr, 50))
                 out[f"{name}_p99_ms"] = float(np.percentile(arr, 99))
-                out[f"{name}_max_ms"] = float(arr.max())
+                out[f"{name}_max_ms"] = values.peak * 1e3
         return out
 
 

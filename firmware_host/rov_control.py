@@ -11,11 +11,13 @@ import logging
 from typing import Any
 
 from drivers.outland import NEUTRAL, ThrusterCommand
+from drivers.ratelog import RateLimitedLog
 from fdi.heading_ft import FaultTolerantHeading, HeadingDecision
 from fdi.pid import HeadingPid
 from firmware_host.rov_config import RovConfig
 
 log = logging.getLogger(__name__)
+_ratelog = RateLimitedLog(log)
 
 
 class RovController:
@@ -45,9 +47,10 @@ class RovController:
                 action = "neutral"
                 cmd = NEUTRAL
                 self.pid.reset()
-            if action != self.action:
-                log.warning("compass telemetry lost for %.1f s: %s", self._since_telemetry,
-                            "holding last command" if action == "hold" else "neutral thrust")
+            if action != self.action:  # rate-limited: line noise can make this flap
+                what = "holding last command" if action == "hold" else "neutral thrust"
+                _ratelog.warning("compass telemetry lost",
+                                 f"for {self._since_telemetry:.1f} s: {what}")
         else:
             self._since_telemetry = 0.0
             assert dec.heading_used is not None

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import calendar
 import math
+import os
 from typing import Any
 
 from drivers.nmea import format_date, format_lat, format_lon, format_time, with_checksum
@@ -67,15 +68,23 @@ def gps_week_ms(unix_s: float) -> tuple[int, int]:
 
 
 class _PortWriter:
-    """A pyserial URL, or ``pty:PATH`` for a new pty whose slave is linked at PATH."""
+    """A pyserial URL, or ``pty:PATH`` for a new pty whose slave is linked at PATH.
+
+    Writing never blocks the detectors: when the consumer does not keep up (or nobody has the
+    pty open), what does not fit is dropped and counted in ``dropped_bytes``.
+    """
 
     def __init__(self, url: str, baudrate: int) -> None:
         self.pty: PtyPair | None = None
         self.port: Any = None
+        self.dropped_bytes = 0
         if url.startswith("pty:"):
             self.pty = PtyPair(link=url[4:] or None, baudrate=baudrate)
+            os.set_blocking(self.pty.master_fd, False)
         else:
-            self.port = open_port(SerialSettings(url=url, baudrate=baudrate, timeout_s=0.0))
+            self.port = open_port(
+                SerialSettings(url=url, baudrate=baudrate, timeout_s=0.0), write_timeout_s=0.0
+            )
 
     @property
     def url(self) -> str:
@@ -83,7 +92,11 @@ class _PortWriter:
 
     def write(self, data: bytes) -> None:
         if self.pty is not None:
-            self.pty.write(data)
+            try:
+                n = os.write(self.pty.master_fd, data)
+            except BlockingIOError:
+                n = 0
+            self.dropped_bytes += len(data) - n
             self.pty.read(0.0)  # drain anything the consumer wrote back (probes)
         else:
             write_all(self.port, data)
@@ -139,6 +152,9 @@ class NmeaSink:
         data = encode_nmea(out)
         self.writer.write(data)
         self.bytes_out += len(data)
+
+    def stats(self) -> dict[str, int]:
+        return {"bytes_out": self.bytes_out, "dropped_bytes": self.writer.dropped_bytes}
 
     def close(self) -> None:
         self.writer.close()
@@ -219,6 +235,9 @@ class MavlinkGpsSink:
         )
         self.endpoint.send_gps_input(fix)
         self.sent += 1
+
+    def stats(self) -> dict[str, int]:
+        return {"gps_input_sent": self.sent, "no_date": self.no_date}
 
     def close(self) -> None:
         self.endpoint.close()

@@ -33,6 +33,7 @@ from fdi.gate_health import GateHealth
 from fdi.geodesy import LocalFrame
 from fdi.rover import Decision, FixInput, RoverIsolator
 from firmware_host.config import RoverConfig
+from firmware_host.loop import RecentSamples
 
 log = logging.getLogger("fdi_bridge.rover")
 
@@ -102,7 +103,7 @@ class RoverPipeline:
         self.faults = 0
         self.alarms_raised = 0
         self.sink_errors = 0
-        self.proc_s: list[float] = []
+        self.proc_s = RecentSamples()
         self.overruns = 0
         self._last_utc: float | None = None
         self._day = 0.0
@@ -275,11 +276,12 @@ class RoverPipeline:
             "reasons": dict(sorted(self.reasons.items())),
             "input": self.stream.counters(),
             "output_errors": self.sink_errors,
+            "outputs": {type(sink).__name__: _sink_stats(sink) for sink in self.sinks},
             "epoch_period_s": None if self._period_s is None else round(self._period_s, 4),
             "processing_ms": {
                 "p50": round(float(np.percentile(proc, 50)), 4),
                 "p99": round(float(np.percentile(proc, 99)), 4),
-                "max": round(float(proc.max()), 4),
+                "max": round(self.proc_s.peak * 1e3, 4),
             },
             "overruns": self.overruns,
             "detector": {
@@ -289,3 +291,8 @@ class RoverPipeline:
             },
             "gate_health": self.gate_health.report().as_dict(),
         }
+
+
+def _sink_stats(sink: EpochSink) -> dict[str, Any]:
+    stats = getattr(sink, "stats", None)
+    return dict(stats()) if callable(stats) else {}
