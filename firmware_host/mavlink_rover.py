@@ -27,11 +27,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from drivers.mavlink_io import GpsInputFix
-from drivers.transport import open_port, read_some
-from fdi.errors import PortError
+from drivers.transport import open_port
 from fdi.rover import Decision, FixInput, RoverDetectorParams, RoverIsolator
 from firmware_host.config import RoverConfig
 from firmware_host.mavparams import ParamStore
+from firmware_host.reconnect import ResilientPort
 from firmware_host.router import Router
 from firmware_host.rover_outputs import MavlinkGpsSink
 from firmware_host.rover_pipeline import EpochOutcome, RoverPipeline
@@ -168,32 +168,19 @@ def run_rover_reader(
     reader of the one-process MAVLink mode.)
     """
     stats = ReaderStats()
-    settings = pipeline.cfg.port
-    port: Any = None
-    backoff = 0.1
-    while not stop.is_set():
-        if port is None:
-            try:
-                port = opener(settings)
-                backoff = 0.1
-            except PortError as err:
-                stats.port_errors += 1
-                log.warning("%s; retrying in %.1f s", err, backoff)
-                stop.wait(backoff)
-                backoff = min(2 * backoff, backoff_max_s)
+    port = ResilientPort(pipeline.cfg.port, name="gps", backoff_max_s=backoff_max_s,
+                         opener=opener)
+    try:
+        while not stop.is_set():
+            if not port.up and not port.service():
+                stop.wait(max(port.wait_s(), 0.01))
                 continue
-        try:
-            data = read_some(port, 65536)
-        except PortError as err:
-            stats.port_errors += 1
-            log.warning("%s; reopening", err)
-            port.close()
-            port = None
-            continue
-        stats.reads += 1
-        if data:
-            stats.bytes_in += len(data)
-            pipeline.feed(data)
-    if port is not None:
+            data = port.read_some(65536)
+            stats.reads += 1
+            if data:
+                stats.bytes_in += len(data)
+                pipeline.feed(data)
+    finally:
         port.close()
+        stats.port_errors = port.losses + port.open_failures
     return stats

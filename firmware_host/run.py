@@ -65,6 +65,14 @@ def resolve_config_path(name: str | Path) -> Path:
     return p
 
 
+def _tables(path: str | Path) -> set[str]:
+    try:
+        with open(resolve_config_path(path), "rb") as fh:
+            return {k for k, v in tomllib.load(fh).items() if isinstance(v, dict)}
+    except (OSError, tomllib.TOMLDecodeError):
+        return set()  # vehicle_of() reports it precisely
+
+
 def vehicle_of(path: str | Path) -> Vehicle:
     """``rover`` for a file with a ``[rover]`` table; ``rov`` for one with the ROV's own keys
     (``[link]``, ``[detector]``, ``[ft]``, ``[pid]``, ``period_s``, ``setpoint_deg`` ...; ``[sim]``
@@ -381,6 +389,16 @@ def _recorder(cfg: RecorderConfig, override: Path | None, note: str) -> FlightRe
 
 
 def run(args: argparse.Namespace) -> int:
+    if "mavlink" in _tables(args.config):
+        # A vehicle with an autopilot: one process, the MAVLink router running the pipeline.
+        from firmware_host import router
+
+        rparser = argparse.ArgumentParser(prog="fdi-bridge mavlink")
+        router.add_arguments(rparser)
+        path = str(resolve_config_path(args.config))
+        log.warning("%s has a [mavlink] table: running it as `fdi-bridge mavlink`", path)
+        extra = ["--seconds", str(args.duration)] if args.duration else []
+        return int(router.run(rparser.parse_args(["--config", path, *extra])))
     vehicle = vehicle_of(args.config)
     stop_event = threading.Event()
     t0 = time.monotonic()

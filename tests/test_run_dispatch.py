@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import threading
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -91,3 +92,21 @@ def test_run_rov_from_the_cli(tmp_path: Path) -> None:
     assert summary["counts"]["telemetry"] >= 5
     lines = (tmp_path / "out" / "epochs.jsonl").read_text().splitlines()
     assert len(lines) >= 15
+
+
+def test_a_config_with_a_mavlink_table_runs_the_router(tmp_path: Path, capsys: Any) -> None:
+    """`fdi-bridge run` on a vehicle file with [mavlink] runs the one-process router."""
+    from firmware_host.cli import main
+
+    cfg = tmp_path / "vehicle.toml"
+    cfg.write_text(
+        'name = "t"\n[mavlink]\ntlog_dir = ""\nparam_file = ""\n'
+        '[mavlink.autopilot]\nurl = "udpin:127.0.0.1:0"\n'
+        '[[mavlink.gcs]]\nurl = "udpin:127.0.0.1:0"\n'
+        f'[rover.port]\nurl = "{tmp_path / "no-such-gps"}"\n'
+    )
+    assert main(["run", "--config", str(cfg), "--duration", "0.5"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert {"rover", "router"} <= summary.keys()
+    assert summary["rover"]["epochs"] == 0  # no receiver: nothing invented
+    assert "autopilot" in summary["router"]
