@@ -47,16 +47,26 @@ raises :class:`~fdi.errors.EstimatorError` instead of producing numbers.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from fdi.errors import EstimatorError
-from fdi.three_zone import Action, GateDecision, Strategy, ThreeZoneGate, ThreeZoneParams
+from fdi.three_zone import (
+    Action,
+    GateDecision,
+    JumpTracker,
+    ReceiverState,
+    Strategy,
+    ThreeZoneGate,
+    ThreeZoneParams,
+)
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -186,11 +196,15 @@ class EarthModel:
     latitude_deg: float = 34.25
     rotation: bool = True
 
-    @property
+    @cached_property
     def g0(self) -> float:
         return normal_gravity(self.latitude_deg)
 
-    @property
+    @cached_property
+    def _g0_r2(self) -> float:
+        return self.g0 * EARTH_RADIUS_M**2
+
+    @cached_property
     def omega_ie_n(self) -> Vec3:
         """Earth rate in ENU, rad/s."""
         if not self.rotation:
@@ -202,7 +216,7 @@ class EarthModel:
         """Gravity vector at ENU position p (m), m/s²."""
         rx, ry, rz = p[0], p[1], p[2] + EARTH_RADIUS_M
         r2 = rx * rx + ry * ry + rz * rz
-        k = -self.g0 * EARTH_RADIUS_M**2 / (r2 * math.sqrt(r2))
+        k = -self._g0_r2 / (r2 * math.sqrt(r2))
         return (k * rx, k * ry, k * rz)
 
 
@@ -425,7 +439,17 @@ class InsGnssFilter:
         )
         self.y: FloatArray = np.zeros(0)
         self.S: FloatArray = np.zeros((0, 0))
-        self.gates = [ThreeZoneGate(params.three_zone, params.strategy) for _ in range(6)]
+        # The lock-in breaker (fdi.three_zone.JumpTracker) watches the position fix as a whole
+        # (E, N, U jump together). Velocity gates go without it: its test needs the INS's
+        # increment over n epochs to be well below the fix's noise, true for position (a MEMS
+        # INS moves centimetres in 4 s against 3 m), not for velocity (a turn changes a MEMS
+        # velocity error by 0.3 m/s in 4 s against 0.1 m/s: measured false onsets that locked
+        # out the velocity aiding). They keep the paper's limit and window restart.
+        vel = dataclasses.replace(params.three_zone, track_jumps=False)
+        self.gates = [ThreeZoneGate(params.three_zone, params.strategy) for _ in range(3)] + [
+            ThreeZoneGate(vel, params.strategy) for _ in range(3)
+        ]
+        self.position_tracker = JumpTracker(params.three_zone, 3)
         self._cov_dt = 1.0 / params.cov_rate_hz
         self._acc_dt = 0.0
         self._acc_fn = [0.0, 0.0, 0.0]
@@ -483,7 +507,7 @@ class InsGnssFilter:
         f = accel_m_s2
         omega = (float(w[0]) - self.b_g[0], float(w[1]) - self.b_g[1], float(w[2]) - self.b_g[2])
         f_b = (float(f[0]) - self.b_a[0], float(f[1]) - self.b_a[1], float(f[2]) - self.b_a[2])
-        if not all(math.isfinite(c) for c in (*omega, *f_b)):
+        if not math.isfinite(omega[0] + omega[1] + omega[2] + f_b[0] + f_b[1] + f_b[2]):
             raise EstimatorError(f"non-finite IMU sample at t = {t_s}")
         cached_dt, q_e = self._q_earth_cache
         if cached_dt != dt:
@@ -552,11 +576,29 @@ class InsGnssFilter:
         # (2) ν = z − H x̂ ; (3) S = H P⁻ Hᵀ + R  (H selects position / velocity states)
         nu = np.array(z) - np.array(zhat)
         s_diag = P[idx, idx] + np.array(r)
+        receiver: ReceiverState | None = None
+        if self.gates[0].tracks_jumps:
+            t2 = prm.three_zone.t2
+            receiver = self.position_tracker.update(
+                nu[:3].tolist(), s_diag[:3].tolist(), r[:3],
+                [float(nu[j]) ** 2 > t2 * float(s_diag[j]) for j in range(3)],
+            )
         # (7)–(8) per-dimension three-zone gate
         decisions = tuple(
-            self.gates[k].step(z[j], float(nu[j]), float(s_diag[j]), r[j])
+            self.gates[k].step(z[j], float(nu[j]), float(s_diag[j]), r[j],
+                               receiver=receiver if k < 3 else None)
             for j, k in enumerate(rows)
         )
+        if any(d.readmit for d in decisions[:3]):
+            self.position_tracker.clear()  # the state is corrected below: a step in ν follows
+        for j, d in enumerate(decisions):
+            if d.readmit and float(nu[j]) ** 2 > float(s_diag[j]):
+                # Receiver accepted again after max_replacements over-limit epochs: the INS
+                # drifted beyond its covariance; raise it so that S_ii = ν_i² and the fix pulls
+                # the state back (velocity and attitude follow through the correlations).
+                k = rows[j]
+                P = P.copy() if P is self.P else P
+                P[k, k] += float(nu[j]) ** 2 - float(s_diag[j])
         keep = [j for j, d in enumerate(decisions) if d.action is not Action.REJECT]
         if keep:
             sel = idx[keep]

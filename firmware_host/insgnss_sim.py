@@ -29,6 +29,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
 
@@ -178,6 +179,17 @@ def ideal_imu(traj: Trajectory, earth: EarthModel) -> tuple[FloatArray, FloatArr
     return gyro, accel
 
 
+@lru_cache(maxsize=4)
+def _truth(epochs: int, rate: int, speed_m_s: float,
+           earth: EarthModel) -> tuple[Trajectory, FloatArray, FloatArray]:
+    """Trajectory and error-free IMU, shared by every seed and scenario (read-only arrays)."""
+    traj = make_trajectory(epochs - 1, rate, speed_m_s, earth)
+    gyro, accel = ideal_imu(traj, earth)
+    for a in (traj.t, traj.p, traj.v, traj.q, traj.rpy, gyro, accel):
+        a.flags.writeable = False
+    return traj, gyro, accel
+
+
 @dataclass
 class NavData:
     """One generated run: truth, IMU, GNSS (with faults) and the filter's initial state."""
@@ -224,8 +236,7 @@ def generate(setup: InsGnssSetup, scenario: Scenario, seed: int) -> NavData:
     ss = np.random.SeedSequence(seed)
     rng_imu, rng_gnss, rng_fault, rng_init = (np.random.default_rng(s) for s in ss.spawn(4))
     rate = sim.imu_rate_hz
-    traj = make_trajectory(sim.epochs - 1, rate, sim.speed_m_s, earth)
-    gyro, accel = ideal_imu(traj, earth)
+    traj, gyro, accel = _truth(sim.epochs, rate, sim.speed_m_s, earth)
     n = len(traj.t)
     dt = 1.0 / rate
     e = sim.imu
