@@ -44,6 +44,9 @@ from fdi.three_zone import Action as ZoneAction
 from fdi.three_zone import ThreeZoneGate, ThreeZoneParams, Zone
 
 Action = Literal["accept", "replace", "alarm", "no_fix"]
+# Epochs over which the receiver must agree with its own Doppler to be restarted on after an
+# alarm: short, so a real step is accepted again soon, long enough to expose a frozen fix.
+RAW_HORIZON = 3
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,18 @@ class RoverDetectorParams:
     gate_tau_epochs: float = field(default=50.0, metadata={"ge": 1.0})
     gate_sigma0_m: float = field(default=0.1, metadata={"gt": 0.0})
     test_up: bool = True
+    # Doppler consistency (beyond the paper): the fix must match the accepted fix of `window`
+    # epochs ago moved by the receiver's Doppler displacement since, within
+    # max(doppler_floor_m, doppler_sigmas × the RMS of that residual on accepted fixes). A
+    # frozen position fails it within a few epochs (GM(1,1) would learn it as a trend), while a
+    # receiver's lag between Doppler and position does not accumulate. At an alarm it also
+    # decides whether the receiver agrees with its own Doppler over the last RAW_HORIZON
+    # epochs: then restart on it (no lock-in), else coast on Doppler, up to max_coast_s.
+    doppler_test: bool = True
+    doppler_sigmas: float = field(default=6.0, metadata={"ge": 0.0})
+    doppler_floor_m: float = field(default=0.5, metadata={"gt": 0.0})
+    doppler_s0_m: float = field(default=0.2, metadata={"gt": 0.0})
+    max_coast_s: float = field(default=30.0, metadata={"ge": 0.0})
     # Isolation and alarm.
     max_consecutive: int = field(default=5, metadata={"ge": 0})
     recover_epochs: int = field(default=5, metadata={"ge": 1})
@@ -107,6 +122,8 @@ class Decision:
     grey_res_u: float | None
     grey_gate_h: float
     grey_gate_u: float
+    doppler_res: float | None
+    doppler_gate: float
     chi2: float | None
     chi2_threshold: float
     consecutive: int
@@ -131,6 +148,13 @@ class RoverIsolator:
         self._last_up = 0.0
         self._up_seen = False
         self._consec = 0
+        # Accepted fixes (east, north) with the Doppler displacement at each, last `window`.
+        self._acc_hist: deque[tuple[float, float, float, float]] = deque(maxlen=n)
+        # The receiver's own recent fixes with the Doppler displacement at each: is it
+        # consistent with itself over the window (a frozen or wandering fix is not)?
+        self._raw_hist: deque[tuple[float, float, float, float]] = deque(maxlen=RAW_HORIZON)
+        self._coast_since: float | None = None
+        self._var_inc = params.doppler_s0_m**2
         self._alarm = False
         self._good_run = 0
         self._var_h = params.gate_sigma0_m**2
@@ -145,6 +169,9 @@ class RoverIsolator:
     # -------------------------------------------------------------- helpers
 
     def _restart(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
+        self._acc_hist.clear()
+        self._acc_hist.append((z[0], z[1], 0.0, 0.0))
+        self._coast_since = None
         self._win.clear()
         self._disp = [0.0, 0.0, 0.0]
         self._win.append(z)
@@ -185,6 +212,10 @@ class RoverIsolator:
             gm11_predict_shifted([v[2] for v in w], shift),
         )
 
+    def _doppler_gate(self) -> float:
+        p = self.p
+        return max(p.doppler_floor_m, p.doppler_sigmas * math.sqrt(self._var_inc))
+
     def _gates(self) -> tuple[float, float]:
         p = self.p
         if p.gate_sigmas <= 0.0:
@@ -199,7 +230,7 @@ class RoverIsolator:
     def step(self, fix: FixInput) -> Decision:
         p = self.p
         gate_h, gate_u = self._gates()
-        t = _Tests(gate_h, gate_u)
+        t = _Tests(gate_h, gate_u, self._doppler_gate())
         if fix.enu is None:
             return self._decision("no_fix", False, "no_fix", None, t)
         dt = None if self._last_t is None else fix.t_s - self._last_t
@@ -257,8 +288,23 @@ class RoverIsolator:
                 # The window's Doppler-free values no longer line up: start it again.
                 self._win.clear()
                 self._disp = [0.0, 0.0, 0.0]
+                self._acc_hist.clear()
+                self._raw_hist.clear()
+        have_doppler = v is not None and lv is not None
         self._last_v = v
         d = self._disp
+        raw_consistent = True
+        doppler_fault = False
+        if p.doppler_test and have_doppler:
+            if self._acc_hist:
+                a = self._acc_hist[0]
+                t.doppler_res = math.hypot(z[0] - a[0] - (d[0] - a[2]), z[1] - a[1] - (d[1] - a[3]))
+                doppler_fault = t.doppler_res > t.doppler_gate
+            if self._raw_hist:
+                q = self._raw_hist[0]
+                raw_res = math.hypot(z[0] - q[0] - (d[0] - q[2]), z[1] - q[1] - (d[1] - q[3]))
+                raw_consistent = raw_res <= t.doppler_gate
+        self._raw_hist.append((z[0], z[1], d[0], d[1]))
 
         # Section 2: grey prediction and residual ε(k) = x⁰(k) − x̂⁰(k) (eq. 18).
         y_hat = self._predict()
@@ -284,7 +330,20 @@ class RoverIsolator:
         if p.strategy != "grey":
             return self._step_zones(fix, z, r, d, up_known, quality, t)
 
-        reasons = (["grey"] if grey_fault else []) + (["chi2"] if chi2_fault else []) + quality
+        if self._coast_since is not None and self._acc_hist and t.pred is not None:
+            # Coasting on the receiver's Doppler from the last accepted fix: the grey window
+            # has fed on its own predictions for a while, so it is neither the best prediction
+            # nor a fair test; the Doppler test (its gate grows with √epochs) decides.
+            a = self._acc_hist[-1]
+            t.pred = (a[0] + d[0] - a[2], a[1] + d[1] - a[3], t.pred[2])
+            grey_fault = False
+
+        reasons = (
+            (["grey"] if grey_fault else [])
+            + (["chi2"] if chi2_fault else [])
+            + (["doppler"] if doppler_fault else [])
+            + quality
+        )
         if not reasons:
             self._accepted(fix, z, t)
             self._window_append(z, d)
@@ -295,8 +354,20 @@ class RoverIsolator:
             self._window_append(t.pred, d)
             self.kf.update(t.pred, r)
             return self._replace(t.pred, t, "+".join(reasons))
-        # Too many in a row (or nothing to replace with): alarm, stop automatic navigation,
-        # restart on the receiver's data.
+        # Too many in a row (or nothing to replace with): alarm, stop automatic navigation.
+        # Restart on the receiver's data when its own fixes are consistent with its Doppler
+        # (no lock-in); while they are not (a frozen or wandering position), coast on the
+        # Doppler-propagated prediction, up to max_coast_s.
+        if (
+            t.pred is not None
+            and not raw_consistent
+            and (self._coast_since is None or fix.t_s - self._coast_since < p.max_coast_s)
+        ):
+            if self._coast_since is None:
+                self._coast_since = fix.t_s
+            self._window_append(t.pred, d)
+            self.kf.update(t.pred, r)
+            return self._coast(t.pred, t, "+".join(reasons) + "+coast")
         return self._raise_alarm(z, r, "+".join(reasons), t)
 
     def _step_zones(
@@ -375,6 +446,8 @@ class RoverIsolator:
             grey_res_u=t.res_u,
             grey_gate_h=t.gate_h,
             grey_gate_u=t.gate_u,
+            doppler_res=t.doppler_res,
+            doppler_gate=t.doppler_gate,
             chi2=t.F,
             chi2_threshold=self.T_d,
             consecutive=self._consec,
@@ -387,6 +460,11 @@ class RoverIsolator:
     def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests) -> None:
         """Bookkeeping for a fix passed on as it is: the run of replacements ends."""
         self._consec = 0
+        self._coast_since = None
+        if t.doppler_res is not None and len(self._acc_hist) == self.p.window:
+            self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, self._ewma)
+        d = self._disp
+        self._acc_hist.append((z[0], z[1], d[0], d[1]))
         if t.pred is not None:
             self._learn_spread(z, t.pred, t.res_u is not None)
 
@@ -418,6 +496,13 @@ class RoverIsolator:
         action: Action = "alarm" if self._alarm else "replace"
         return self._decision(action, True, reason, None if self._alarm else out, t, zones=zones)
 
+    def _coast(self, out: tuple[float, float, float], t: _Tests, reason: str) -> Decision:
+        """Alarm up; the receiver is not consistent with itself: carry on the prediction."""
+        raised = not self._alarm
+        self._alarm = True
+        self._good_run = 0
+        return self._decision("alarm", True, reason, None, t, alarm_raised=raised)
+
     def _raise_alarm(
         self,
         z: tuple[float, float, float],
@@ -442,10 +527,9 @@ class RoverIsolator:
         self, z: tuple[float, float, float], pred: tuple[float, float, float], up: bool
     ) -> None:
         ee, en, eu = z[0] - pred[0], z[1] - pred[1], z[2] - pred[2]
-        w = self._ewma
-        self._var_h += w * (0.5 * (ee * ee + en * en) - self._var_h)
+        self._var_h = _learn(self._var_h, 0.5 * (ee * ee + en * en), self._ewma)
         if up:
-            self._var_u += w * (eu * eu - self._var_u)
+            self._var_u = _learn(self._var_u, eu * eu, self._ewma)
 
     def update_params(self, params: RoverDetectorParams) -> None:
         """Use ``params`` from the next :meth:`step` on (an operator's change, at run time).
@@ -468,7 +552,21 @@ class _Tests:
 
     gate_h: float
     gate_u: float
+    doppler_gate: float
     pred: tuple[float, float, float] | None = None
+    doppler_res: float | None = None
     res_h: float | None = None
     res_u: float | None = None
     F: float | None = None
+
+
+def _learn(var: float, sample: float, w: float) -> float:
+    """One step of the exponentially weighted variance of accepted residuals.
+
+    Only residuals within 3σ of the current estimate are learned from (a fix accepted just
+    under a wide gate would otherwise widen the gate further: a runaway a slowly frozen
+    receiver can drive). Cut at 3σ the estimate is biased low by about 3 %.
+    """
+    if sample > 9.0 * var:
+        return var
+    return var + w * (sample - var)

@@ -255,6 +255,8 @@ class RoverPipeline:
             "grey_res_u": _r(d.grey_res_u),
             "grey_gate_h": _r(d.grey_gate_h),
             "grey_gate_u": _r(d.grey_gate_u),
+            "doppler_res": _r(d.doppler_res),
+            "doppler_gate": _r(d.doppler_gate),
             "chi2": _r(d.chi2),
             "chi2_threshold": _r(d.chi2_threshold),
             "consecutive": d.consecutive,

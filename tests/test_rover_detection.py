@@ -110,3 +110,19 @@ def test_persistent_fault_raises_the_alarm_and_does_not_lock_in() -> None:
     tail = epochs[-50:]
     assert all(e["action"] == "accept" for e in tail)
     assert all(math.isfinite(e["kf_e"]) for e in epochs if e["kf_e"] is not None)
+
+
+@pytest.mark.parametrize(("rate", "min_detect"), [(1.0, 0.85), (10.0, 0.75)])
+def test_frozen_position_is_caught_by_the_doppler_test(rate: float, min_detect: float) -> None:
+    """A receiver that repeats its last position while the rover moves on: GM(1,1) alone
+    learns the frozen series as a trend (0 % at 10 Hz); the Doppler consistency test sees it,
+    and the alarm coasts on Doppler instead of restarting on the frozen fix."""
+    cfg = load_config("rover")
+    sc = RoverScenario(rate_hz=rate, duration_s=300.0, seed=1, kinds=("frozen",))
+    s, epochs = run_scenario(cfg, sc)
+    assert s.faulty_min >= 5 * rate * 10
+    assert s.detection_rate >= min_detect, (s.detected_min, s.faulty_min)
+    assert any("coast" in e["reason"] for e in epochs)
+    paper = load_config("rover-paper")
+    sp, _ = run_scenario(paper, sc)
+    assert sp.detection_rate < s.detection_rate
