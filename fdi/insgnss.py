@@ -34,7 +34,11 @@ GNSS update, the paper's eqs. (2)–(8) per component i (antenna at the IMU):
 (2) ``ν = z − H x̂``: position ``z − p̂`` (and velocity ``z_v − v̂``), ``H = [I 0 0 0 0]`` (and
 ``[0 I 0 0 0]``); (3) ``S = H P⁻ Hᵀ + R``; (7)–(8) ``DM(i) = ν_i²/S_ii`` against T1, T2 by
 :class:`fdi.three_zone.ThreeZoneGate`, which returns the value and variance to use (or drops
-the component); then ``K = P⁻H'ᵀ(H'P⁻H'ᵀ + R')⁻¹``, ``δx̂ = K ν'``, Joseph form
+the component). Before the gates, one :class:`fdi.three_zone.JumpTracker` looks at the position
+fix as a whole and tells "the receiver jumped" from "the INS drifted" (the lock-in breaker; its
+state goes to the three position gates). A gate that accepts the receiver again after the INS
+drifted beyond ``P`` flags ``readmit``: ``P_ii += ν_i² − S_ii`` so that the fix pulls the state
+back. Then ``K = P⁻H'ᵀ(H'P⁻H'ᵀ + R')⁻¹``, ``δx̂ = K ν'``, Joseph form
 ``P⁺ = (I − KH')P⁻(I − KH')ᵀ + KR'Kᵀ``, and the correction is fed back into the nominal
 state (``δx̂`` reset to 0).
 

@@ -52,11 +52,13 @@ receiver is healthy (``b = 0``) or faulted (offset ``b``):
   innovation, by an amount that explains it (``Σ (ν − J)²/(S + σ_J²) ≤ T2``); ``b = J``;
 - faulted: every fix is treated as over-limit whatever its zone (it does not become
   acceptable because the INS drifted towards it): the paper's replacement, within its limit,
-  then rejection; a further jump moves ``b``; when it brings ``b`` back to zero
-  (``Σ b²/σ_b² ≤ T2``: back on its own pre-fault track) the receiver is healthy again, the fit
-  window restarts and the fix gets the ordinary three-zone treatment;
-- faulted → healthy also when the raw fix agrees with the prediction (``DM < T1``) while the
-  offset-corrected one is over-limit: the "jump" was not the receiver's;
+  then rejection. The receiver is healthy again when its fix is back on its own pre-fault
+  track: the healthy hypothesis (``ν`` against the offset-corrected window, ``J + b``) is
+  plausible (``≤ T2``) and fits better than the faulted one (``J``); the fit window restarts
+  and the fix gets the ordinary three-zone treatment. This also ends at once a false onset
+  (a 3.5σ noise outlier). Otherwise a jump moves ``b`` (the fault changed level). The INS's
+  prediction is not consulted for the return: after minutes of coasting it is what cannot be
+  trusted;
 - healthy, over-limit, no jump, for ``max_replacements`` epochs in a row: the receiver agrees
   with its own history and the INS does not, so the INS drifted beyond its ``P``. The receiver
   is accepted again (FINDINGS: a limit of 3-5 consecutive replacements, then accept the
@@ -339,19 +341,17 @@ class JumpTracker:
                 self.faulted = True
                 self.offset, self.offset_var = tuple(jv), tuple(var_j)
                 self.fault_onsets += 1
-        elif jumped:
-            nb = tuple(b[i] + jv[i] for i in range(dims))
-            nvb = tuple(vb[i] + var_j[i] for i in range(dims))
-            if _chi2(nb, nvb) <= self._t2:  # back on its own pre-fault track
-                self._set_healthy()
-            else:  # the fault changed level
-                self.offset, self.offset_var = nb, nvb
-        elif _chi2(nu, s) < self._t1 and _chi2(
-            [nu[i] - b[i] for i in range(dims)], [s[i] + vb[i] for i in range(dims)]
-        ) > self._t2:
-            # The raw fix agrees with the prediction and the corrected one does not: the offset
-            # was wrong (a jump mistaken for a fault's onset).
+        elif ready and (
+            (h := _chi2([jv[i] + b[i] for i in range(dims)],
+                        [var_j[i] + vb[i] for i in range(dims)])) <= self._t2
+            and h < _chi2(jv, var_j)
+        ):
+            # Back on its own pre-fault track: the fix is closer to the receiver's healthy
+            # history (ν against the offset-corrected window) than to its faulted one (J).
             self._set_healthy()
+        elif jumped:  # the fault changed level
+            self.offset = tuple(b[i] + jv[i] for i in range(dims))
+            self.offset_var = tuple(vb[i] + var_j[i] for i in range(dims))
         returned = was_faulted and not self.faulted
         if returned:
             self.returns += 1

@@ -279,6 +279,9 @@ class MethodRun:
     action_counts: dict[str, int]
     flagged: npt.NDArray[np.bool_]  # epoch with any position component outside zone 0
     restarts: int
+    fault_onsets: int = 0  # receiver judged faulty by the jump tracker (position)
+    returns: int = 0  # ... and healthy again
+    readmissions: int = 0  # position components accepted again after the INS drifted
 
 
 def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> MethodRun:
@@ -303,9 +306,11 @@ def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> Meth
         vel_err[j - 1] = kf.velocity - traj.v[k]
     zones = {z.name.lower(): sum(g.zone_counts[z] for g in kf.gates[:3]) for z in Zone}
     actions = {a.value: sum(g.action_counts[a] for g in kf.gates[:3]) for a in Action}
+    tracker = kf.position_tracker
     return MethodRun(
         data.gnss_t[1:], pos_err, vel_err, zones, actions, flagged,
-        sum(g.restarts for g in kf.gates[:3]),
+        sum(g.restarts for g in kf.gates[:3]), tracker.fault_onsets, tracker.returns,
+        sum(g.readmissions for g in kf.gates[:3]),
     )
 
 
@@ -337,6 +342,9 @@ def summarize(data: NavData, runs: dict[str, MethodRun], scenario: str, seed: in
             "zones": r.zone_counts,
             "actions": r.action_counts,
             "window_restarts": r.restarts,
+            "receiver_fault_onsets": r.fault_onsets,
+            "receiver_returns": r.returns,
+            "readmissions": r.readmissions,
             "fault_epochs_flagged": int(np.sum(r.flagged & faulty)),
             "clean_epochs_flagged": int(np.sum(r.flagged & ~faulty)),
         }

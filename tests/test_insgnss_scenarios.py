@@ -1,110 +1,176 @@
-"""The issue's done-means on the paper's scenarios (config/insgnss-paper.toml, seed 1).
+"""The issue's done-means on the paper's scenarios, over seeds 1-5.
 
-Position-only GNSS (3 m east/north, 5 m up, white), navigation-grade IMU, 501 epochs at 1 s.
-Measured on seed 1 (RMS = 3-D position RMS over epochs 1..500, m):
+``config/insgnss-paper.toml``: position-only GNSS (3 m east/north, 5 m up, white),
+navigation-grade IMU, 501 epochs at 1 s, the paper's α1, α2, n. ``config/insgnss.toml``: MEMS
+IMU and GNSS velocity. 3-D position RMS (m) over epochs 1..500, measured with
+``fdi-bridge sim insgnss --scenario S --seed N --out DIR`` (docs/insgnss.md has
+every method, axis and seed):
 
-    scenario           none   downweight  replace  three_zone
-    paper-random      28.86      2.07       2.03      2.15
-    paper-single      14.07      1.82       1.86      2.02
-    paper-continuous  90.29    155.87      18.49     20.03
-    paper-deviation    2.98      1.70       1.77      1.97
+    paper preset       seed   none   downweight  replace  three_zone
+    paper-continuous   1-5    90.0-90.4  151-160  12.4-26.3  5.6-19.2
+    paper-random       1-5    28.9-30.6  1.8-2.1   1.4-2.0   1.4-2.1
+    paper-single       1-5    14.0-14.5  1.5-1.8   1.4-1.9   1.4-1.9
+    paper-deviation    1-5     2.9-3.3   1.4-1.7   1.4-1.8   1.4-1.9
+
+Time: each filter run takes 0.6 s, so the multi-seed checks run only three-zone on every seed
+(the lock-in depends on the seed) and compare it with the baselines of seed 1 where those are
+fault-dominated and do not depend on the seed (none on paper-continuous: 90.0-90.4 m, on
+paper-random 28.9-30.6 m, on paper-single 14.0-14.5 m; down-weighting on paper-continuous
+151-160 m). On paper-deviation, where no robust filtering is close, both run on every seed.
+``_run`` caches per preset, scenario, seed and method.
 """
 
 from __future__ import annotations
 
 import json
+from functools import cache
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 
 from firmware_host.cli import main
-from firmware_host.insgnss_sim import MethodRun, load_setup, run_scenario
+from firmware_host.insgnss_sim import (
+    InsGnssSetup,
+    MethodRun,
+    NavData,
+    generate,
+    load_setup,
+    run_method,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
-SEED = 1
-# Cai & Shao, Table 2 (20 m faults), robust filtering, m: (min, max) east, north, up
+SEEDS = (1, 2, 3, 4, 5)
+PRESETS = ("insgnss-paper", "insgnss")
+# Cai & Shao, Table 2 (20 m faults), with robust filtering, m: (min, max) east, north, up
 PAPER_TABLE2 = {"east": (-11.8, 6.06), "north": (-6.64, 7.54), "up": (-2.62, 2.57)}
+FAULTS = slice(9, 200)  # epochs 10..200 (pos_err row k is epoch k + 1)
+AFTER = slice(299, 500)  # epochs 300..500
 
 
-@pytest.fixture(scope="module")
-def results() -> dict[str, tuple[dict[str, Any], dict[str, MethodRun]]]:
-    setup = load_setup(ROOT / "config" / "insgnss-paper.toml")
-    out = {}
-    for scenario in ("paper-random", "paper-single", "paper-continuous", "paper-deviation"):
-        summary, _data, runs = run_scenario(setup, scenario, SEED)  # type: ignore[arg-type]
-        out[scenario] = (summary, runs)
-    return out
+@cache
+def _setup(preset: str) -> InsGnssSetup:
+    return load_setup(ROOT / "config" / f"{preset}.toml")
 
 
-def _rms(summary: dict[str, Any], method: str) -> float:
-    return float(summary["methods"][method]["position_rms_3d_m"])
+@cache
+def _data(preset: str, scenario: str, seed: int) -> NavData:
+    return generate(_setup(preset), scenario, seed)  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize(
-    "scenario", ["paper-random", "paper-single", "paper-continuous", "paper-deviation"]
-)
-def test_three_zone_beats_no_robust_filtering(results: dict, scenario: str) -> None:
-    summary, _ = results[scenario]
-    # The done-means is on position RMS; per axis, up is not always better (deviation: 0.97
-    # vs 0.92 m, the 4 m up faults are under the 5 m noise; continuous: the 20 m up fault is
-    # absorbed by every method), so only east and north are asserted per axis.
-    assert _rms(summary, "three_zone") < _rms(summary, "none")
-    for axis in ("east", "north"):
-        tz = summary["methods"]["three_zone"]["position_m"][axis]["rms"]
-        assert tz < summary["methods"]["none"]["position_m"][axis]["rms"]
+@cache
+def _run(preset: str, scenario: str, seed: int, method: str) -> MethodRun:
+    return run_method(_data(preset, scenario, seed), _setup(preset).filter, method)  # type: ignore[arg-type]
 
 
-def test_single_faults_downweight_and_replace_far_better(results: dict) -> None:
-    summary, _ = results["paper-single"]
-    none = _rms(summary, "none")
-    assert _rms(summary, "downweight") < none / 4
-    assert _rms(summary, "replace") < none / 4
+def _rms3(run: MethodRun) -> float:
+    return float(np.sqrt(np.mean(np.sum(run.pos_err**2, axis=1))))
 
 
-def test_random_faults_detected(results: dict) -> None:
-    summary, _ = results["paper-random"]
-    m = summary["methods"]["three_zone"]
-    assert summary["fault_epochs"] == 100
-    assert m["fault_epochs_flagged"] >= 99  # 100 m faults: every one found
-    assert _rms(summary, "three_zone") < 0.1 * _rms(summary, "none")
+def _horiz(run: MethodRun, rows: slice) -> float:
+    e = run.pos_err[rows]
+    return float(np.hypot(e[:, 0], e[:, 1]).max())
 
 
-def test_continuous_faults_bounded_where_downweighting_drifts(results: dict) -> None:
-    _, runs = results["paper-continuous"]
-
-    def horiz(run: MethodRun, lo: int, hi: int) -> float:
-        e = run.pos_err[lo - 1 : hi]  # epochs lo..hi
-        return float(np.hypot(e[:, 0], e[:, 1]).max())
-
-    tz, dw = horiz(runs["three_zone"], 10, 200), horiz(runs["downweight"], 10, 200)
-    assert tz < 40.0  # INS coasting through 190 s of 100 m faults (measured 30 m)
-    assert dw > 5 * tz  # down-weighting alone is dragged off (measured 281 m)
-    assert horiz(runs["three_zone"], 300, 500) < 5.0  # and recovers once the faults stop
+# ---------------------------------------------------------------- paper-continuous: lock-in
 
 
-def test_deviation_ranges_vs_paper_table2(results: dict) -> None:
-    summary, _ = results["paper-deviation"]
-    ours = summary["methods"]["three_zone"]["position_m"]
-    for axis in ("east", "north"):
+@pytest.mark.parametrize("seed", SEEDS)
+def test_continuous_paper_preset_bounded_where_downweighting_drifts(seed: int) -> None:
+    none = _run("insgnss-paper", "paper-continuous", 1, "none")
+    dw = _run("insgnss-paper", "paper-continuous", 1, "downweight")
+    tz = _run("insgnss-paper", "paper-continuous", seed, "three_zone")
+    assert _rms3(tz) < 0.25 * _rms3(none)  # measured 5.6-19.2 m against 90 m
+    # Through the 190 s of 100 m faults (141 m horizontally) the INS coasts and is never dragged
+    # onto the fault: less than half of it (measured 9-51 m: the INS's own drift) ...
+    assert _horiz(tz, FAULTS) < 70.0
+    # ... where down-weighting alone is taken most of the way (measured 281 m on seed 1)
+    assert _horiz(dw, FAULTS) > 4.0 * _horiz(tz, FAULTS)
+    # and no lock-in: once the faults stop the receiver is accepted again (measured 1.9-3.4 m,
+    # the level of fault-free data). Before the jump tracker, seed 3 ended 600 m off.
+    assert _horiz(tz, AFTER) < 5.0
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_continuous_velocity_aided_preset_bounded(seed: int) -> None:
+    none = _run("insgnss", "paper-continuous", 1, "none")  # 84.6-84.9 m on seeds 1-5
+    tz = _run("insgnss", "paper-continuous", seed, "three_zone")
+    assert _rms3(tz) < 0.1 * _rms3(none)  # measured 1.8-5.5 m against 85 m
+    assert _horiz(tz, FAULTS) < 10.0  # velocity aiding holds the INS (measured 3.2-6.9 m)
+    assert _horiz(tz, AFTER) < 5.0
+
+
+def test_continuous_velocity_aided_downweighting_is_dragged() -> None:
+    dw = _run("insgnss", "paper-continuous", 1, "downweight")
+    tz = _run("insgnss", "paper-continuous", 1, "three_zone")
+    assert _rms3(dw) > 4.0 * _rms3(tz)  # measured 14.1 vs 2.1 m
+
+
+def test_continuous_without_jump_tracker_locks_in() -> None:
+    # The paper's method alone (track_jumps = false) on the seed that exposed the lock-in: the
+    # drifted INS takes the fault in near 185 s and rejects the good fixes afterwards.
+    from dataclasses import replace
+
+    setup = _setup("insgnss-paper")
+    params = replace(setup.filter, three_zone=replace(setup.filter.three_zone, track_jumps=False))
+    run = run_method(_data("insgnss-paper", "paper-continuous", 3), params, "three_zone")
+    assert _horiz(run, AFTER) > 100.0  # measured 600 m at the end
+    assert _horiz(_run("insgnss-paper", "paper-continuous", 3, "three_zone"), AFTER) < 5.0
+
+
+# ---------------------------------------------------------------- the other scenarios
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("scenario", ["paper-random", "paper-deviation"])
+def test_three_zone_beats_no_robust_filtering(scenario: str, seed: int) -> None:
+    none = _run("insgnss-paper", scenario, seed if scenario == "paper-deviation" else 1, "none")
+    tz = _run("insgnss-paper", scenario, seed, "three_zone")
+    assert _rms3(tz) < _rms3(none)
+    # per axis, east and north; up is at its noise floor on paper-deviation (see below)
+    for i in (0, 1):
+        assert np.sqrt(np.mean(tz.pos_err[:, i] ** 2)) < np.sqrt(np.mean(none.pos_err[:, i] ** 2))
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_single_faults_downweight_and_replace_far_better(seed: int) -> None:
+    none = _rms3(_run("insgnss-paper", "paper-single", 1, "none"))
+    methods = ("downweight", "replace", "three_zone") if seed == 1 else ("downweight", "replace")
+    for method in methods:  # three-zone on seed 2: test_cli_writes_summary
+        assert _rms3(_run("insgnss-paper", "paper-single", seed, method)) < none / 5  # 14 vs < 2
+
+
+def test_random_faults_detected() -> None:
+    data = _data("insgnss-paper", "paper-random", 1)
+    run = _run("insgnss-paper", "paper-random", 1, "three_zone")
+    faulty = np.any(data.fault[1:] != 0, axis=1)
+    assert int(faulty.sum()) == 100
+    assert int(np.sum(run.flagged & faulty)) >= 99  # 100 m faults: every one found
+    assert _rms3(run) < 0.1 * _rms3(_run("insgnss-paper", "paper-random", 1, "none"))
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_deviation_ranges_vs_paper_table2(seed: int) -> None:
+    tz = _run("insgnss-paper", "paper-deviation", seed, "three_zone")
+    none = _run("insgnss-paper", "paper-deviation", seed, "none")
+    for i, axis in enumerate(("east", "north")):
         lo, hi = PAPER_TABLE2[axis]
-        assert lo <= ours[axis]["min"] and ours[axis]["max"] <= hi
-        assert ours[axis]["max"] - ours[axis]["min"] <= 0.7 * (hi - lo)  # the 30 % goal
-    # Up: the span is within the paper's (5.02 vs 5.19 m) but not 30 % tighter, and the
-    # maximum (3.20 m) is above the paper's 2.57 m: the up range here is set by the 5 m
-    # vertical GNSS noise (no robust filtering gives -2.03..2.84 m), not by the faults.
-    lo, hi = PAPER_TABLE2["up"]
-    assert ours["up"]["max"] - ours["up"]["min"] <= hi - lo
+        e = tz.pos_err[:, i]
+        assert lo <= e.min() and e.max() <= hi
+        assert e.max() - e.min() <= 0.7 * (hi - lo)  # the 30 % goal (measured 40-60 % tighter)
+    # Up: the range is the 5 m vertical noise's, not the faults' (4 m on up, under the noise):
+    # no robust filtering, which the up faults barely move, spans 4.1-5.6 m, the same as on
+    # fault-free data of the same seed (4.1-5.5 m). The paper's -2.62..2.57 m (5.19 m) is met
+    # on seeds 3 and 5 only, and the 30 % goal (3.63 m) on none: docs/insgnss.md. What holds:
+    # the three-zone treatment adds little to that floor. It cannot go below it: the 4 m up
+    # faults are harmless and the fixes discarded with their 20 m east/north faults are lost
+    # information (up RMS measured 0.85-1.32 m against 0.82-1.05 m without robust filtering).
+    up, up_none = tz.pos_err[:, 2], none.pos_err[:, 2]
+    assert np.ptp(up) <= np.ptp(up_none) + 1.0  # measured +0.71 m at worst (seed 1)
+    assert np.sqrt(np.mean(up**2)) <= 1.35 * np.sqrt(np.mean(up_none**2))  # measured 1.27
 
 
-def test_velocity_aided_default_preset_bounded_on_continuous_faults() -> None:
-    setup = load_setup(ROOT / "config" / "insgnss.toml")  # MEMS IMU, GNSS velocity used
-    _summary, _data, runs = run_scenario(setup, "paper-continuous", SEED,
-                                         strategies=("downweight", "three_zone"))
-    tz = np.hypot(*runs["three_zone"].pos_err[:, :2].T).max()
-    dw = np.hypot(*runs["downweight"].pos_err[:, :2].T).max()
-    assert tz < 8.0 and dw > 2 * tz
+# ---------------------------------------------------------------- the command
 
 
 def test_cli_writes_summary(tmp_path: Path) -> None:
@@ -118,3 +184,4 @@ def test_cli_writes_summary(tmp_path: Path) -> None:
     assert {"min", "max", "rms"} <= set(m["velocity_m_s"]["east"])
     assert set(m["zones"]) == {"no_fault", "deviation", "over_limit"}
     assert doc["fault_epochs"] == 50
+    assert m["position_rms_3d_m"] < doc["methods"]["none"]["position_rms_3d_m"] / 5

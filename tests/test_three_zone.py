@@ -11,6 +11,8 @@ import pytest
 
 from fdi.three_zone import (
     Action,
+    JumpTracker,
+    ReceiverState,
     ThreeZoneGate,
     ThreeZoneParams,
     Zone,
@@ -206,3 +208,110 @@ def test_degree1_with_limit_does_not_coast_away() -> None:
         worst[degree] = err
     assert worst[1] < 15.0  # stays within a few σ of the truth (0)
     assert worst[2] > worst[1]
+
+
+# ---------------------------------------------------------------- lock-in breaker (ours)
+
+
+def _healthy(tracker: JumpTracker, k: int, s: float = 10.0, r: float = 9.0) -> None:
+    for _ in range(k):
+        st = tracker.update((0.0,), (s,), (r,), (False,))
+        assert not st.faulted
+
+
+def test_jump_tracker_onset_hold_and_return() -> None:
+    tr = JumpTracker(ThreeZoneParams(), 1)
+    _healthy(tr, 4)
+    st = tr.update((100.0,), (10.0,), (9.0,), (True,))  # the receiver jumps 100 m
+    assert st.faulted and st.jumped and tr.offset[0] == pytest.approx(100.0)
+    # The INS drifts towards the fault while P grows: ν slides into the deviation and no-fault
+    # zones, but the receiver has not jumped back, so it stays faulted.
+    for k in range(1, 60):
+        drift, s = 1.5 * k, 10.0 + (0.5 * k) ** 2
+        st = tr.update((100.0 - drift,), (s,), (9.0,), ((100.0 - drift) ** 2 > 6.63 * s,))
+        assert st.faulted and not st.returned
+    st = tr.update((-drift,), (s,), (9.0,), (False,))  # back on its own track: ν = −drift
+    assert st.returned and not st.faulted and tr.offset == (0.0,)
+    assert tr.fault_onsets == 1 and tr.returns == 1
+
+
+def test_jump_tracker_single_outlier_returns_at_once() -> None:
+    # A 3.5σ noise outlier can pass the onset test; the next fix is nearer the healthy track
+    # than the "faulted" one, so the receiver is healthy again after one epoch.
+    tr = JumpTracker(ThreeZoneParams(), 1)
+    _healthy(tr, 4, s=9.5, r=9.0)
+    assert tr.update((11.0,), (9.5,), (9.0,), (True,)).faulted
+    st = tr.update((0.5,), (9.5,), (9.0,), (False,))
+    assert st.returned and not st.faulted
+
+
+def test_jump_tracker_drift_is_not_a_jump() -> None:
+    # A smooth ramp in ν (the INS drifting, the receiver steady) never looks like a jump.
+    tr = JumpTracker(ThreeZoneParams(), 1)
+    for k in range(40):
+        st = tr.update((0.8 * k,), (10.0,), (9.0,), ((0.8 * k) ** 2 > 66.0,))
+        assert not st.jumped and not st.faulted
+
+
+def test_jump_tracker_needs_the_jump_to_explain_the_innovation() -> None:
+    # Over-limit because the INS drifted 80 m, plus a 15 m jump: not a receiver fault.
+    tr = JumpTracker(ThreeZoneParams(), 1)
+    for _ in range(4):
+        tr.update((80.0,), (10.0,), (9.0,), (True,))
+    st = tr.update((95.0,), (10.0,), (9.0,), (True,))
+    assert st.jumped and not st.faulted
+
+
+def test_gate_keeps_a_persistent_fault_out_in_the_deviation_zone() -> None:
+    gate = ThreeZoneGate(ThreeZoneParams())
+    _fill(gate, [0.0, 0.0, 0.0, 0.0])
+    d = gate.step(100.0, 100.0, 2.0, 1.0)
+    assert d.action is Action.REPLACE
+    # The INS drifts 3 m per epoch towards the fault while P grows (σ by 1.5 m per epoch, the
+    # drift is 2σ): ν slides through the
+    # deviation zone into the no-fault zone, where the paper would use the fix (and lock in).
+    # The receiver has not jumped back: it stays faulted and is never used as is.
+    zones, actions = set(), set()
+    for k in range(1, 31):
+        d = gate.step(100.0, 100.0 - 3.0 * k, 2.0 + (1.5 * k) ** 2, 1.0)
+        zones.add(d.zone)
+        actions.add(d.action)
+    assert {Zone.DEVIATION, Zone.NO_FAULT} <= zones
+    assert actions <= {Action.REPLACE, Action.REJECT}
+    # The receiver jumps back to its own track (ν = −93, the INS's drift): healthy again.
+    gate.step(0.0, -93.0, 2.0 + 46.5**2, 1.0)
+    assert gate.tracker.returns == 1 and not gate.tracker.faulted
+
+
+def test_gate_readmits_a_steady_receiver_after_the_limit() -> None:
+    # No jump, yet over-limit epoch after epoch: the INS drifted beyond its P. After
+    # max_replacements such epochs the receiver is accepted again, flagged for P inflation.
+    params = ThreeZoneParams(max_replacements=5)
+    gate = ThreeZoneGate(params)
+    actions = []
+    for k in range(30):
+        nu = 0.3 * k  # a ramp: over-limit (ν² > T2·S = 13.3) from k = 13 on
+        d = gate.step(nu, nu, 2.0, 1.0)
+        actions.append((d.action, d.readmit))
+    assert gate.tracker.fault_onsets == 0
+    assert (Action.ACCEPT, True) in actions
+    first = actions.index((Action.ACCEPT, True))
+    assert all(a is not Action.ACCEPT for a, _ in actions[13:first])
+    assert first - 13 == params.max_replacements and gate.readmissions >= 1
+
+
+def test_track_jumps_false_is_the_paper_method() -> None:
+    gate = ThreeZoneGate(ThreeZoneParams(track_jumps=False))
+    _fill(gate, [0.0, 0.0, 0.0, 0.0])
+    assert gate.step(100.0, 100.0, 2.0, 1.0).action is Action.REPLACE
+    # without the tracker a deviation-zone fault is down-weighted and used
+    assert gate.step(100.0, 3.0, 2.0, 1.0).action is Action.DOWNWEIGHT
+    assert not gate.tracks_jumps and gate.tracker.fault_onsets == 0
+
+
+def test_shared_receiver_state_overrides_the_own_tracker() -> None:
+    gate = ThreeZoneGate(ThreeZoneParams())
+    _fill(gate, [0.0, 0.0, 0.0, 0.0])
+    d = gate.step(0.5, 0.5, 2.0, 1.0, receiver=ReceiverState(faulted=True, ready=True))
+    assert d.action is Action.REPLACE  # no-fault on its own, faulty by the fix's verdict
+    assert gate.tracker.fault_onsets == 0
