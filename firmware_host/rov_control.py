@@ -49,8 +49,8 @@ class RovController:
                 self.pid.reset()
             if action != self.action:  # rate-limited: line noise can make this flap
                 what = "holding last command" if action == "hold" else "neutral thrust"
-                _ratelog.warning("compass telemetry lost",
-                                 f"for {self._since_telemetry:.1f} s: {what}")
+                _ratelog.warning(f"compass telemetry lost: {what}",
+                                 f"for {self._since_telemetry:.1f} s")
         else:
             self._since_telemetry = 0.0
             assert dec.heading_used is not None
