@@ -588,9 +588,13 @@ class InsGnssFilter:
                 [float(nu[j]) ** 2 > t2 * float(s_diag[j]) for j in range(3)],
             )
         # (7)–(8) per-dimension three-zone gate
+        # (each position gate sees the tracker's verdict on its own component: a fault in east
+        # and north does not make a normal up value faulty, section 2.1)
         decisions = tuple(
-            self.gates[k].step(z[j], float(nu[j]), float(s_diag[j]), r[j],
-                               receiver=receiver if k < 3 else None)
+            self.gates[k].step(
+                z[j], float(nu[j]), float(s_diag[j]), r[j],
+                receiver=receiver.component(j) if receiver is not None and k < 3 else None,
+            )
             for j, k in enumerate(rows)
         )
         if any(d.readmit for d in decisions[:3]):

@@ -51,14 +51,16 @@ receiver is healthy (``b = 0``) or faulted (offset ``b``):
 - healthy → faulted: a component is over-limit *and* the fix jumped, in the direction of the
   innovation, by an amount that explains it (``Σ (ν − J)²/(S + σ_J²) ≤ T2``); ``b = J``;
 - faulted: every fix is treated as over-limit whatever its zone (it does not become
-  acceptable because the INS drifted towards it): the paper's replacement, within its limit,
-  then rejection. The receiver is healthy again when its fix is back on its own pre-fault
-  track: the healthy hypothesis (``ν`` against the offset-corrected window, ``J + b``) is
-  plausible (``≤ T2``) and fits better than the faulted one (``J``); the fit window restarts
-  and the fix gets the ordinary three-zone treatment. This also ends at once a false onset
-  (a 3.5σ noise outlier). Otherwise a jump moves ``b`` (the fault changed level). The INS's
-  prediction is not consulted for the return: after minutes of coasting it is what cannot be
-  trusted;
+  acceptable because the INS drifted towards it), except a component in the no-fault zone
+  whose own offset ``b_i`` is not significant (``ReceiverState.axes``: a fault in east and
+  north does not make a normal up value faulty, section 2.1): the paper's replacement,
+  within its limit, then rejection. The receiver is healthy again when its fix is back on
+  its own pre-fault track: the healthy hypothesis (``ν`` against the offset-corrected
+  window, ``J + b``) is plausible (``≤ T2``) and fits better than the faulted one (``J``);
+  the fit window restarts and the fix gets the ordinary three-zone treatment. This also ends
+  at once a false onset (a 3.5σ noise outlier). Otherwise a jump moves ``b`` (the fault
+  changed level). The INS's prediction is not consulted for the return: after minutes of
+  coasting it is what cannot be trusted;
 - healthy, over-limit, no jump, for ``max_replacements`` epochs in a row: the receiver agrees
   with its own history and the INS does not, so the INS drifted beyond its ``P``. The receiver
   is accepted again (FINDINGS: a limit of 3-5 consecutive replacements, then accept the
@@ -90,6 +92,7 @@ Epochs are assumed equally spaced; call :meth:`ThreeZoneGate.reset` after a gap.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 from collections import deque
@@ -260,6 +263,20 @@ class ReceiverState:
     returned: bool = False  # healthy again at this epoch after a fault: re-admit it
     jumped: bool = False  # the fix jumped against the receiver's own recent history
     ready: bool = False  # the history window was full (the jump test was made)
+    # Per component: is its tracked fault offset significant on its own (``b_i²/σ_bi² ≥ T1``
+    # of χ²(1))? Empty: every component is (the whole-fix verdict; callers that predate it).
+    axes: tuple[bool, ...] = ()
+
+    def component(self, i: int) -> ReceiverState:
+        """The state as seen by component ``i``'s gate (``axes`` reduced to that component)."""
+        if not self.axes:
+            return self
+        return dataclasses.replace(self, axes=(self.axes[i],))
+
+    @property
+    def axis_faulted(self) -> bool:
+        """Faulted, and (for a one-component view) this component is part of the fault."""
+        return self.faulted and all(self.axes)
 
 
 class JumpTracker:
@@ -285,6 +302,7 @@ class JumpTracker:
         self.n = params.window
         self._t1 = chi2_ppf(1.0 - params.alpha1, dims)
         self._t2 = chi2_ppf(1.0 - params.alpha2, dims)
+        self._t1_axis = params.t1  # χ²(1): is one component's offset significant on its own
         # (ν − b, S) per component, of the last n epochs whatever the gates did with them
         self._seq: deque[tuple[tuple[float, ...], tuple[float, ...]]] = deque(maxlen=self.n)
         self.faulted = False
@@ -292,6 +310,7 @@ class JumpTracker:
         self.offset_var = (0.0,) * dims  # σ_b²
         self.fault_onsets = 0
         self.returns = 0
+        self._axes = (False,) * dims
 
     def clear(self) -> None:
         """Forget the history (after the filter's state was corrected by a re-admission)."""
@@ -360,7 +379,13 @@ class JumpTracker:
             self._seq.append(
                 (tuple(nu[i] - self.offset[i] for i in range(dims)), tuple(s[:dims]))
             )
-        return ReceiverState(self.faulted, returned, jumped, ready)
+        prev = self._axes if was_faulted else (False,) * dims
+        axes = tuple(
+            self.faulted and (prev[i] or self.offset[i] ** 2 >= self._t1_axis * self.offset_var[i])
+            for i in range(dims)
+        )
+        self._axes = axes
+        return ReceiverState(self.faulted, returned, jumped, ready, axes)
 
 
 def _chi2(x: Sequence[float], var: Sequence[float]) -> float:
@@ -450,9 +475,12 @@ class ThreeZoneGate:
         own = receiver is None
         if receiver is None:
             receiver = self.tracker.update((nu,), (s,), (r,), (zone is Zone.OVER_LIMIT,))
-        if receiver.faulted:
+        if receiver.faulted and (zone is not Zone.NO_FAULT or receiver.axis_faulted):
             # The fault persists: whatever its zone, the fix is no better than at the onset
-            # (the INS may have drifted towards it).
+            # (the INS may have drifted towards it). A component in the no-fault zone whose own
+            # fault offset is not significant (the fault is in the other components) follows
+            # its own zone: the per-dimension test's point is that a fault in one component
+            # does not make the normal ones faulty.
             return self._over_limit(zone, dm, z, nu, s, r, external)
         if receiver.returned:
             # Back on its own pre-fault track: healthy again; the fit window, which holds the

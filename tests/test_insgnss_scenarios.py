@@ -160,14 +160,15 @@ def test_deviation_ranges_vs_paper_table2(seed: int) -> None:
         assert e.max() - e.min() <= 0.7 * (hi - lo)  # the 30 % goal (measured 40-60 % tighter)
     # Up: the range is the 5 m vertical noise's, not the faults' (4 m on up, under the noise):
     # no robust filtering, which the up faults barely move, spans 4.1-5.6 m, the same as on
-    # fault-free data of the same seed (4.1-5.5 m). The paper's -2.62..2.57 m (5.19 m) is met
-    # on seeds 3 and 5 only, and the 30 % goal (3.63 m) on none: docs/insgnss.md. What holds:
-    # the three-zone treatment adds little to that floor. It cannot go below it: the 4 m up
-    # faults are harmless and the fixes discarded with their 20 m east/north faults are lost
-    # information (up RMS measured 0.85-1.32 m against 0.82-1.05 m without robust filtering).
+    # fault-free data of the same seed (4.1-5.5 m), and is itself outside the paper's
+    # -2.62..2.57 m on seeds 1 and 2. Since each position gate follows its own zone unless the
+    # tracker's offset on its own component is significant (section 2.1), three-zone up is
+    # inside Table 2 on seeds 3, 4 and 5 and not on 1 (max 3.47 m) and 2 (min -3.08 m):
+    # docs/insgnss.md. What holds on every seed: the treatment adds little to that floor
+    # (up RMS measured 0.83-1.13 m against 0.82-1.05 m without robust filtering).
     up, up_none = tz.pos_err[:, 2], none.pos_err[:, 2]
-    assert np.ptp(up) <= np.ptp(up_none) + 1.0  # measured +0.71 m at worst (seed 1)
-    assert np.sqrt(np.mean(up**2)) <= 1.35 * np.sqrt(np.mean(up_none**2))  # measured 1.27
+    assert np.ptp(up) <= np.ptp(up_none) + 1.0  # measured +0.86 m at worst (seed 1)
+    assert np.sqrt(np.mean(up**2)) <= 1.2 * np.sqrt(np.mean(up_none**2))  # measured 1.11
 
 
 # ---------------------------------------------------------------- the command

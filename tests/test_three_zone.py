@@ -315,3 +315,29 @@ def test_shared_receiver_state_overrides_the_own_tracker() -> None:
     d = gate.step(0.5, 0.5, 2.0, 1.0, receiver=ReceiverState(faulted=True, ready=True))
     assert d.action is Action.REPLACE  # no-fault on its own, faulty by the fix's verdict
     assert gate.tracker.fault_onsets == 0
+
+
+def test_fault_in_other_components_leaves_a_normal_one_to_its_own_zone() -> None:
+    # Section 2.1: a fault in one component must not make the normal ones faulty. A fix jumps
+    # 20 m east and north, 0 m up (R: 9, 9, 25 m²): the tracker's verdict is per component.
+    tr = JumpTracker(ThreeZoneParams(), 3)
+    for _ in range(4):
+        tr.update((0.0, 0.0, 0.0), (10.0, 10.0, 27.0), (9.0, 9.0, 25.0), (False,) * 3)
+    st = tr.update((20.0, 20.0, 0.5), (10.0, 10.0, 27.0), (9.0, 9.0, 25.0), (True, True, False))
+    assert st.faulted and st.axes == (True, True, False)
+    assert st.component(0).axis_faulted and not st.component(2).axis_faulted
+    gates = [ThreeZoneGate(ThreeZoneParams()) for _ in range(3)]
+    for g in gates:
+        _fill(g, [0.0, 0.0, 0.0, 0.0])
+    up = gates[2].step(0.5, 0.5, 27.0, 25.0, receiver=st.component(2))
+    assert up.action is Action.ACCEPT and up.variance == 25.0  # its own zone: no fault
+    east = gates[0].step(20.0, 20.0, 10.0, 9.0, receiver=st.component(0))
+    assert east.action is not Action.ACCEPT
+    # A flagged component stays flagged until the return, even if its offset's variance grows
+    st = tr.update((20.0, 20.0, 0.0), (10.0, 10.0, 27.0), (9.0, 9.0, 25.0), (True, True, False))
+    assert st.faulted and st.axes[:2] == (True, True)
+    # a component out of its no-fault zone is still overridden while the fix is faulted
+    dev = gates[2].step(9.0, 9.0, 27.0, 25.0, receiver=st.component(2))
+    assert dev.zone is Zone.DEVIATION and dev.action is Action.REPLACE
+    # a state without per-component flags (older callers) keeps the whole-fix verdict
+    assert ReceiverState(faulted=True).axis_faulted
