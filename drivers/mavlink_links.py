@@ -101,7 +101,21 @@ class Link(ABC):
         return True
 
 
-class UdpServerLink(Link):
+class _UdpLink(Link):
+    """A link on one UDP socket (``sock``)."""
+
+    sock: socket.socket
+
+    @property
+    def local_address(self) -> tuple[str, int]:
+        host, port = self.sock.getsockname()[:2]
+        return str(host), int(port)
+
+    def filenos(self) -> list[int]:
+        return [self.sock.fileno()]
+
+
+class UdpServerLink(_UdpLink):
     def __init__(self, url: str, host: str, port: int) -> None:
         self.url = url
         self._clock = time.monotonic
@@ -115,14 +129,6 @@ class UdpServerLink(Link):
             raise PortError(f"could not bind {url!r}: {err}") from err
         self.peers: dict[tuple[str, int], float] = {}
         self.dropped = 0  # datagrams a peer lost because the socket's send buffer was full
-
-    @property
-    def local_address(self) -> tuple[str, int]:
-        host, port = self.sock.getsockname()[:2]
-        return str(host), int(port)
-
-    def filenos(self) -> list[int]:
-        return [self.sock.fileno()]
 
     def read(self, max_chunks: int) -> Iterator[Chunk]:
         now = self._clock()
@@ -176,7 +182,7 @@ class UdpServerLink(Link):
         self.sock.close()
 
 
-class UdpClientLink(Link):
+class UdpClientLink(_UdpLink):
     def __init__(self, url: str, host: str, port: int) -> None:
         self.url = url
         try:
@@ -187,14 +193,6 @@ class UdpClientLink(Link):
             self.sock.bind(("0.0.0.0" if host not in ("127.0.0.1", "localhost") else host, 0))
         except OSError as err:
             raise PortError(f"could not open {url!r}: {err}") from err
-
-    @property
-    def local_address(self) -> tuple[str, int]:
-        host, port = self.sock.getsockname()[:2]
-        return str(host), int(port)
-
-    def filenos(self) -> list[int]:
-        return [self.sock.fileno()]
 
     def read(self, max_chunks: int) -> Iterator[Chunk]:
         recvfrom = self.sock.recvfrom
