@@ -77,7 +77,7 @@ def bench_rover(duration_s: float = 600.0, rate_hz: float = 10.0) -> dict[str, A
             t0 = time.perf_counter()
             replay_direct(inp, pipe)
             best = max(best, pipe.epochs / (time.perf_counter() - t0))
-            proc = list(pipe.proc_s)
+            proc = list(pipe.timer.stats.proc_s)
         per[strat] = {"epoch_ms": _pct(proc), "throughput_eps_no_pty": best}
     out["strategies"] = per
     cfg = _cfg()

@@ -22,6 +22,7 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, Protocol, TextIO
 
 import numpy as np
@@ -33,7 +34,7 @@ from fdi.gate_health import GateHealth
 from fdi.geodesy import LocalFrame
 from fdi.rover import Decision, FixInput, RoverIsolator
 from firmware_host.config import RoverConfig
-from firmware_host.loop import RecentSamples
+from firmware_host.loop import EpochTimer
 
 log = logging.getLogger("fdi_bridge.rover")
 
@@ -46,28 +47,17 @@ class EpochSink(Protocol):
     def close(self) -> None: ...
 
 
+@dataclass(frozen=True, slots=True)
 class EpochOutcome:
     """One epoch's input, decision and output position, handed to the sinks."""
 
-    __slots__ = ("alt", "decision", "epoch", "lat", "lon", "record", "t_s")
-
-    def __init__(
-        self,
-        epoch: GpsEpoch,
-        decision: Decision,
-        lat: float | None,
-        lon: float | None,
-        alt: float | None,
-        t_s: float | None,
-        record: dict[str, Any],
-    ) -> None:
-        self.epoch = epoch
-        self.decision = decision
-        self.lat = lat
-        self.lon = lon
-        self.alt = alt
-        self.t_s = t_s
-        self.record = record
+    epoch: GpsEpoch
+    decision: Decision
+    lat: float | None
+    lon: float | None
+    alt: float | None
+    t_s: float | None
+    record: dict[str, Any]
 
 
 def _r(x: float | None, nd: int = 4) -> float | None:
@@ -96,15 +86,13 @@ class RoverPipeline:
             self.frame = LocalFrame(ref.lat_deg, ref.lon_deg, ref.alt_m)
         self.jsonl = jsonl
         self.sinks = sinks or []
-        self.perf_clock = perf_clock
         self.actions: Counter[str] = Counter()
         self.reasons: Counter[str] = Counter()
         self.epochs = 0
         self.faults = 0
         self.alarms_raised = 0
         self.sink_errors = 0
-        self.proc_s = RecentSamples()
-        self.overruns = 0
+        self.timer = EpochTimer(perf_clock)  # per-epoch processing time and overruns
         self._last_utc: float | None = None
         self._day = 0.0
         self._period_s: float | None = None
@@ -141,7 +129,7 @@ class RoverPipeline:
         return utc + self._day
 
     def process(self, epoch: GpsEpoch) -> EpochOutcome:
-        t0 = self.perf_clock()
+        self.timer.start()
         t_s = self._time(epoch.utc_s)
         enu = None
         h = None
@@ -215,15 +203,13 @@ class RoverPipeline:
             except Exception as err:  # an output failing must not stop the detectors
                 self.sink_errors += 1
                 self.ratelog.warning(f"output {type(sink).__name__}", str(err))
-        dt = self.perf_clock() - t0
-        self.proc_s.append(dt)
+        # The receiver's epoch period (smoothed) is the budget an epoch overruns.
         if t_s is not None and self._last_t is not None and 0 < t_s - self._last_t < 5.0:
             p = t_s - self._last_t
             self._period_s = p if self._period_s is None else 0.9 * self._period_s + 0.1 * p
         if t_s is not None:
             self._last_t = t_s
-        if self._period_s is not None and dt > self._period_s:
-            self.overruns += 1
+        self.timer.stop(self._period_s)
         return outcome
 
     def _record(
@@ -280,7 +266,8 @@ class RoverPipeline:
     # ------------------------------------------------------------------ summary
 
     def summary(self) -> dict[str, Any]:
-        proc = np.asarray(self.proc_s) * 1e3 if self.proc_s else np.zeros(1)
+        stats = self.timer.stats
+        proc = np.asarray(stats.proc_s) * 1e3 if stats.proc_s else np.zeros(1)
         return {
             "epochs": self.epochs,
             "faults": self.faults,
@@ -294,9 +281,9 @@ class RoverPipeline:
             "processing_ms": {
                 "p50": round(float(np.percentile(proc, 50)), 4),
                 "p99": round(float(np.percentile(proc, 99)), 4),
-                "max": round(self.proc_s.peak * 1e3, 4),
+                "max": round(stats.proc_s.peak * 1e3, 4),
             },
-            "overruns": self.overruns,
+            "overruns": stats.overruns,
             "detector": {
                 "strategy": self.cfg.detector.strategy,
                 "chi2_threshold": round(self.isolator.T_d, 4),
