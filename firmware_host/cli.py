@@ -54,6 +54,10 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
     "rover": ("firmware_host.rover_sim", "generate a rover NMEA run with injected GPS faults"),
     "rov": ("firmware_host.rov_app", "ROV compass faults and fault-tolerant heading hold"),
     "insgnss": ("firmware_host.insgnss_sim", "INS/GNSS three-zone robust filter: paper scenarios"),
+    "insgnss-report": (
+        "firmware_host.insgnss_report",
+        "INS/GNSS: every scenario, seed and preset as the Markdown tables of docs/insgnss.md",
+    ),
 }
 
 # ``fdi-bridge demo KIND``: KIND -> module with ``run_demo(args) -> int`` and ``add_arguments``.

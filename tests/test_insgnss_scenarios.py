@@ -1,23 +1,22 @@
 """The issue's done-means on the paper's scenarios, over seeds 1-5.
 
-``config/insgnss-paper.toml``: position-only GNSS (3 m east/north, 5 m up, white),
-navigation-grade IMU, 501 epochs at 1 s, the paper's α1, α2, n. ``config/insgnss.toml``: MEMS
-IMU and GNSS velocity. 3-D position RMS (m) over epochs 1..500, measured with
-``fdi-bridge sim insgnss --scenario S --seed N --out DIR`` (docs/insgnss.md has
-every method, axis and seed):
+``config/insgnss-paper.toml``: position-only GNSS (white; 3 m east/north, and 1.15 m up: the
+ratio of up to horizontal in the paper's own Table 2, see the preset), navigation-grade IMU,
+501 epochs at 1 s, the paper's α1, α2, n. ``config/insgnss.toml``: MEMS IMU, GNSS velocity,
+5 m up. 3-D position RMS (m) over epochs 1..500, measured with
+``fdi-bridge sim insgnss-report`` (every method, axis, seed and preset, as in docs/insgnss.md):
 
-    paper preset       seed   none   downweight  replace  three_zone
-    paper-continuous   1-5    90.0-90.4  151-160  12.4-26.3  5.6-19.2
-    paper-random       1-5    28.9-30.6  1.8-2.1   1.4-2.0   1.4-2.1
-    paper-single       1-5    14.0-14.5  1.5-1.8   1.4-1.9   1.4-1.9
-    paper-deviation    1-5     2.9-3.3   1.4-1.7   1.4-1.8   1.4-1.9
+    paper preset       seed   none       downweight  replace   three_zone
+    paper-continuous   1-5    90.0-90.3  152-162     9.6-29.3  5.5-19.5
+    paper-random       1-5    28.9-30.6  0.9-1.4     1.1-1.4   1.1-1.6
+    paper-single       1-5    14.0-14.5  0.9-1.4     1.0-1.5   1.0-1.6
+    paper-deviation    1-5     2.8-3.2   0.9-1.4     1.0-1.5   1.0-1.6
 
 Time: each filter run takes 0.6 s, so the multi-seed checks run only three-zone on every seed
 (the lock-in depends on the seed) and compare it with the baselines of seed 1 where those are
-fault-dominated and do not depend on the seed (none on paper-continuous: 90.0-90.4 m, on
-paper-random 28.9-30.6 m, on paper-single 14.0-14.5 m; down-weighting on paper-continuous
-151-160 m). On paper-deviation, where no robust filtering is close, both run on every seed.
-``_run`` caches per preset, scenario, seed and method.
+fault-dominated and do not depend on the seed (none on paper-continuous: 90.0-90.3 m, on
+paper-single 14.0-14.5 m; down-weighting on paper-continuous 152-162 m). On paper-random and
+paper-deviation both run on every seed. ``_run`` caches per preset, scenario, seed and method.
 """
 
 from __future__ import annotations
@@ -44,6 +43,8 @@ SEEDS = (1, 2, 3, 4, 5)
 PRESETS = ("insgnss-paper", "insgnss")
 # Cai & Shao, Table 2 (20 m faults), with robust filtering, m: (min, max) east, north, up
 PAPER_TABLE2 = {"east": (-11.8, 6.06), "north": (-6.64, 7.54), "up": (-2.62, 2.57)}
+# ... and without robust filtering
+PAPER_TABLE2_NONE = {"east": (-25.8, 32.6), "north": (-20.5, 34.9), "up": (-7.9, 13.9)}
 FAULTS = slice(9, 200)  # epochs 10..200 (pos_err row k is epoch k + 1)
 AFTER = slice(299, 500)  # epochs 300..500
 
@@ -80,13 +81,13 @@ def test_continuous_paper_preset_bounded_where_downweighting_drifts(seed: int) -
     none = _run("insgnss-paper", "paper-continuous", 1, "none")
     dw = _run("insgnss-paper", "paper-continuous", 1, "downweight")
     tz = _run("insgnss-paper", "paper-continuous", seed, "three_zone")
-    assert _rms3(tz) < 0.25 * _rms3(none)  # measured 5.6-19.2 m against 90 m
+    assert _rms3(tz) < 0.25 * _rms3(none)  # measured 5.5-19.5 m against 90 m
     # Through the 190 s of 100 m faults (141 m horizontally) the INS coasts and is never dragged
     # onto the fault: less than half of it (measured 9-51 m: the INS's own drift) ...
     assert _horiz(tz, FAULTS) < 70.0
-    # ... where down-weighting alone is taken most of the way (measured 281 m on seed 1)
+    # ... where down-weighting alone is taken most of the way (measured 280 m on seed 1)
     assert _horiz(dw, FAULTS) > 4.0 * _horiz(tz, FAULTS)
-    # and no lock-in: once the faults stop the receiver is accepted again (measured 1.9-3.4 m,
+    # and no lock-in: once the faults stop the receiver is accepted again (measured 1.8-3.4 m,
     # the level of fault-free data). Before the jump tracker, seed 3 ended 600 m off.
     assert _horiz(tz, AFTER) < 5.0
 
@@ -124,11 +125,12 @@ def test_continuous_without_jump_tracker_locks_in() -> None:
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("scenario", ["paper-random", "paper-deviation"])
 def test_three_zone_beats_no_robust_filtering(scenario: str, seed: int) -> None:
-    none = _run("insgnss-paper", scenario, seed if scenario == "paper-deviation" else 1, "none")
+    none = _run("insgnss-paper", scenario, seed, "none")
     tz = _run("insgnss-paper", scenario, seed, "three_zone")
     assert _rms3(tz) < _rms3(none)
-    # per axis, east and north; up is at its noise floor on paper-deviation (see below)
-    for i in (0, 1):
+    # and on every axis (per-axis RMS ratio three-zone / none measured 0.03-0.09 on
+    # paper-random, 0.32-0.91 on paper-deviation: up on seed 4 is 0.91, its start-up error)
+    for i in range(3):
         assert np.sqrt(np.mean(tz.pos_err[:, i] ** 2)) < np.sqrt(np.mean(none.pos_err[:, i] ** 2))
 
 
@@ -151,24 +153,31 @@ def test_random_faults_detected() -> None:
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_deviation_ranges_vs_paper_table2(seed: int) -> None:
+    # Three-zone inside Table 2's robust ranges on every axis and seed, and at least 30 % tighter
+    # (the goal): spans measured east 3.6-6.9 m (Table 2: 17.9), north 2.6-3.7 (14.2), up
+    # 1.2-2.5 (5.2); up's widest is seed 4's start (initial error -1.78 m, a 1.8σ draw).
     tz = _run("insgnss-paper", "paper-deviation", seed, "three_zone")
-    none = _run("insgnss-paper", "paper-deviation", seed, "none")
-    for i, axis in enumerate(("east", "north")):
+    for i, axis in enumerate(("east", "north", "up")):
         lo, hi = PAPER_TABLE2[axis]
         e = tz.pos_err[:, i]
-        assert lo <= e.min() and e.max() <= hi
-        assert e.max() - e.min() <= 0.7 * (hi - lo)  # the 30 % goal (measured 40-60 % tighter)
-    # Up: the range is the 5 m vertical noise's, not the faults' (4 m on up, under the noise):
-    # no robust filtering, which the up faults barely move, spans 4.1-5.6 m, the same as on
-    # fault-free data of the same seed (4.1-5.5 m), and is itself outside the paper's
-    # -2.62..2.57 m on seeds 1 and 2. Since each position gate follows its own zone unless the
-    # tracker's offset on its own component is significant (section 2.1), three-zone up is
-    # inside Table 2 on seeds 3, 4 and 5 and not on 1 (max 3.47 m) and 2 (min -3.08 m):
-    # docs/insgnss.md. What holds on every seed: the treatment adds little to that floor
-    # (up RMS measured 0.83-1.13 m against 0.82-1.05 m without robust filtering).
-    up, up_none = tz.pos_err[:, 2], none.pos_err[:, 2]
-    assert np.ptp(up) <= np.ptp(up_none) + 1.0  # measured +0.86 m at worst (seed 1)
-    assert np.sqrt(np.mean(up**2)) <= 1.2 * np.sqrt(np.mean(up_none**2))  # measured 1.11
+        assert lo <= e.min() and e.max() <= hi, axis
+        assert e.max() - e.min() <= 0.7 * (hi - lo), axis
+
+
+def test_paper_preset_vertical_noise_follows_the_papers_ratio() -> None:
+    # The paper gives no GNSS noise. Its own errors without robust filtering (Table 2) span
+    # 21.8 m up against 58.4 m east and 55.4 m north; the preset keeps that ratio to its 3 m
+    # horizontal noise, in the generator and in the filter alike. Pinned here so that the
+    # vertical noise cannot drift to whatever passes: with 5 m (a real receiver's vertical,
+    # kept in config/insgnss.toml) the up range is noise, not faults, and even fault-free data
+    # without robust filtering leaves Table 2 (docs/insgnss.md, the sweep).
+    span = {a: hi - lo for a, (lo, hi) in PAPER_TABLE2_NONE.items()}
+    ratio = span["up"] / ((span["east"] + span["north"]) / 2)
+    setup = _setup("insgnss-paper")
+    for block in (setup.sim, setup.filter):
+        assert block.gnss_sigma_h_m == 3.0
+        assert block.gnss_sigma_v_m == pytest.approx(ratio * block.gnss_sigma_h_m, abs=0.01)
+    assert _setup("insgnss").sim.gnss_sigma_v_m == 5.0
 
 
 # ---------------------------------------------------------------- the command
@@ -186,3 +195,31 @@ def test_cli_writes_summary(tmp_path: Path) -> None:
     assert set(m["zones"]) == {"no_fault", "deviation", "over_limit"}
     assert doc["fault_epochs"] == 50
     assert m["position_rms_3d_m"] < doc["methods"]["none"]["position_rms_3d_m"] / 5
+
+
+def test_report_command_prints_the_tables(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "report.md"
+    rc = main(["sim", "insgnss-report", "--seeds", "2", "--scenario", "paper-deviation",
+               "--config", str(ROOT / "config" / "insgnss-paper.toml"),
+               "--sweep-sigma-v", "5", "--out", str(out)])
+    assert rc == 0
+    text = out.read_text(encoding="utf-8")
+    assert text == capsys.readouterr().out
+    rows = [ln for ln in text.splitlines() if ln.startswith("| insgnss-paper | 2 |")]
+    assert len(rows) == 1  # the Table 2 row: every axis inside and 30 % tighter
+    assert rows[0].count("✓✓") == 3
+    # the sweep row at 5 m up: seed 2 leaves Table 2 (measured -3.08 … 1.95 m), no mark
+    sweep = [ln for ln in text.splitlines() if ln.startswith("| 5 | 2 |")]
+    assert len(sweep) == 1 and "✓" not in sweep[0]
+
+
+def test_report_seed_lists() -> None:
+    from firmware_host.insgnss_report import _seeds, range_verdict
+
+    assert _seeds("1-3,7") == [1, 2, 3, 7]
+    pos = {"up": {"min": -1.0, "max": 1.0}}
+    assert range_verdict(pos, "up").endswith("✓✓")  # span 2.0 <= 0.7 × 5.19
+    assert range_verdict({"up": {"min": -2.6, "max": 2.5}}, "up").endswith(" ✓")
+    assert "✓" not in range_verdict({"up": {"min": -3.0, "max": 1.0}}, "up")
