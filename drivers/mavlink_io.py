@@ -389,6 +389,40 @@ class MavPacker(_Encoders):
         return self._sink.last
 
 
+NETWORK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
+
+
+def is_network_url(url: str) -> bool:
+    """True for the mavutil network spellings (``udpout:HOST:PORT`` ...), False for a device."""
+    scheme, sep, _rest = url.partition(":")
+    return bool(sep) and scheme in NETWORK_SCHEMES
+
+
+class PortEndpoint(MavPacker):
+    """The encoders of :class:`MavEndpoint` writing to a byte port: a serial line to the autopilot.
+
+    Give it a :class:`drivers.resilient.ResilientPort`: its writes never raise, a lost device
+    (USB unplugged, the autopilot rebooting) is reported once and reopened with backoff, and
+    what is sent while it is down is dropped and counted (``port.tx_dropped``).
+    """
+
+    def __init__(self, port: Any, source_system: int = 1, source_component: int = 191) -> None:
+        super().__init__(source_system, source_component)
+        self.port = port
+        self.url = str(getattr(port, "port", "port"))
+
+    def _emit(self, msg: Any) -> bytes:
+        data = super()._emit(msg)
+        self.port.write(data)
+        return data
+
+    def send_raw(self, data: bytes) -> None:
+        self.port.write(data)
+
+    def close(self) -> None:
+        self.port.close()
+
+
 class MavEndpoint(_Encoders):
     """A pymavlink connection by URL that sends typed messages and returns the bytes sent.
 

@@ -26,15 +26,19 @@ failing peer is dropped and counted, never raised into the forwarding loop.
 from __future__ import annotations
 
 import errno
+import logging
 import socket
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Hashable, Iterator
+from typing import Any
 
+from drivers.resilient import ResilientPort
 from drivers.transport import SerialSettings, open_port
 from fdi.errors import PortError
 
 Chunk = tuple[bytes, Hashable, bool]
+log = logging.getLogger("fdi_bridge.mavlink")
 
 DEFAULT_SERVER_HOST = "127.0.0.1"
 MAX_UDP_PEERS = 16
@@ -347,27 +351,83 @@ class TcpServerLink(_TcpBase):
 
 
 class TcpClientLink(_TcpBase):
-    def __init__(self, url: str, host: str, port: int, connect_timeout_s: float = 5.0) -> None:
+    """A TCP client (``tcp:HOST:PORT``, as SITL listens on 5760) that connects again when lost.
+
+    The first connection is made at start (a refused one is a start-up error). When the server
+    closes or resets it (SITL restarted, the companion's server gone), the loss is counted in
+    ``errors`` and logged once, and the link reconnects by itself, as mavlink-router's TCP
+    endpoints do: an attempt after 0.1 s, then 0.2, 0.4 ... capped at ``retry_max_s``; each
+    attempt waits at most ``retry_timeout_s`` for the connection (the router's loop waits with
+    it). While it is down the router counts its packets as ``no_peer``.
+    """
+
+    def __init__(self, url: str, host: str, port: int, connect_timeout_s: float = 5.0,
+                 retry_max_s: float = 5.0, retry_timeout_s: float = 0.1) -> None:
         self.url = url
+        self._addr = (host, port)
+        self.retry_max_s = retry_max_s
+        self.retry_timeout_s = retry_timeout_s
+        self.reconnects = 0
+        self._backoff = 0.1
+        self._next_try = 0.0
         try:
-            sock = socket.create_connection((host, port), timeout=connect_timeout_s)
-            sock.setblocking(False)
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            sock = self._connect(connect_timeout_s)
         except OSError as err:
             raise PortError(f"could not connect to {url!r}: {err}") from err
         self.conns = [_TcpConn(sock, ("tcp", host, port))]
 
+    def _connect(self, timeout_s: float) -> socket.socket:
+        sock = socket.create_connection(self._addr, timeout=timeout_s)
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        return sock
+
+    def _lost(self, c: _TcpConn) -> None:
+        super()._lost(c)
+        log.warning("%s: connection lost; reconnecting with backoff up to %.1f s", self.url,
+                    self.retry_max_s)
+        self._backoff = 0.1
+        self._next_try = time.monotonic() + self._backoff
+
+    def _retry(self) -> None:
+        now = time.monotonic()
+        if now < self._next_try:
+            return
+        try:
+            sock = self._connect(self.retry_timeout_s)
+        except OSError as err:
+            log.debug("%s: still down: %s", self.url, err)
+            self._backoff = min(2.0 * self._backoff, self.retry_max_s)
+            self._next_try = now + self._backoff
+            return
+        self.reconnects += 1
+        log.warning("%s: connected again", self.url)
+        self.conns = [_TcpConn(sock, ("tcp", *self._addr))]
+
     def read(self, max_chunks: int) -> Iterator[Chunk]:
+        if not self.conns:
+            self._retry()
         return self._read_conns(max_chunks)
+
+    def has_peer(self) -> bool:
+        return bool(self.conns)
 
 
 class SerialLink(Link):
-    """A pyserial URL (``/dev/ttyACM0``, a pty, ``loop://``) read and written without blocking."""
+    """A pyserial URL (``/dev/ttyACM0``, a pty, ``loop://``) read and written without blocking.
 
-    def __init__(self, url: str, baud: int) -> None:
+    The port is a :class:`~drivers.resilient.ResilientPort`: when the device goes away (USB
+    unplugged, the autopilot rebooting and its USB port vanishing with it) the loss is logged
+    once and counted, the router keeps forwarding between the other links, and the same URL is
+    reopened with backoff (capped at ``backoff_max_s``); while it is down its descriptor leaves
+    the router's select and the router polls it. A device absent at start is not fatal either.
+    """
+
+    def __init__(self, url: str, baud: int, backoff_max_s: float = 5.0) -> None:
         self.url = url
-        self.port = open_port(SerialSettings(url=url, baudrate=baud, timeout_s=0.0))
-        self.port.write_timeout = 0
+        self.port = ResilientPort(SerialSettings(url=url, baudrate=baud, timeout_s=0.0),
+                                  name=f"mavlink {url}", backoff_max_s=backoff_max_s,
+                                  opener=_open_nonblocking)
         self._key = ("serial", url)
         self._out = bytearray()
 
@@ -375,18 +435,19 @@ class SerialLink(Link):
         try:
             return [int(self.port.fileno())]
         except (AttributeError, OSError, ValueError, NotImplementedError):
-            return []  # loop:// and friends: the router polls them
+            return []  # loop:// and friends, and a port that is down: the router polls them
 
     def read(self, max_chunks: int) -> Iterator[Chunk]:
-        try:
-            waiting = int(getattr(self.port, "in_waiting", 0))
-            data = bytes(self.port.read(waiting or 1)) if waiting or self.filenos() else b""
-        except Exception:  # serial.SerialException, OSError: count, never raise in the loop
-            self.errors += 1
+        if not self.port.service():  # down: a reopen is tried when its backoff is due
             return iter(())
+        waiting = self.port.in_waiting
+        data = self.port.read(waiting or 1) if waiting or self.filenos() else b""
         return iter([(data, self._key, False)] if data else ())
 
     def write(self, data: bytes) -> bool:
+        if not self.port.up:
+            self.port.write(data)  # counted as dropped (or sent, if the reopen is due now)
+            return True
         if len(self._out) > MAX_TCP_BACKLOG:
             self._flush()
             return False
@@ -406,18 +467,34 @@ class SerialLink(Link):
     def _flush(self) -> None:
         if not self._out:
             return
-        try:
-            n = self.port.write(bytes(self._out))
-            del self._out[: n or 0]
-        except Exception:  # SerialTimeoutException when the line is full: keep the bytes
-            self.errors += 1
+        losses = self.port.losses
+        n = self.port.write(bytes(self._out))
+        if self.port.losses != losses:  # lost on this write (counted as dropped): start afresh
+            self._out.clear()
+            return
+        del self._out[: n or 0]
+
+    @property
+    def errors(self) -> int:
+        """Losses of the device and failed reopen attempts."""
+        return self.port.losses + self.port.open_failures
+
+    @errors.setter
+    def errors(self, value: int) -> None:
+        raise AttributeError("SerialLink.errors counts the port's losses")
 
     def close(self) -> None:
         self.port.close()
 
 
-def open_link(url: str, baud: int = 115200) -> Link:
-    """Open a link from its URL (see the module docstring)."""
+def _open_nonblocking(settings: SerialSettings) -> Any:
+    """Open with ``write_timeout = 0``: a write takes what fits and says how much."""
+    return open_port(settings, write_timeout_s=0.0)
+
+
+def open_link(url: str, baud: int = 115200, backoff_max_s: float = 5.0) -> Link:
+    """Open a link from its URL (see the module docstring); ``backoff_max_s``: the longest wait
+    between reconnection attempts of a serial or TCP client link."""
     scheme, sep, rest = url.partition(":")
     if sep and scheme == "udpin":
         host, port = _split_hostport(rest, url, DEFAULT_SERVER_HOST)
@@ -430,5 +507,5 @@ def open_link(url: str, baud: int = 115200) -> Link:
         return TcpServerLink(url, host, port)
     if sep and scheme == "tcp":
         host, port = _split_hostport(rest, url, None)
-        return TcpClientLink(url, host, port)
-    return SerialLink(url, baud)
+        return TcpClientLink(url, host, port, retry_max_s=backoff_max_s)
+    return SerialLink(url, baud, backoff_max_s)

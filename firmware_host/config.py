@@ -34,7 +34,8 @@ class RoverOutputs:
 
     nmea_url: str = ""
     nmea_baudrate: int = field(default=9600, metadata={"gt": 0})
-    mavlink_url: str = ""  # e.g. "udpout:127.0.0.1:14550"
+    mavlink_url: str = ""  # e.g. "udpout:127.0.0.1:14550", or a serial device (reopened if lost)
+    mavlink_baudrate: int = field(default=57600, metadata={"gt": 0})  # serial mavlink_url only
     mavlink_system: int = field(default=1, metadata={"ge": 1, "le": 255})
     mavlink_component: int = field(default=191, metadata={"ge": 1, "le": 255})
     target_system: int = field(default=1, metadata={"ge": 1, "le": 255})

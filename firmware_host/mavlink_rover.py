@@ -27,11 +27,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from drivers.mavlink_io import GpsInputFix
+from drivers.resilient import ResilientPort
 from drivers.transport import open_port
 from fdi.rover import Decision, FixInput, RoverDetectorParams, RoverIsolator
 from firmware_host.config import RoverConfig
 from firmware_host.mavparams import ParamStore
-from firmware_host.reconnect import ResilientPort
 from firmware_host.router import Router
 from firmware_host.rover_outputs import MavlinkGpsSink
 from firmware_host.rover_pipeline import EpochOutcome, RoverPipeline

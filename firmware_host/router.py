@@ -92,6 +92,9 @@ class MavlinkConfig:
     tlog_max_bytes: int = field(default=64 * 1024 * 1024, metadata={"ge": 4096})
     param_file: str = ""
     signing_key_file: str = ""
+    reconnect_max_s: float = field(
+        default=5.0, metadata={"gt": 0.0, "doc": "serial links: longest wait between reopens"}
+    )
 
     def __post_init__(self) -> None:
         if any(g.signing for g in self.gcs) and not self.signing_key_file:
@@ -325,14 +328,14 @@ class Router:
             self.tlog = TlogWriter(cfg.tlog_dir, cfg.tlog_max_bytes, wall_clock)
         self.endpoints: list[Endpoint] = []
         try:
-            ap = open_link(cfg.autopilot.url, cfg.autopilot.baud)
+            ap = open_link(cfg.autopilot.url, cfg.autopilot.baud, cfg.reconnect_max_s)
             self.autopilot = Endpoint(
                 cfg.autopilot.name or "autopilot", ap, is_gcs=False, signing=False,
                 queue=cfg.queue_packets,
             )  # fmt: skip
             self.endpoints.append(self.autopilot)
             for i, g in enumerate(cfg.gcs):
-                link = open_link(g.url, g.baud)
+                link = open_link(g.url, g.baud, cfg.reconnect_max_s)
                 self.endpoints.append(
                     Endpoint(g.name or f"gcs{i}", link, is_gcs=True, signing=g.signing,
                              queue=cfg.queue_packets)

@@ -98,7 +98,7 @@ def run_rov(
 
     Returns the loop's timing summary plus the link's counters. ``base_dir`` resolves a relative
     protocol path (default: the project's ``config/``). ``opener`` opens the link's port
-    (``fdi-bridge run`` passes one that reopens a lost port: :mod:`firmware_host.reconnect`).
+    (``fdi-bridge run`` passes one that reopens a lost port: :mod:`drivers.resilient`).
     """
     base = Path(base_dir) if base_dir is not None else load_rov_config(None)[1]
     proto = load_protocol(protocol_path(config, base))

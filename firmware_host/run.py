@@ -7,7 +7,7 @@ isolation, :class:`RoverBridge`); a file with the ROV's keys (``[link]``, ``[det
 
 Reliability (``docs/reliability.md``):
 
-* every port is a :class:`~firmware_host.reconnect.ResilientPort`: a port that errors or
+* every port is a :class:`~drivers.resilient.ResilientPort`: a port that errors or
   vanishes is reported once, the loop keeps running, and the same URL is reopened with backoff
   capped at ``rover.reconnect_max_s`` / ``link.reconnect_max_s``; data resumes without a restart
   (the rover pipeline and the ROV controller keep their state);
@@ -39,12 +39,12 @@ from pathlib import Path
 from typing import Any, Literal, TextIO
 
 from drivers.ptypair import PtyPair
+from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port
 from fdi.errors import ConfigError
 from firmware_host.capture import Channel
 from firmware_host.config import CONFIG_DIR, BridgeConfig, load_config
 from firmware_host.failsafe import RoverFailsafe, RovFailsafeMonitor
-from firmware_host.reconnect import Opener, ResilientPort
 from firmware_host.recorder import FlightRecorder, RecorderConfig
 from firmware_host.rover_outputs import MavlinkGpsSink, encode_nmea
 from firmware_host.rover_pipeline import EpochOutcome, EpochSink, RoverPipeline
@@ -224,6 +224,7 @@ class RoverBridge:
         nmea = nmea_url if nmea_url is not None else out.nmea_url
         mav = mavlink_url if mavlink_url is not None else out.mavlink_url
         self.nmea: ResilientNmeaSink | None = None
+        self.mav_port: ResilientPort | None = None
         if nmea:
             tap = None
             if recorder is not None:
@@ -234,10 +235,18 @@ class RoverBridge:
                                           tap=tap)
             sinks.append(self.nmea)
         if endpoint is None and mav:
-            from drivers.mavlink_io import MavEndpoint
+            from drivers.mavlink_io import MavEndpoint, PortEndpoint, is_network_url
 
-            endpoint = MavEndpoint(mav, source_system=out.mavlink_system,
-                                   source_component=out.mavlink_component)
+            if is_network_url(mav):
+                endpoint = MavEndpoint(mav, source_system=out.mavlink_system,
+                                       source_component=out.mavlink_component)
+            else:  # a serial line to the autopilot: reopened when it goes and comes back
+                self.mav_port = ResilientPort(
+                    SerialSettings(url=mav, baudrate=out.mavlink_baudrate, timeout_s=0.0),
+                    name="mavlink out", backoff_max_s=rc.reconnect_max_s, clock=clock,
+                    opener=opener)
+                endpoint = PortEndpoint(self.mav_port, source_system=out.mavlink_system,
+                                        source_component=out.mavlink_component)
         if endpoint is not None:
             if recorder is not None:
                 ch = recorder.add_channel(Channel(name="mavlink tx", url=mav or "endpoint",
@@ -278,6 +287,8 @@ class RoverBridge:
         if self.nmea is not None:
             s["nmea_out"] = (self.nmea.port.counters() if self.nmea.port is not None
                              else {"dropped": self.nmea.dropped})
+        if self.mav_port is not None:
+            s["mavlink_out"] = self.mav_port.counters()
         if self.recorder is not None:
             s["recorder"] = self.recorder.counters()
         return s

@@ -6,7 +6,7 @@ hour takes a minute or so of real time, and the result is the same on every run 
 :class:`~firmware_host.run.RoverBridge` (resilient port, pipeline, NMEA/MAVLink outputs,
 failsafe), the ROV's :func:`~firmware_host.rov_app.link_step` with
 :class:`~firmware_host.rov_control.RovController` on an :class:`~drivers.outland.OutlandLink`
-over a :class:`~firmware_host.reconnect.ResilientPort`, and the
+over a :class:`~drivers.resilient.ResilientPort`, and the
 :class:`~firmware_host.recorder.FlightRecorder` on every port direction. Only the devices are
 simulated (:class:`SimDevice`): the rover's receiver (:func:`firmware_host.rover_sim.generate`,
 GPS faults included) and the ROV (:class:`~firmware_host.rov_sim.RovSimServer`, compass faults).
@@ -42,13 +42,13 @@ import numpy as np
 
 from drivers.framecodec import load_protocol
 from drivers.outland import OutlandLink
+from drivers.resilient import ResilientPort
 from drivers.transport import SerialSettings
 from fdi.errors import PortError
 from firmware_host.capture import Channel
 from firmware_host.config import BridgeConfig, RoverConfig
 from firmware_host.failsafe import RovFailsafeMonitor
 from firmware_host.loop import FakeClock
-from firmware_host.reconnect import ResilientPort
 from firmware_host.recorder import FlightRecorder, RecorderConfig
 from firmware_host.rov_app import link_step
 from firmware_host.rov_config import load_rov_config, protocol_path

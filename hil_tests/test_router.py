@@ -535,3 +535,54 @@ def test_tcp_links_ground_station_server_and_autopilot_client(tmp_path: Path) ->
         router.close()
         gcs.close()
         ap.close()
+
+
+def test_tcp_client_link_reconnects_when_the_server_restarts(tmp_path: Path) -> None:
+    """SITL (a TCP server on 5760) is restarted: the router's ``tcp:`` link counts the loss,
+    connects again by itself to the same port, and the autopilot's packets reach the GCS."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    ap_port = listener.getsockname()[1]
+    cfg = MavlinkConfig(
+        autopilot=EndpointConfig(f"tcp:127.0.0.1:{ap_port}"),
+        gcs=(EndpointConfig("udpin:127.0.0.1:0"),),
+        stats_hz=0.0,
+        reconnect_max_s=0.2,
+    )
+    router = Router(cfg)
+    ap, _ = listener.accept()
+    listener.close()
+    router.start()
+    gcs = mio.MavEndpoint(f"udpout:127.0.0.1:{_port(router, 1)}", source_system=255,
+                          source_component=190)  # fmt: skip
+    packer = mio.MavPacker(1, 1)
+    link = router.endpoints[0].link
+
+    def heartbeat_reaches_gcs(sock: socket.socket) -> bool:
+        sock.sendall(packer.send_heartbeat())
+        msg = gcs.recv(timeout_s=0.02)
+        while msg is not None:
+            if (msg.get_srcSystem(), msg.get_srcComponent()) == (1, 1):
+                return True
+            msg = gcs.recv(0.0)
+        return False
+
+    ap2: socket.socket | None = None
+    try:
+        gcs.send_heartbeat()
+        _wait(lambda: heartbeat_reaches_gcs(ap), "the autopilot's heartbeat")
+        ap.close()  # SITL stops ...
+        _wait(lambda: link.errors == 1 and not link.has_peer(), "the loss")
+        listener = socket.create_server(("127.0.0.1", ap_port))  # ... and starts again
+        listener.settimeout(10.0)
+        ap2, _ = listener.accept()
+        listener.close()
+        sock2 = ap2
+        _wait(lambda: heartbeat_reaches_gcs(sock2), "the heartbeat after the restart")
+        assert getattr(link, "reconnects", None) == 1
+        assert router._thread is not None and router._thread.is_alive()
+    finally:
+        router.close()
+        gcs.close()
+        ap.close()
+        if ap2 is not None:
+            ap2.close()

@@ -19,11 +19,11 @@ from pathlib import Path
 import pytest
 
 from drivers.ptypair import PtyPair
+from drivers.resilient import ResilientPort
 from drivers.transport import SerialSettings
 from fdi.errors import PortError
 from firmware_host.config import BridgeConfig, RoverConfig
 from firmware_host.loop import FakeClock
-from firmware_host.reconnect import ResilientPort
 from firmware_host.rover_sim import RoverScenario, generate
 from firmware_host.run import RoverBridge, run_rov_bridge
 
@@ -287,3 +287,138 @@ def test_rov_link_survives_far_end_closing(tmp_path: Path) -> None:
         stop1.set()
         bridge.join(5.0)
         pty.close()
+
+
+# --------------------------------------------------------------------------- MAVLink serial links
+
+
+def _heartbeats(data: bytes, src: tuple[int, int]) -> int:
+    """HEARTBEATs from ``src`` (system, component) in a MAVLink byte stream."""
+    from drivers.mavlink_framer import MavFramer
+
+    n = 0
+    for frame in MavFramer().feed(data):
+        if frame.msgid == 0 and (frame.sysid, frame.compid) == src:
+            n += 1
+    return n
+
+
+def test_router_serial_link_survives_autopilot_reboot(tmp_path: Path) -> None:
+    """The autopilot's USB port vanishes (a reboot) and comes back under the same path: the
+    router keeps serving the ground station, drops and counts what it cannot deliver, reopens
+    the path by itself, and packets flow both ways again."""
+    from drivers.mavlink_io import MavEndpoint, MavPacker
+    from firmware_host.router import EndpointConfig, MavlinkConfig, Router
+
+    link = tmp_path / "ttyACM0"
+    pty = PtyPair(link=link, baudrate=115200)
+    cfg = MavlinkConfig(autopilot=EndpointConfig(str(link), baud=115200),
+                        gcs=(EndpointConfig("udpin:127.0.0.1:0"),), reconnect_max_s=0.2)
+    router = Router(cfg)
+    router.start()
+    addr = router.endpoints[1].link.local_address
+    assert addr is not None
+    gcs = MavEndpoint(f"udpout:127.0.0.1:{addr[1]}", source_system=255, source_component=190)
+    autopilot = MavPacker(source_system=1, source_component=1)
+    serial_link = router.endpoints[0].link
+    got: list[int] = []
+
+    def autopilot_heartbeat_reaches_gcs(p: PtyPair) -> bool:
+        p.write(autopilot.send_heartbeat())
+        msg = gcs.recv(timeout_s=0.02)
+        while msg is not None:
+            if (msg.get_srcSystem(), msg.get_srcComponent()) == (1, 1):
+                got.append(1)
+                return True
+            msg = gcs.recv(0.0)
+        return False
+
+    pty2: PtyPair | None = None
+    try:
+        gcs.send_heartbeat()
+        wait_for(lambda: autopilot_heartbeat_reaches_gcs(pty), what="autopilot -> gcs")
+        pty.close()  # the autopilot reboots: its USB device node goes away
+        assert not link.exists()
+        wait_for(lambda: serial_link.port.losses == 1, what="loss detected")
+        before = serial_link.port.tx_dropped
+        wait_for(lambda: (gcs.send_heartbeat(), serial_link.port.tx_dropped > before)[1],
+                 what="gcs packets dropped and counted while the autopilot is away")
+        assert router._thread is not None and router._thread.is_alive()
+        pty2 = PtyPair(link=link, baudrate=115200)  # ... and is back
+        wait_for(lambda: serial_link.port.up, what="reopened")
+        p2 = pty2
+        wait_for(lambda: autopilot_heartbeat_reaches_gcs(p2), what="autopilot -> gcs again")
+        seen = bytearray()
+
+        def gcs_heartbeat_reaches_autopilot() -> bool:
+            gcs.send_heartbeat()
+            seen.extend(p2.read(0.02))
+            return _heartbeats(bytes(seen), (255, 190)) > 0
+
+        wait_for(gcs_heartbeat_reaches_autopilot, what="gcs -> autopilot again")
+        assert serial_link.port.losses == 1 and serial_link.port.reopens == 1
+        assert router.endpoints[0].link.errors >= 1  # the loss, in the router's link statistics
+    finally:
+        router.close()
+        gcs.close()
+        pty.close()
+        if pty2 is not None:
+            pty2.close()
+
+
+def test_rover_serial_mavlink_output_survives_autopilot_reboot(tmp_path: Path) -> None:
+    """``rover.output.mavlink_url`` is a serial device: GPS_INPUT stops while it is gone (counted
+    as dropped), and resumes on the same path without a restart."""
+    from drivers.mavlink_framer import MavFramer
+
+    gps_link, ap_link = tmp_path / "gps", tmp_path / "ttyACM0"
+    gps = PtyPair(link=gps_link, baudrate=9600)
+    ap = PtyPair(link=ap_link, baudrate=57600)
+    settings = SerialSettings(url=str(gps_link), baudrate=9600, timeout_s=0.02)
+    out = BridgeConfig().rover.output
+    from dataclasses import replace
+
+    cfg = BridgeConfig(rover=RoverConfig(
+        port=settings, reconnect_max_s=0.2,
+        output=replace(out, mavlink_url=str(ap_link), hold_on_alarm=False)))
+    bridge = RoverBridge(cfg)
+    stop = threading.Event()
+    thread = threading.Thread(target=bridge.run, args=(stop.is_set,), daemon=True)
+    thread.start()
+    epochs = _epochs(200, seed=5)
+    gps_input_id = 232
+
+    def gps_inputs(p: PtyPair, buf: bytearray) -> int:
+        buf.extend(p.read(0.01))
+        return sum(1 for f in MavFramer().feed(bytes(buf)) if f.msgid
+                   == gps_input_id)
+
+    ap2: PtyPair | None = None
+    try:
+        buf = bytearray()
+        _feed(gps, epochs[:60])
+        wait_for(lambda: gps_inputs(ap, buf) >= 50, what="GPS_INPUT on the serial line")
+        ap.close()
+        wait_for(lambda: bridge.mav_port is not None and bridge.mav_port.losses == 1,
+                 what="loss of the autopilot's port")
+        _feed(gps, epochs[60:100])
+        wait_for(lambda: bridge.pipeline.epochs >= 99, what="epochs while away")
+        assert bridge.mav_port is not None and bridge.mav_port.tx_dropped > 0
+        assert thread.is_alive()
+        ap2 = PtyPair(link=ap_link, baudrate=57600)
+        wait_for(lambda: bridge.mav_port is not None and bridge.mav_port.up, what="reopened")
+        buf2 = bytearray()
+        _feed(gps, epochs[100:])
+        p2 = ap2
+        wait_for(lambda: gps_inputs(p2, buf2) >= 80, what="GPS_INPUT again")
+        s = bridge.summary()
+        assert s["mavlink_out"]["losses"] == 1 and s["mavlink_out"]["reopens"] == 1
+        assert s["output_errors"] == 0  # the sink never saw an exception
+    finally:
+        stop.set()
+        thread.join(5.0)
+        bridge.close()
+        gps.close()
+        ap.close()
+        if ap2 is not None:
+            ap2.close()

@@ -170,19 +170,27 @@ class ResilientPort:
         return read_some(self, size)
 
     def write(self, data: bytes, /) -> int | None:
+        """Bytes written: all of them, or what a non-blocking port took (``write_timeout=0``)."""
         if self._port is None and not self.service():
             self.tx_dropped += len(data)
             return 0
         try:
-            self._port.write(data)
+            n = self._port.write(data)
         except Exception as err:
             self._lost(err)
             self.tx_dropped += len(data)
             return 0
-        self.bytes_tx += len(data)
-        if self.on_tx is not None:
-            self.on_tx(data)
-        return len(data)
+        n = len(data) if n is None else int(n)
+        self.bytes_tx += n
+        if self.on_tx is not None and n:
+            self.on_tx(data[:n])
+        return n
+
+    def fileno(self) -> int:
+        """The open port's descriptor (to wait on); OSError while the port is down."""
+        if self._port is None:
+            raise OSError("port is down")
+        return int(self._port.fileno())
 
     def reset_input_buffer(self) -> None:
         if self._port is None:
