@@ -36,6 +36,19 @@ _LINE_STOP = re.compile(rb"[\r\n$]")
 _LINE_END = re.compile(rb"[\r\n]")
 _NON_PRINTABLE = re.compile(rb"[^\x20-\x7e]")
 _BLANKS = b" \t\x00"
+_CLEAN_LINES: dict[int, re.Pattern[bytes]] = {}  # max_line -> pattern of _clean_line_re
+
+
+def _clean_line_re(max_line: int) -> re.Pattern[bytes] | None:
+    """Optional blanks and line ends, then a whole line the framer passes on unchanged: ``$``,
+    at most ``max_line - 2`` printable characters other than ``$``, and its CR or LF."""
+    if max_line < 2:
+        return None
+    pattern = _CLEAN_LINES.get(max_line)
+    if pattern is None:
+        body = rb"\$[\x20-\x23\x25-\x7e]{0,%d}" % (max_line - 2)
+        pattern = _CLEAN_LINES[max_line] = re.compile(rb"[\r\n \t\x00]*(" + body + rb")[\r\n]")
+    return pattern
 
 
 class Ignored(Exception):
@@ -79,8 +92,21 @@ class NmeaFramer:
         # Scans with ``re``/``bytes.find`` rather than byte by byte: the framer is the hot
         # path of an offline replay (tens of thousands of epochs a second).
         buf = self._buf
+        clean = _clean_line_re(self.max_line)
         i, n = 0, len(data)
         while i < n:
+            if clean is not None and not self._in_line and not self._garbage:
+                # Fast path: whole, clean lines (the usual case) in one regex match each.
+                # Exactly what the general path below does with them: the blanks and line
+                # ends before the '$' are not garbage, and the line is yielded as it is.
+                m = clean.match(data, i)
+                if m is not None:
+                    self._skipping = False
+                    while m is not None:
+                        yield m.group(1)
+                        i = m.end()
+                        m = clean.match(data, i)
+                    continue
             if self._in_line:
                 m = _LINE_STOP.search(data, i)
                 end = m.start() if m is not None else n
