@@ -22,6 +22,7 @@ import math
 import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from functools import lru_cache
 
 import pynmea2
 
@@ -293,6 +294,12 @@ def _int(text: str, name: str) -> int | None:
         raise DecodeError("bad_field", f"{name}={text!r}") from err
 
 
+# The time, date and position conversions are pure and a receiver repeats their fields within
+# an epoch (GGA and RMC carry the same time and position), so their results are cached (errors
+# are not: a bad field raises every time).
+
+
+@lru_cache(maxsize=32)
 def _time(text: str) -> float | None:
     """hhmmss[.sss] -> seconds of day."""
     if text == "":
@@ -309,6 +316,7 @@ def _time(text: str) -> float | None:
     return hh * 3600 + mm * 60 + ss
 
 
+@lru_cache(maxsize=32)
 def _date(ddmmyy: str) -> tuple[int, int, int] | None:
     if ddmmyy == "":
         return None
@@ -321,6 +329,7 @@ def _date(ddmmyy: str) -> tuple[int, int, int] | None:
     return (1900 + y if y >= 80 else 2000 + y, m, d)
 
 
+@lru_cache(maxsize=32)
 def _latlon(value: str, hemi: str, is_lat: bool) -> float | None:
     """ddmm.mmmm / dddmm.mmmm with hemisphere -> signed degrees, strictly range-checked."""
     if value == "" and hemi == "":
@@ -374,10 +383,12 @@ def parse_sentence(line: bytes) -> NmeaMessage:
     star = len(line) - 3
     if star < 1 or line[star] != 0x2A:  # '*' followed by two characters ends every sentence
         raise DecodeError("no_checksum", line[:20].decode("ascii", "replace"))
-    comma = line.find(b",", 1, star)
-    address = line[1 : comma if comma > 0 else star].decode("ascii")
+    text = line.decode("ascii")
+    comma = text.find(",", 1, star)
+    address = text[1 : comma if comma > 0 else star]
     kind = address[2:]
-    if address[:1] == "P" or kind not in SUPPORTED:
+    decoder = _DECODERS.get(kind)
+    if decoder is None or address[:1] == "P":
         if checksum(line[1:star]) != _given(line, star):
             raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
         if address.startswith("P"):
@@ -391,7 +402,7 @@ def parse_sentence(line: bytes) -> NmeaMessage:
     # pynmea2 splits the sentence and, with check=True, verifies the checksum (once: we do
     # not compute it again on this path). Its field conversions are not used.
     try:
-        msg = pynmea2.parse(line.decode("ascii"), check=True)
+        msg = pynmea2.parse(text, check=True)
     except pynmea2.ChecksumError as err:
         raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace")) from err
     except (pynmea2.ParseError, ValueError, AttributeError, TypeError) as err:
@@ -399,8 +410,11 @@ def parse_sentence(line: bytes) -> NmeaMessage:
             raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace")) from err
         raise DecodeError("parse_error", str(err)[:60]) from err
     data: list[str] = msg.data
-    n = len(data)
-    return _DECODERS[kind](talker, data + _PAD, n)
+    return decoder(talker, data + _PAD, len(data))
+
+
+# The decoders build the frozen messages with positional arguments, in field order (and so in
+# the order the fields are checked).
 
 
 def _gga(talker: str, d: list[str], n: int) -> Gga:
@@ -415,17 +429,17 @@ def _gga(talker: str, d: list[str], n: int) -> Gga:
     if sats is not None and not 0 <= sats <= 99:
         raise DecodeError("bad_field", f"sats={sats}")
     return Gga(
-        talker=talker,
-        time_s=_time(d[0]),
-        lat_deg=_latlon(d[1], d[2], True),
-        lon_deg=_latlon(d[3], d[4], False),
-        quality=quality,
-        num_sats=sats,
-        hdop=_nonneg(d[7], "hdop"),
-        alt_msl_m=_float(d[8], "alt"),
-        geoid_sep_m=_float(d[10], "geoid_sep"),
-        dgps_age_s=_nonneg(d[12], "dgps_age"),
-        dgps_station=d[13] or None,
+        talker,
+        _time(d[0]),  # time_s
+        _latlon(d[1], d[2], True),  # lat_deg
+        _latlon(d[3], d[4], False),  # lon_deg
+        quality,
+        sats,  # num_sats
+        _nonneg(d[7], "hdop"),
+        _float(d[8], "alt"),  # alt_msl_m
+        _float(d[10], "geoid_sep"),
+        _nonneg(d[12], "dgps_age"),
+        d[13] or None,  # dgps_station
     )
 
 
@@ -449,15 +463,15 @@ def _rmc(talker: str, d: list[str], n: int) -> Rmc:
             raise
         lat = lon = None  # void RMC with junk placeholders (seen: lat "36000.0000")
     return Rmc(
-        talker=talker,
-        time_s=_time(d[0]),
-        valid=valid,
-        lat_deg=lat,
-        lon_deg=lon,
-        speed_mps=None if speed_kn is None else speed_kn * KNOT_MPS,
-        course_deg=course,
-        date=_date(d[8]) if valid else _safe_date(d[8]),
-        mode=mode,
+        talker,
+        _time(d[0]),  # time_s
+        valid,
+        lat,
+        lon,
+        None if speed_kn is None else speed_kn * KNOT_MPS,  # speed_mps
+        course,
+        _date(d[8]) if valid else _safe_date(d[8]),  # date
+        mode,
     )
 
 
@@ -484,7 +498,7 @@ def _vtg(talker: str, d: list[str], n: int) -> Vtg:
     mode = d[8] or None
     if mode == "N":
         course = speed = None
-    return Vtg(talker=talker, course_deg=course, speed_mps=speed, mode=mode)
+    return Vtg(talker, course, speed, mode)
 
 
 def _gsa(talker: str, d: list[str], n: int) -> Gsa:
