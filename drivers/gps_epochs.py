@@ -43,7 +43,7 @@ class GpsEpoch:
     sentences: tuple[str, ...]
 
 
-@dataclass
+@dataclass(slots=True)
 class _Pending:
     utc_s: float | None = None
     types: list[str] = field(default_factory=list)
@@ -86,38 +86,42 @@ class _Pending:
         speed = course = None
         if rmc is not None and rmc.valid:
             speed, course = rmc.speed_mps, rmc.course_deg
-        if self.vtg is not None and self.vtg.speed_mps is not None:
-            speed, course = self.vtg.speed_mps, self.vtg.course_deg
+        vtg = self.vtg
+        if vtg is not None and vtg.speed_mps is not None:
+            speed, course = vtg.speed_mps, vtg.course_deg
         date = None
+        zda = self.zda
         if rmc is not None and rmc.date is not None:
             date = rmc.date
-        elif self.zda is not None and self.zda.date is not None:
-            date = self.zda.date
+        elif zda is not None and zda.date is not None:
+            date = zda.date
         else:
             date = last_date
-        if self.gsa is not None and self.gsa.hdop is not None and hdop is None:
-            hdop = self.gsa.hdop
+        gsa = self.gsa
+        if gsa is not None and gsa.hdop is not None and hdop is None:
+            hdop = gsa.hdop
         gst = self.gst
+        # Positional, in GpsEpoch's field order (this runs once an epoch).
         return GpsEpoch(
-            utc_s=self.utc_s,
-            date=date,
-            valid=valid,
-            lat_deg=lat,
-            lon_deg=lon,
-            alt_msl_m=alt if valid else None,
-            geoid_sep_m=sep,
-            quality=quality if valid else 0,
-            num_sats=sats,
-            hdop=hdop,
-            vdop=self.gsa.vdop if self.gsa is not None else None,
-            dgps_age_s=age,
-            speed_mps=speed,
-            course_deg=course,
-            sd_lat_m=gst.sd_lat_m if gst is not None else None,
-            sd_lon_m=gst.sd_lon_m if gst is not None else None,
-            sd_alt_m=gst.sd_alt_m if gst is not None else None,
-            talker=talker,
-            sentences=tuple(self.types),
+            self.utc_s,
+            date,
+            valid,
+            lat,
+            lon,
+            alt if valid else None,  # alt_msl_m
+            sep,  # geoid_sep_m
+            quality if valid else 0,  # quality
+            sats,  # num_sats
+            hdop,
+            gsa.vdop if gsa is not None else None,  # vdop
+            age,  # dgps_age_s
+            speed,  # speed_mps
+            course,  # course_deg
+            gst.sd_lat_m if gst is not None else None,  # sd_lat_m
+            gst.sd_lon_m if gst is not None else None,  # sd_lon_m
+            gst.sd_alt_m if gst is not None else None,  # sd_alt_m
+            talker,
+            tuple(self.types),  # sentences
         )
 
 
@@ -152,7 +156,7 @@ class EpochAssembler:
 
     def feed(self, msg: NmeaMessage) -> Iterator[GpsEpoch]:
         kind, slot, timed = _KINDS[type(msg)]
-        msg_time: float | None = getattr(msg, "time_s", None)
+        msg_time: float | None = getattr(msg, "time_s", None) if timed else None
         cur = self._cur
         if (
             timed

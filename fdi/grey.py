@@ -69,13 +69,14 @@ def gm11_predict_shifted(values: Sequence[float], shift: float) -> float:
     if n < 3:
         raise ValueError("GM(1,1) needs at least 3 values")
     offset = shift - min(values)
-    x0_1 = values[0] + offset
+    rest = iter(values)
+    x0_1 = next(rest) + offset
     x1 = x0_1
     sz = sy = szz = szy = 0.0
-    for k in range(1, n):
-        xk = values[k] + offset
+    for value in rest:  # k = 2..n
+        xk = value + offset
         prev = x1
-        x1 += xk
+        x1 += xk  # eq. (9): 1-AGO
         z = 0.5 * (x1 + prev)  # eq. (11)
         sz += z
         sy += xk

@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 
-@dataclass
+@dataclass(slots=True)
 class AxisFilter:
     """One axis: state ``[p, v]``, covariance ``[[P00, P01], [P01, P11]]``."""
 
@@ -35,9 +35,10 @@ class AxisFilter:
         # (1) x̂(k,k−1) = Φ x̂(k−1), Φ = [[1, dt], [0, 1]]
         self.p += self.v * dt
         # P(k,k−1) = Φ P Φᵀ + Q, Q = q [[dt³/3, dt²/2], [dt²/2, dt]]
-        p00 = self.P00 + 2.0 * dt * self.P01 + dt * dt * self.P11 + q * dt**3 / 3.0
-        p01 = self.P01 + dt * self.P11 + q * dt * dt / 2.0
-        p11 = self.P11 + q * dt
+        P01, P11 = self.P01, self.P11
+        p00 = self.P00 + 2.0 * dt * P01 + dt * dt * P11 + q * dt**3 / 3.0
+        p01 = P01 + dt * P11 + q * dt * dt / 2.0
+        p11 = P11 + q * dt
         self.P00, self.P01, self.P11 = p00, p01, p11
 
     def innovation(self, z: float, r: float) -> tuple[float, float]:
@@ -45,16 +46,19 @@ class AxisFilter:
         return z - self.p, self.P00 + r
 
     def update(self, z: float, r: float) -> None:
-        d, s = self.innovation(z, r)
-        k0 = self.P00 / s
-        k1 = self.P01 / s
+        P00, P01 = self.P00, self.P01
+        # (3) D and (4) S, as in innovation()
+        d = z - self.p
+        s = P00 + r
+        k0 = P00 / s
+        k1 = P01 / s
         self.p += k0 * d
         self.v += k1 * d
         # Joseph form: P = (I − K H) P (I − K H)ᵀ + K R Kᵀ
         a = 1.0 - k0
-        p00 = a * a * self.P00 + k0 * k0 * r
-        p01 = a * (self.P01 - k1 * self.P00) + k0 * k1 * r
-        p11 = self.P11 - 2.0 * k1 * self.P01 + k1 * k1 * self.P00 + k1 * k1 * r
+        p00 = a * a * P00 + k0 * k0 * r
+        p01 = a * (P01 - k1 * P00) + k0 * k1 * r
+        p11 = self.P11 - 2.0 * k1 * P01 + k1 * k1 * P00 + k1 * k1 * r
         self.P00, self.P01, self.P11 = p00, p01, p11
 
 
@@ -78,8 +82,9 @@ class GpsKalman:
         self.initialised = True
 
     def predict(self, dt: float) -> None:
+        q = self.q
         for ax in self.axes:
-            ax.predict(dt, self.q)
+            ax.predict(dt, q)
 
     def test(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> float:
         """F(k) of eq. (5) for the predicted state; also stores ``D`` and ``S``."""

@@ -206,10 +206,11 @@ class RoverIsolator:
         if len(w) < 4:
             return w[-1]
         shift = self.p.shift_m
+        east, north, up = zip(*w, strict=True)  # the window's three axes
         return (
-            gm11_predict_shifted([v[0] for v in w], shift),
-            gm11_predict_shifted([v[1] for v in w], shift),
-            gm11_predict_shifted([v[2] for v in w], shift),
+            gm11_predict_shifted(east, shift),
+            gm11_predict_shifted(north, shift),
+            gm11_predict_shifted(up, shift),
         )
 
     def _doppler_gate(self) -> float:
@@ -338,17 +339,17 @@ class RoverIsolator:
             t.pred = (a[0] + d[0] - a[2], a[1] + d[1] - a[3], t.pred[2])
             grey_fault = False
 
+        if not (grey_fault or chi2_fault or doppler_fault or quality):
+            self._accepted(fix, z, t)
+            self._window_append(z, d)
+            self.kf.update(z, r)
+            return self._accept(z, t, "")
         reasons = (
             (["grey"] if grey_fault else [])
             + (["chi2"] if chi2_fault else [])
             + (["doppler"] if doppler_fault else [])
             + quality
         )
-        if not reasons:
-            self._accepted(fix, z, t)
-            self._window_append(z, d)
-            self.kf.update(z, r)
-            return self._accept(z, t, "")
         # Isolation: replace the faulty fix by its prediction before the filter update.
         if t.pred is not None and self._consec < p.max_consecutive:
             self._window_append(t.pred, d)
@@ -436,25 +437,27 @@ class RoverIsolator:
         alarm_raised: bool = False,
         zones: tuple[int, ...] | None = None,
     ) -> Decision:
+        kf = self.kf
+        # Positional, in Decision's field order (this runs once an epoch).
         return Decision(
-            action=action,
-            fault=fault,
-            reason=reason,
-            out_enu=out,
-            pred_enu=t.pred,
-            grey_res_h=t.res_h,
-            grey_res_u=t.res_u,
-            grey_gate_h=t.gate_h,
-            grey_gate_u=t.gate_u,
-            doppler_res=t.doppler_res,
-            doppler_gate=t.doppler_gate,
-            chi2=t.F,
-            chi2_threshold=self.T_d,
-            consecutive=self._consec,
-            alarm=self._alarm,
-            alarm_raised=alarm_raised,
-            kf_enu=self.kf.position if self.kf.initialised else None,
-            zones=zones,
+            action,
+            fault,
+            reason,
+            out,  # out_enu
+            t.pred,  # pred_enu
+            t.res_h,  # grey_res_h
+            t.res_u,  # grey_res_u
+            t.gate_h,  # grey_gate_h
+            t.gate_u,  # grey_gate_u
+            t.doppler_res,
+            t.doppler_gate,
+            t.F,  # chi2
+            self.T_d,  # chi2_threshold
+            self._consec,  # consecutive
+            self._alarm,  # alarm
+            alarm_raised,
+            kf.position if kf.initialised else None,  # kf_enu
+            zones,
         )
 
     def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests) -> None:
