@@ -37,6 +37,7 @@ class NmeaStream:
 
     def feed(self, data: bytes) -> Iterator[GpsEpoch]:
         self.bytes_in += len(data)
+        assemble = self.assembler.feed
         for item in self.framer.feed(data):
             if isinstance(item, Rejected):
                 self._reject(item.reason, item.data)
@@ -50,7 +51,7 @@ class NmeaStream:
                 self.ignored[ign.sentence_type] += 1
                 continue
             self.sentences += 1
-            yield from self.assembler.feed(msg)
+            yield from assemble(msg)
 
     def flush(self) -> Iterator[GpsEpoch]:
         for item in self.framer.flush():

@@ -127,24 +127,29 @@ class GateHealth:
         F = decision.chi2
         if F is None or not math.isfinite(F):
             return
-        self._t_d = decision.chi2_threshold
-        if decision.grey_gate_h is not None and math.isfinite(decision.grey_gate_h):
-            self._grey_gate = decision.grey_gate_h
+        t_d = self._t_d = decision.chi2_threshold
+        grey_gate = decision.grey_gate_h
+        if grey_gate is not None and math.isfinite(grey_gate):
+            self._grey_gate = grey_gate
         if S is not None:
-            self._j_min = math.sqrt(decision.chi2_threshold * max(S[0], S[1]))
-            self._inert += self._j_min > self.min_jump_m
+            j_min = self._j_min = math.sqrt(t_d * max(S[0], S[1]))
+            self._inert += j_min > self.min_jump_m
             self._tested += 1
-        if len(self._flags) == self.window:
-            self._flag_sum -= self._flags[0]
-        self._flags.append(decision.fault)
-        self._flag_sum += decision.fault
-        if decision.fault:
+        window = self.window
+        flags = self._flags
+        fault = decision.fault
+        if len(flags) == window:
+            self._flag_sum -= flags[0]
+        flags.append(fault)
+        self._flag_sum += fault
+        if fault:
             return
         self._n += 1
         self._sum += F
-        if len(self._win) == self.window:
-            self._win_sum -= self._win[0]
-        self._win.append(F)
+        win = self._win
+        if len(win) == window:
+            self._win_sum -= win[0]
+        win.append(F)
         self._win_sum += F
 
     def report(self) -> GateHealthReport:

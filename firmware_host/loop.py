@@ -155,8 +155,9 @@ class EpochTimer:
     def stop(self, period_s: float | None) -> float:
         """End the epoch; ``period_s`` is the receiver's epoch period (None if not known yet)."""
         dt = self.clock() - self._t0
-        self.stats.proc_s.append(dt)
-        self.stats.steps += 1
+        stats = self.stats
+        stats.proc_s.append(dt)
+        stats.steps += 1
         if period_s is not None and dt > period_s:
-            self.stats.overruns += 1
+            stats.overruns += 1
         return dt

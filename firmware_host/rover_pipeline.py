@@ -131,43 +131,49 @@ class RoverPipeline:
     def process(self, epoch: GpsEpoch) -> EpochOutcome:
         self.timer.start()
         t_s = self._time(epoch.utc_s)
+        lat_deg, lon_deg, alt_msl = epoch.lat_deg, epoch.lon_deg, epoch.alt_msl_m
+        frame = self.frame
         enu = None
         h = None
-        if epoch.valid and epoch.lat_deg is not None and epoch.lon_deg is not None:
-            if epoch.alt_msl_m is not None:
-                h = epoch.alt_msl_m + (epoch.geoid_sep_m or 0.0)
-            if self.frame is None:
-                self.frame = LocalFrame(epoch.lat_deg, epoch.lon_deg, h or 0.0)
+        if epoch.valid and lat_deg is not None and lon_deg is not None:
+            if alt_msl is not None:
+                h = alt_msl + (epoch.geoid_sep_m or 0.0)
+            if frame is None:
+                frame = self.frame = LocalFrame(lat_deg, lon_deg, h or 0.0)
             if h is None:
-                e, n, _ = self.frame.to_enu(epoch.lat_deg, epoch.lon_deg, self.frame.h0_m)
+                e, n, _ = frame.to_enu(lat_deg, lon_deg, frame.h0_m)
                 enu = (e, n, math.nan)  # a 2D fix: height unknown
             else:
-                enu = self.frame.to_enu(epoch.lat_deg, epoch.lon_deg, h)
+                enu = frame.to_enu(lat_deg, lon_deg, h)
         sd = None
-        if epoch.sd_lat_m is not None and epoch.sd_lon_m is not None:
-            sd = (epoch.sd_lon_m, epoch.sd_lat_m, epoch.sd_alt_m or 2.0 * epoch.sd_lat_m)
+        sd_lat = epoch.sd_lat_m
+        if sd_lat is not None and epoch.sd_lon_m is not None:
+            sd = (epoch.sd_lon_m, sd_lat, epoch.sd_alt_m or 2.0 * sd_lat)
         if t_s is None and enu is not None:
             enu = None  # a fix with no time cannot be put in order: not passed on
+        # Positional, in FixInput's field order (this runs once an epoch).
         fix = FixInput(
-            t_s=t_s if t_s is not None else 0.0,
-            enu=enu,
-            speed_mps=epoch.speed_mps,
-            course_deg=epoch.course_deg,
-            sd_enu_m=sd,
-            num_sats=epoch.num_sats,
-            hdop=epoch.hdop,
+            t_s if t_s is not None else 0.0,  # t_s
+            enu,
+            epoch.speed_mps,
+            epoch.course_deg,
+            sd,  # sd_enu_m
+            epoch.num_sats,
+            epoch.hdop,
         )
-        d = self.isolator.step(fix)
-        self.gate_health.update(d, self.isolator.kf.S if d.chi2 is not None else None)
+        isolator = self.isolator
+        d = isolator.step(fix)
+        self.gate_health.update(d, isolator.kf.S if d.chi2 is not None else None)
         lat = lon = alt = None
-        if d.out_enu is not None and self.frame is not None:
+        if d.out_enu is not None and frame is not None:
             if d.action == "accept":
-                lat, lon, alt = epoch.lat_deg, epoch.lon_deg, epoch.alt_msl_m
+                lat, lon, alt = lat_deg, lon_deg, alt_msl
             else:
-                glat, glon, gh = self.frame.to_lla(*d.out_enu)
+                glat, glon, gh = frame.to_lla(*d.out_enu)
                 lat, lon = glat, glon
-                alt = gh - (epoch.geoid_sep_m or 0.0) if epoch.alt_msl_m is not None else None
-        record = self._record(epoch, d, enu, lat, lon, alt) if self.jsonl is not None else {}
+                alt = gh - (epoch.geoid_sep_m or 0.0) if alt_msl is not None else None
+        jsonl = self.jsonl
+        record = self._record(epoch, d, enu, lat, lon, alt) if jsonl is not None else {}
         outcome = EpochOutcome(epoch, d, lat, lon, alt, t_s, record)
         self.last_outcome = outcome
         # Counters.
@@ -181,22 +187,9 @@ class RoverPipeline:
             log.warning("GPS alarm at utc %s: %d faults in a row; stop automatic navigation",
                         epoch.utc_s, self.cfg.detector.max_consecutive)
         if self.epochs % 100 == 0:
-            health = self.gate_health.report()
-            if health.messages:
-                # A χ² gate that only sees gross jumps is expected when the grey test carries
-                # the detection (its gate covers the minimum jump): say so at INFO. A warning
-                # when nothing in the pipeline could see the minimum jump, or S is too small.
-                grey_covers = (
-                    self.cfg.detector.strategy == "grey"
-                    and health.grey_gate_h_m is not None
-                    and health.grey_gate_h_m <= health.min_jump_m
-                )
-                if health.status == "nis_high" or not grey_covers:
-                    self.ratelog.warning("gate health", "; ".join(health.messages))
-                else:
-                    log.info("gate health: %s", "; ".join(health.messages))
-        if self.jsonl is not None:
-            self.jsonl.write(json.dumps(record, separators=(",", ":")) + "\n")
+            self._check_gate_health()
+        if jsonl is not None:
+            jsonl.write(json.dumps(record, separators=(",", ":")) + "\n")
         for sink in self.sinks:
             try:
                 sink.emit(outcome)
@@ -204,13 +197,30 @@ class RoverPipeline:
                 self.sink_errors += 1
                 self.ratelog.warning(f"output {type(sink).__name__}", str(err))
         # The receiver's epoch period (smoothed) is the budget an epoch overruns.
-        if t_s is not None and self._last_t is not None and 0 < t_s - self._last_t < 5.0:
-            p = t_s - self._last_t
-            self._period_s = p if self._period_s is None else 0.9 * self._period_s + 0.1 * p
         if t_s is not None:
+            last_t = self._last_t
+            if last_t is not None and 0 < t_s - last_t < 5.0:
+                p = t_s - last_t
+                self._period_s = p if self._period_s is None else 0.9 * self._period_s + 0.1 * p
             self._last_t = t_s
         self.timer.stop(self._period_s)
         return outcome
+
+    def _check_gate_health(self) -> None:
+        health = self.gate_health.report()
+        if health.messages:
+            # A χ² gate that only sees gross jumps is expected when the grey test carries
+            # the detection (its gate covers the minimum jump): say so at INFO. A warning
+            # when nothing in the pipeline could see the minimum jump, or S is too small.
+            grey_covers = (
+                self.cfg.detector.strategy == "grey"
+                and health.grey_gate_h_m is not None
+                and health.grey_gate_h_m <= health.min_jump_m
+            )
+            if health.status == "nis_high" or not grey_covers:
+                self.ratelog.warning("gate health", "; ".join(health.messages))
+            else:
+                log.info("gate health: %s", "; ".join(health.messages))
 
     def _record(
         self,
