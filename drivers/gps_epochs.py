@@ -155,6 +155,10 @@ class EpochAssembler:
         return self._ender
 
     def feed(self, msg: NmeaMessage) -> Iterator[GpsEpoch]:
+        yield from self.push(msg)
+
+    def push(self, msg: NmeaMessage) -> tuple[GpsEpoch, ...]:
+        """:meth:`feed` without the generator: the epochs ``msg`` completes (usually none)."""
         kind, slot, timed = _KINDS[type(msg)]
         msg_time: float | None = getattr(msg, "time_s", None) if timed else None
         cur = self._cur
@@ -170,13 +174,14 @@ class EpochAssembler:
             # trusting it; from now on epochs close when the fix time changes.
             if kind in self._last_closed_types:
                 self.duplicates += 1  # e.g. GPGGA after the GNGGA that closed the epoch
-                return
+                return ()
             self.late += 1
             if self._ender is not None:
                 self._banned.add(self._ender)
                 self._ender = None
                 self._ender_votes = (None, 0)
-            return
+            return ()
+        closed: tuple[GpsEpoch, ...] = ()
         if cur is not None and timed:
             new_time = (
                 msg_time is not None
@@ -192,7 +197,7 @@ class EpochAssembler:
                     self.orphans += len(cur.types)  # VTG/GSA with no fix of their own
                     self._cur = None
                 else:
-                    yield self._close()
+                    closed = (self._close(),)
                 cur = None
         if cur is None:
             cur = self._cur = _Pending(utc_s=msg_time)
@@ -204,7 +209,8 @@ class EpochAssembler:
             setattr(cur, slot, msg)
         cur.types.append(kind)
         if self._ender is not None and kind == self._ender and cur.utc_s is not None:
-            yield self._close()
+            return (*closed, self._close())
+        return closed
 
     def flush(self) -> Iterator[GpsEpoch]:
         cur = self._cur
