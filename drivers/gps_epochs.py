@@ -146,7 +146,7 @@ class EpochAssembler:
         self.orphans = 0
         self.late = 0
         self._last_closed: float | None = None
-        self._last_closed_types: frozenset[str] = frozenset()
+        self._last_closed_types: tuple[str, ...] = ()
         self._banned: set[str] = set()
 
     @property
@@ -225,7 +225,7 @@ class EpochAssembler:
         assert self._cur is not None
         epoch = self._cur.build(self._last_date)
         self._last_closed = epoch.utc_s
-        self._last_closed_types = frozenset(self._cur.types)
+        self._last_closed_types = epoch.sentences  # its sentence types
         if epoch.date is not None:
             self._last_date = epoch.date
         self._cur = None
