@@ -17,7 +17,6 @@ from fdi.pid import HeadingPid
 from firmware_host.rov_config import RovConfig
 
 log = logging.getLogger(__name__)
-_ratelog = RateLimitedLog(log)
 
 
 class RovController:
@@ -32,6 +31,8 @@ class RovController:
         self._last_safe = NEUTRAL
         self._since_telemetry = 0.0
         self.action = "init"
+        # One per controller: a process-wide limiter let one run's reports silence the next's.
+        self._ratelog = RateLimitedLog(log)
 
     def step(
         self, heading_meas: float | None, dt: float
@@ -49,7 +50,7 @@ class RovController:
                 self.pid.reset()
             if action != self.action:  # rate-limited: line noise can make this flap
                 what = "holding last command" if action == "hold" else "neutral thrust"
-                _ratelog.warning(f"compass telemetry lost: {what}",
+                self._ratelog.warning(f"compass telemetry lost: {what}",
                                  f"for {self._since_telemetry:.1f} s")
         else:
             self._since_telemetry = 0.0

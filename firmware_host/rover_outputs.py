@@ -13,13 +13,18 @@
 from __future__ import annotations
 
 import calendar
+import contextlib
+import errno
 import math
 import os
+import time
+from collections.abc import Callable
 from typing import Any
 
 from drivers.nmea import format_date, format_lat, format_lon, format_time, with_checksum
 from drivers.ptypair import PtyPair
-from drivers.transport import SerialSettings, open_port, write_all
+from drivers.resilient import Opener, ResilientPort
+from drivers.transport import SerialSettings, open_port
 from firmware_host.config import RoverConfig
 from firmware_host.rover_pipeline import EpochOutcome
 
@@ -71,41 +76,64 @@ class _PortWriter:
     """A pyserial URL, or ``pty:PATH`` for a new pty whose slave is linked at PATH.
 
     Writing never blocks the detectors: when the consumer does not keep up (or nobody has the
-    pty open), what does not fit is dropped and counted in ``dropped_bytes``.
+    pty open), what does not fit is dropped and counted in ``dropped_bytes``. A URL is a
+    :class:`~drivers.resilient.ResilientPort` opened non-blocking: a device that goes away (a
+    USB adapter unplugged in the middle of a hardware-in-the-loop replay) is reported once,
+    what is written meanwhile is dropped and counted, and the same URL is reopened with backoff.
+    ``tap`` sees every byte written (the flight recorder).
     """
 
-    def __init__(self, url: str, baudrate: int) -> None:
+    def __init__(self, url: str, baudrate: int, *, clock: Callable[[], float] = time.monotonic,
+                 backoff_max_s: float = 5.0, opener: Opener | None = None,
+                 tap: Callable[[bytes], None] | None = None) -> None:
         self.pty: PtyPair | None = None
-        self.port: Any = None
-        self.dropped_bytes = 0
+        self.port: ResilientPort | None = None
+        self.tap = tap
+        self._dropped = 0
         if url.startswith("pty:"):
             self.pty = PtyPair(link=url[4:] or None, baudrate=baudrate)
             os.set_blocking(self.pty.master_fd, False)
         else:
-            self.port = open_port(
-                SerialSettings(url=url, baudrate=baudrate, timeout_s=0.0), write_timeout_s=0.0
-            )
+            self.port = ResilientPort(SerialSettings(url=url, baudrate=baudrate, timeout_s=0.0),
+                                      name="nmea out", backoff_max_s=backoff_max_s, clock=clock,
+                                      opener=opener or _open_nonblocking, on_tx=tap)
 
     @property
     def url(self) -> str:
-        return self.pty.url if self.pty is not None else str(self.port.port)
+        return self.pty.url if self.pty is not None else str(self.port.port if self.port else "")
+
+    @property
+    def dropped_bytes(self) -> int:
+        return self._dropped + (self.port.tx_dropped if self.port is not None else 0)
 
     def write(self, data: bytes) -> None:
-        if self.pty is not None:
-            try:
-                n = os.write(self.pty.master_fd, data)
-            except BlockingIOError:
-                n = 0
-            self.dropped_bytes += len(data) - n
-            self.pty.read(0.0)  # drain anything the consumer wrote back (probes)
-        else:
-            write_all(self.port, data)
+        if self.port is not None:
+            n = self.port.write(data) or 0
+            if self.port.up:  # a partial write on a full line (a loss counts in tx_dropped)
+                self._dropped += len(data) - n
+            return
+        assert self.pty is not None
+        with contextlib.suppress(OSError):  # drain what the consumer wrote back (probes)
+            os.read(self.pty.master_fd, 4096)
+        try:
+            n = os.write(self.pty.master_fd, data)
+        except OSError as err:
+            if err.errno not in (errno.EAGAIN, errno.EIO):
+                raise
+            n = 0  # nobody reading (EAGAIN) or nobody has the slave open (EIO)
+        self._dropped += len(data) - n
+        if n and self.tap is not None:
+            self.tap(data[:n])
 
     def close(self) -> None:
         if self.pty is not None:
             self.pty.close()
-        elif self.port is not None:
+        if self.port is not None:
             self.port.close()
+
+
+def _open_nonblocking(settings: SerialSettings) -> Any:
+    return open_port(settings, write_timeout_s=0.0)
 
 
 def encode_nmea(out: EpochOutcome) -> bytes:
@@ -140,8 +168,15 @@ def encode_nmea(out: EpochOutcome) -> bytes:
 
 
 class NmeaSink:
-    def __init__(self, url: str, baudrate: int = 9600) -> None:
-        self.writer = _PortWriter(url, baudrate)
+    """EpochSink: corrected NMEA (:func:`encode_nmea`) to a URL or ``pty:PATH`` (see
+    :class:`_PortWriter`: never blocks, a lost device is reopened)."""
+
+    def __init__(self, url: str, baudrate: int = 9600, *,
+                 clock: Callable[[], float] = time.monotonic, backoff_max_s: float = 5.0,
+                 opener: Opener | None = None, tap: Callable[[bytes], None] | None = None
+                 ) -> None:
+        self.writer = _PortWriter(url, baudrate, clock=clock, backoff_max_s=backoff_max_s,
+                                  opener=opener, tap=tap)
         self.bytes_out = 0
 
     @property
@@ -153,8 +188,12 @@ class NmeaSink:
         self.writer.write(data)
         self.bytes_out += len(data)
 
-    def stats(self) -> dict[str, int]:
-        return {"bytes_out": self.bytes_out, "dropped_bytes": self.writer.dropped_bytes}
+    def stats(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"bytes_out": self.bytes_out,
+                               "dropped_bytes": self.writer.dropped_bytes}
+        if self.writer.port is not None:
+            out["port"] = self.writer.port.counters()
+        return out
 
     def close(self) -> None:
         self.writer.close()

@@ -24,11 +24,8 @@ Reliability (``docs/reliability.md``):
 from __future__ import annotations
 
 import argparse
-import contextlib
-import errno
 import json
 import logging
-import os
 import signal
 import threading
 import time
@@ -38,7 +35,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal, TextIO
 
-from drivers.ptypair import PtyPair
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port
 from fdi.errors import ConfigError
@@ -46,8 +42,8 @@ from firmware_host.capture import Channel
 from firmware_host.config import CONFIG_DIR, BridgeConfig, load_config
 from firmware_host.failsafe import RoverFailsafe, RovFailsafeMonitor
 from firmware_host.recorder import FlightRecorder, RecorderConfig
-from firmware_host.rover_outputs import MavlinkGpsSink, encode_nmea
-from firmware_host.rover_pipeline import EpochOutcome, EpochSink, RoverPipeline
+from firmware_host.rover_outputs import MavlinkGpsSink, NmeaSink
+from firmware_host.rover_pipeline import EpochSink, RoverPipeline
 
 log = logging.getLogger("fdi_bridge.run")
 
@@ -127,61 +123,6 @@ class TappedEndpoint:
         return sent
 
 
-class ResilientNmeaSink:
-    """Corrected NMEA (GGA/RMC/VTG per epoch, :func:`encode_nmea`) to a port that may come and go.
-
-    ``pty:PATH`` makes a pty linked at PATH whose master never blocks the loop (bytes nobody
-    reads are dropped and counted); any other URL is a :class:`ResilientPort`.
-    """
-
-    def __init__(
-        self,
-        url: str,
-        baudrate: int,
-        *,
-        clock: Callable[[], float],
-        backoff_max_s: float,
-        opener: Opener = open_port,
-        tap: Callable[[bytes], None] | None = None,
-    ) -> None:
-        self.url = url
-        self.tap = tap
-        self.pty: PtyPair | None = None
-        self.port: ResilientPort | None = None
-        self.dropped = 0
-        if url.startswith("pty:"):
-            self.pty = PtyPair(link=url[4:] or None, baudrate=baudrate)
-            os.set_blocking(self.pty.master_fd, False)
-        else:
-            self.port = ResilientPort(SerialSettings(url=url, baudrate=baudrate, timeout_s=0.0),
-                                      name="nmea out", backoff_max_s=backoff_max_s,
-                                      clock=clock, opener=opener, on_tx=tap)
-
-    def emit(self, out: EpochOutcome) -> None:
-        data = encode_nmea(out)
-        if self.port is not None:
-            self.port.write(data)
-            return
-        assert self.pty is not None
-        with contextlib.suppress(OSError):  # drain what the consumer wrote back (probes)
-            os.read(self.pty.master_fd, 4096)
-        try:
-            n = os.write(self.pty.master_fd, data)
-        except OSError as err:
-            if err.errno not in (errno.EAGAIN, errno.EIO):
-                raise
-            n = 0  # nobody reading (EAGAIN) or nobody has the slave open (EIO)
-        self.dropped += len(data) - n
-        if n and self.tap is not None:
-            self.tap(data[:n])
-
-    def close(self) -> None:
-        if self.pty is not None:
-            self.pty.close()
-        if self.port is not None:
-            self.port.close()
-
-
 def _channel(name: str, s: SerialSettings, direction: Literal["rx", "tx"]) -> Channel:
     return Channel(name=name, url=s.url, baudrate=s.baudrate, bytesize=s.bytesize,
                    parity=s.parity, stopbits=s.stopbits, direction=direction)
@@ -223,16 +164,16 @@ class RoverBridge:
         out = rc.output
         nmea = nmea_url if nmea_url is not None else out.nmea_url
         mav = mavlink_url if mavlink_url is not None else out.mavlink_url
-        self.nmea: ResilientNmeaSink | None = None
+        self.nmea: NmeaSink | None = None
         self.mav_port: ResilientPort | None = None
         if nmea:
             tap = None
             if recorder is not None:
                 s = SerialSettings(url=nmea, baudrate=out.nmea_baudrate)
                 tap = recorder.tap(recorder.add_channel(_channel("nmea tx", s, "tx")))
-            self.nmea = ResilientNmeaSink(nmea, out.nmea_baudrate, clock=clock,
-                                          backoff_max_s=rc.reconnect_max_s, opener=opener,
-                                          tap=tap)
+            self.nmea = NmeaSink(nmea, out.nmea_baudrate, clock=clock,
+                                 backoff_max_s=rc.reconnect_max_s,
+                                 opener=None if opener is open_port else opener, tap=tap)
             sinks.append(self.nmea)
         if endpoint is None and mav:
             from drivers.mavlink_io import MavEndpoint, PortEndpoint, is_network_url
@@ -285,8 +226,9 @@ class RoverBridge:
                          "no_fix_sent": self.failsafe.no_fix_sent,
                          "statustexts": self.failsafe.statustexts}
         if self.nmea is not None:
-            s["nmea_out"] = (self.nmea.port.counters() if self.nmea.port is not None
-                             else {"dropped": self.nmea.dropped})
+            w = self.nmea.writer
+            s["nmea_out"] = w.port.counters() if w.port is not None else {
+                "dropped": w.dropped_bytes}
         if self.mav_port is not None:
             s["mavlink_out"] = self.mav_port.counters()
         if self.recorder is not None:

@@ -422,3 +422,43 @@ def test_rover_serial_mavlink_output_survives_autopilot_reboot(tmp_path: Path) -
         ap.close()
         if ap2 is not None:
             ap2.close()
+
+
+def test_replay_nmea_output_survives_adapter_unplugged(tmp_path: Path) -> None:
+    """Hardware-in-the-loop replay into a serial line (``replay --nmea-out /dev/ttyUSB1``): the
+    adapter is unplugged and plugged back; the output reopens the same path by itself."""
+    from firmware_host.rover_outputs import NmeaSink
+    from firmware_host.rover_pipeline import RoverPipeline
+
+    link = tmp_path / "ttyUSB1"
+    pty = PtyPair(link=link, baudrate=9600)
+    sink = NmeaSink(str(link), 9600, backoff_max_s=0.2)
+    pipe = RoverPipeline(RoverConfig(), sinks=[sink])
+    epochs = iter(_epochs(400, seed=6))
+    pty2: PtyPair | None = None
+    try:
+        for _ in range(30):
+            pipe.feed(next(epochs))
+        got = bytearray()
+        wait_for(lambda: (got.extend(pty.read(0.01)), got.count(b"GGA,") >= 29)[1],
+                 what="corrected NMEA on the line")
+        pty.close()  # unplugged
+        for _ in range(30):
+            pipe.feed(next(epochs))
+        port = sink.writer.port
+        assert port is not None and port.losses == 1 and sink.writer.dropped_bytes > 0
+        pty2 = PtyPair(link=link, baudrate=9600)  # plugged back
+        p2 = pty2
+        wait_for(lambda: (pipe.feed(next(epochs)), port.up)[1], what="reopened")
+        got2 = bytearray()
+        for _ in range(20):
+            pipe.feed(next(epochs))
+        wait_for(lambda: (got2.extend(p2.read(0.01)), got2.count(b"GGA,") >= 20)[1],
+                 what="corrected NMEA again")
+        assert port.reopens == 1 and pipe.summary()["output_errors"] == 0
+        assert sink.stats()["port"]["losses"] == 1
+    finally:
+        pipe.finish()
+        pty.close()
+        if pty2 is not None:
+            pty2.close()
