@@ -410,14 +410,18 @@ class PortEndpoint(MavPacker):
         super().__init__(source_system, source_component)
         self.port = port
         self.url = str(getattr(port, "port", "port"))
+        self.partial_bytes = 0  # bytes a full line did not take (the packet is lost to the peer)
 
     def _emit(self, msg: Any) -> bytes:
         data = super()._emit(msg)
-        self.port.write(data)
+        self.send_raw(data)
         return data
 
     def send_raw(self, data: bytes) -> None:
-        self.port.write(data)
+        """Write without blocking: on a full line the rest is dropped and counted."""
+        n = self.port.write(data)
+        if n is not None and 0 < n < len(data):
+            self.partial_bytes += len(data) - n
 
     def close(self) -> None:
         self.port.close()

@@ -31,10 +31,9 @@ import socket
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Hashable, Iterator
-from typing import Any
 
 from drivers.resilient import ResilientPort
-from drivers.transport import SerialSettings, open_port
+from drivers.transport import SerialSettings, open_port_nonblocking
 from fdi.errors import PortError
 
 Chunk = tuple[bytes, Hashable, bool]
@@ -427,7 +426,7 @@ class SerialLink(Link):
         self.url = url
         self.port = ResilientPort(SerialSettings(url=url, baudrate=baud, timeout_s=0.0),
                                   name=f"mavlink {url}", backoff_max_s=backoff_max_s,
-                                  opener=_open_nonblocking)
+                                  opener=open_port_nonblocking)
         self._key = ("serial", url)
         self._out = bytearray()
 
@@ -485,11 +484,6 @@ class SerialLink(Link):
 
     def close(self) -> None:
         self.port.close()
-
-
-def _open_nonblocking(settings: SerialSettings) -> Any:
-    """Open with ``write_timeout = 0``: a write takes what fits and says how much."""
-    return open_port(settings, write_timeout_s=0.0)
 
 
 def open_link(url: str, baud: int = 115200, backoff_max_s: float = 5.0) -> Link:

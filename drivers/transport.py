@@ -113,6 +113,12 @@ def read_some(port: Port, size: int = 4096) -> bytes:
         raise PortError(f"could not read from {port.port}: {err}") from err
 
 
+def open_port_nonblocking(settings: SerialSettings) -> serial.Serial:
+    """:func:`open_port` with ``write_timeout = 0``: a write takes what fits now and returns
+    how much (outputs that must never block the loop: what does not fit is dropped, counted)."""
+    return open_port(settings, write_timeout_s=0.0)
+
+
 def write_all(port: Port, data: bytes) -> None:
     """Write ``data``; translate failures into :class:`PortError`."""
     try:

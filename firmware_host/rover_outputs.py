@@ -24,7 +24,7 @@ from typing import Any
 from drivers.nmea import format_date, format_lat, format_lon, format_time, with_checksum
 from drivers.ptypair import PtyPair
 from drivers.resilient import Opener, ResilientPort
-from drivers.transport import SerialSettings, open_port
+from drivers.transport import SerialSettings, open_port_nonblocking
 from firmware_host.config import RoverConfig
 from firmware_host.rover_pipeline import EpochOutcome
 
@@ -96,7 +96,7 @@ class _PortWriter:
         else:
             self.port = ResilientPort(SerialSettings(url=url, baudrate=baudrate, timeout_s=0.0),
                                       name="nmea out", backoff_max_s=backoff_max_s, clock=clock,
-                                      opener=opener or _open_nonblocking, on_tx=tap)
+                                      opener=opener or open_port_nonblocking, on_tx=tap)
 
     @property
     def url(self) -> str:
@@ -130,10 +130,6 @@ class _PortWriter:
             self.pty.close()
         if self.port is not None:
             self.port.close()
-
-
-def _open_nonblocking(settings: SerialSettings) -> Any:
-    return open_port(settings, write_timeout_s=0.0)
 
 
 def encode_nmea(out: EpochOutcome) -> bytes:

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any, Literal, TextIO
 
 from drivers.resilient import Opener, ResilientPort
-from drivers.transport import SerialSettings, open_port
+from drivers.transport import SerialSettings, open_port, open_port_nonblocking
 from fdi.errors import ConfigError
 from firmware_host.capture import Channel
 from firmware_host.config import CONFIG_DIR, BridgeConfig, load_config
@@ -166,6 +166,7 @@ class RoverBridge:
         mav = mavlink_url if mavlink_url is not None else out.mavlink_url
         self.nmea: NmeaSink | None = None
         self.mav_port: ResilientPort | None = None
+        self.mav_endpoint: Any = None
         if nmea:
             tap = None
             if recorder is not None:
@@ -185,9 +186,10 @@ class RoverBridge:
                 self.mav_port = ResilientPort(
                     SerialSettings(url=mav, baudrate=out.mavlink_baudrate, timeout_s=0.0),
                     name="mavlink out", backoff_max_s=rc.reconnect_max_s, clock=clock,
-                    opener=opener)
+                    opener=open_port_nonblocking if opener is open_port else opener)
                 endpoint = PortEndpoint(self.mav_port, source_system=out.mavlink_system,
                                         source_component=out.mavlink_component)
+                self.mav_endpoint = endpoint
         if endpoint is not None:
             if recorder is not None:
                 ch = recorder.add_channel(Channel(name="mavlink tx", url=mav or "endpoint",
@@ -230,7 +232,8 @@ class RoverBridge:
             s["nmea_out"] = w.port.counters() if w.port is not None else {
                 "dropped": w.dropped_bytes}
         if self.mav_port is not None:
-            s["mavlink_out"] = self.mav_port.counters()
+            s["mavlink_out"] = dict(self.mav_port.counters(),
+                                    partial_bytes=getattr(self.mav_endpoint, "partial_bytes", 0))
         if self.recorder is not None:
             s["recorder"] = self.recorder.counters()
         return s
