@@ -389,15 +389,6 @@ class MavPacker(_Encoders):
         return self._sink.last
 
 
-NETWORK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
-
-
-def is_network_url(url: str) -> bool:
-    """True for the mavutil network spellings (``udpout:HOST:PORT`` ...), False for a device."""
-    scheme, sep, _rest = url.partition(":")
-    return bool(sep) and scheme in NETWORK_SCHEMES
-
-
 class PortEndpoint(MavPacker):
     """The encoders of :class:`MavEndpoint` writing to a byte port: a serial line to the autopilot.
 

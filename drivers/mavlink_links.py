@@ -49,6 +49,16 @@ UDP_RCVBUF_BYTES = 1 << 20
 _WOULD_BLOCK = (errno.EAGAIN, errno.EWOULDBLOCK, errno.ENOBUFS)
 
 
+# The mavutil / MAVProxy network spellings; anything else is a serial device or pyserial URL.
+NETWORK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
+
+
+def is_network_url(url: str) -> bool:
+    """True for ``udpout:HOST:PORT`` and the other network spellings, False for a device."""
+    scheme, sep, _rest = url.partition(":")
+    return bool(sep) and scheme in NETWORK_SCHEMES
+
+
 def _split_hostport(rest: str, url: str, default_host: str | None) -> tuple[str, int]:
     host, sep, port = rest.rpartition(":")
     if not sep:

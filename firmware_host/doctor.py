@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from drivers.mavlink_links import is_network_url
 from fdi.errors import ConfigError, FdiBridgeError
 
 _SCHEMES = ("socket://", "rfc2217://", "loop://", "spy://", "alt://", "hwgrep://", "cp2110://")
@@ -113,10 +114,10 @@ def check_mavlink_url(rep: Report, role: str, url: str) -> None:
     """Parse a MAVLink URL; test-bind a listening UDP port on 127.0.0.1 only."""
     if not url:
         return
-    scheme, sep, rest = url.partition(":")
-    if not sep or scheme not in ("udpout", "udpin", "udp", "tcp", "tcpin", "udpbcast"):
+    if not is_network_url(url):
         check_device(rep, role, url)  # a serial device for the autopilot
         return
+    scheme, _sep, rest = url.partition(":")
     host, _, port_text = rest.rpartition(":")
     listening = scheme in ("udpin", "udp", "tcpin")
     if not host and not listening:

@@ -148,7 +148,7 @@ class RoverBridge:
         mavlink_url: str | None = None,
         clock: Callable[[], float] = time.monotonic,
         recorder: FlightRecorder | None = None,
-        opener: Opener = open_port,
+        opener: Opener = open_port_nonblocking,
         endpoint: Any | None = None,
     ) -> None:
         rc = cfg.rover
@@ -165,8 +165,7 @@ class RoverBridge:
         nmea = nmea_url if nmea_url is not None else out.nmea_url
         mav = mavlink_url if mavlink_url is not None else out.mavlink_url
         self.nmea: NmeaSink | None = None
-        self.mav_port: ResilientPort | None = None
-        self.mav_endpoint: Any = None
+        self.mav_out: Any = None  # drivers.mavlink_io.PortEndpoint on a serial mavlink_url
         if nmea:
             tap = None
             if recorder is not None:
@@ -174,22 +173,22 @@ class RoverBridge:
                 tap = recorder.tap(recorder.add_channel(_channel("nmea tx", s, "tx")))
             self.nmea = NmeaSink(nmea, out.nmea_baudrate, clock=clock,
                                  backoff_max_s=rc.reconnect_max_s,
-                                 opener=None if opener is open_port else opener, tap=tap)
+                                 opener=opener, tap=tap)
             sinks.append(self.nmea)
         if endpoint is None and mav:
-            from drivers.mavlink_io import MavEndpoint, PortEndpoint, is_network_url
+            from drivers.mavlink_io import MavEndpoint, PortEndpoint
+            from drivers.mavlink_links import is_network_url
 
             if is_network_url(mav):
                 endpoint = MavEndpoint(mav, source_system=out.mavlink_system,
                                        source_component=out.mavlink_component)
             else:  # a serial line to the autopilot: reopened when it goes and comes back
-                self.mav_port = ResilientPort(
+                port = ResilientPort(
                     SerialSettings(url=mav, baudrate=out.mavlink_baudrate, timeout_s=0.0),
                     name="mavlink out", backoff_max_s=rc.reconnect_max_s, clock=clock,
-                    opener=open_port_nonblocking if opener is open_port else opener)
-                endpoint = PortEndpoint(self.mav_port, source_system=out.mavlink_system,
-                                        source_component=out.mavlink_component)
-                self.mav_endpoint = endpoint
+                    opener=opener)
+                endpoint = self.mav_out = PortEndpoint(
+                    port, source_system=out.mavlink_system, source_component=out.mavlink_component)
         if endpoint is not None:
             if recorder is not None:
                 ch = recorder.add_channel(Channel(name="mavlink tx", url=mav or "endpoint",
@@ -231,9 +230,9 @@ class RoverBridge:
             w = self.nmea.writer
             s["nmea_out"] = w.port.counters() if w.port is not None else {
                 "dropped": w.dropped_bytes}
-        if self.mav_port is not None:
-            s["mavlink_out"] = dict(self.mav_port.counters(),
-                                    partial_bytes=getattr(self.mav_endpoint, "partial_bytes", 0))
+        if self.mav_out is not None:
+            s["mavlink_out"] = dict(self.mav_out.port.counters(),
+                                    partial_bytes=self.mav_out.partial_bytes)
         if self.recorder is not None:
             s["recorder"] = self.recorder.counters()
         return s
@@ -249,7 +248,7 @@ def run_rover(
     sleep: Callable[[float], None] = time.sleep,
     stop: Callable[[], bool] = lambda: False,
     recorder: FlightRecorder | None = None,
-    opener: Opener = open_port,
+    opener: Opener = open_port_nonblocking,
     endpoint: Any | None = None,
 ) -> RoverBridge:
     """Run the rover until ``stop()``; returns the (closed) bridge for its counters."""

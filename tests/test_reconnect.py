@@ -399,14 +399,15 @@ def test_rover_serial_mavlink_output_survives_autopilot_reboot(tmp_path: Path) -
         _feed(gps, epochs[:60])
         wait_for(lambda: gps_inputs(ap, buf) >= 50, what="GPS_INPUT on the serial line")
         ap.close()
-        wait_for(lambda: bridge.mav_port is not None and bridge.mav_port.losses == 1,
-                 what="loss of the autopilot's port")
+        assert bridge.mav_out is not None
+        mav_port = bridge.mav_out.port
+        wait_for(lambda: mav_port.losses == 1, what="loss of the autopilot's port")
         _feed(gps, epochs[60:100])
         wait_for(lambda: bridge.pipeline.epochs >= 99, what="epochs while away")
-        assert bridge.mav_port is not None and bridge.mav_port.tx_dropped > 0
+        assert mav_port.tx_dropped > 0
         assert thread.is_alive()
         ap2 = PtyPair(link=ap_link, baudrate=57600)
-        wait_for(lambda: bridge.mav_port is not None and bridge.mav_port.up, what="reopened")
+        wait_for(lambda: mav_port.up, what="reopened")
         buf2 = bytearray()
         _feed(gps, epochs[100:])
         p2 = ap2
