@@ -3,7 +3,7 @@
 :class:`ResilientPort` wraps whatever :func:`drivers.transport.open_port` returns (any pyserial
 URL) and looks like a port to the drivers (``read``, ``write``, ``in_waiting``, ``port``,
 ``reset_input_buffer``), so :func:`drivers.transport.read_some` and
-:class:`drivers.outland.OutlandLink` use it unchanged. Its reads and writes never raise:
+:class:`drivers.outland.link.OutlandLink` use it unchanged. Its reads and writes never raise:
 
 * a read or write error (USB unplugged, the pty's far end closed, a socket reset) closes the
   port, is logged **once** (``... lost: ...``) and counted in ``losses``;

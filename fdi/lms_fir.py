@@ -18,7 +18,7 @@ e^2 is reported in deg^2. The weight vector C_k has shape (M,) or (M + 1,) with 
 
 Measured traps this design avoids are listed in ``../shared/FINDINGS.md`` ("Adaptive FIR with
 LMS"). Plain Python floats with a doubled ring buffer and running sums: one step costs a few
-microseconds (see ``firmware_host.rov_app.bench_rov_step``).
+microseconds (see ``firmware_host.rov.app.bench_rov_step``).
 """
 
 from __future__ import annotations

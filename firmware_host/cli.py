@@ -33,37 +33,64 @@ class Command(Protocol):
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("", "run a built-in demo with no hardware (rover by default)"),
     "replay": (
-        "firmware_host.replay",
+        "firmware_host.commands.replay",
         "replay a capture or NMEA log through a pty into a pipeline",
     ),
-    "record": ("firmware_host.record", "record a serial port's raw bytes to a capture file"),
-    "run": ("firmware_host.run", "run on the vehicle with the configured ports"),
-    "eval": ("firmware_host.eval", "score detectors against the truth, beside the baselines"),
-    "bench": ("firmware_host.bench", "benchmarks: per-epoch time, throughput, loop jitter"),
-    "doctor": ("firmware_host.doctor", "start-up checks: config, ports, permissions, endpoints"),
-    "fuzz": ("firmware_host.fuzz", "seeded mutation fuzzer for the NMEA/Outland/MAVLink input"),
-    "soak": ("firmware_host.soak", "rover + ROV together, accelerated, faults and port drops"),
+    "record": (
+        "firmware_host.commands.record",
+        "record a serial port's raw bytes to a capture file",
+    ),
+    "run": ("firmware_host.commands.run", "run on the vehicle with the configured ports"),
+    "eval": (
+        "firmware_host.devtools.eval",
+        "score detectors against the truth, beside the baselines",
+    ),
+    "bench": (
+        "firmware_host.devtools.bench",
+        "benchmarks: per-epoch time, throughput, loop jitter",
+    ),
+    "doctor": (
+        "firmware_host.commands.doctor",
+        "start-up checks: config, ports, permissions, endpoints",
+    ),
+    "fuzz": (
+        "firmware_host.devtools.fuzz",
+        "seeded mutation fuzzer for the NMEA/Outland/MAVLink input",
+    ),
+    "soak": (
+        "firmware_host.devtools.soak",
+        "rover + ROV together, accelerated, faults and port drops",
+    ),
     "mavlink": (
-        "firmware_host.router",
+        "firmware_host.mavlink.router",
         "MAVLink passthrough between autopilot and ground stations",
     ),
 }
 
 # ``fdi-bridge sim KIND``: KIND -> (module, help).
 SIM_COMMANDS: dict[str, tuple[str, str]] = {
-    "rover": ("firmware_host.rover_sim", "generate a rover NMEA run with injected GPS faults"),
-    "rov": ("firmware_host.rov_app", "ROV compass faults and fault-tolerant heading hold"),
-    "insgnss": ("firmware_host.insgnss_sim", "INS/GNSS three-zone robust filter: paper scenarios"),
+    "rover": (
+        "firmware_host.devtools.rover_sim",
+        "generate a rover NMEA run with injected GPS faults",
+    ),
+    "rov": ("firmware_host.rov.app", "ROV compass faults and fault-tolerant heading hold"),
+    "insgnss": (
+        "firmware_host.devtools.insgnss_sim",
+        "INS/GNSS three-zone robust filter: paper scenarios",
+    ),
     "insgnss-report": (
-        "firmware_host.insgnss_report",
+        "firmware_host.devtools.insgnss_report",
         "INS/GNSS: every scenario, seed and preset as the Markdown tables of docs/insgnss.md",
     ),
 }
 
 # ``fdi-bridge demo KIND``: KIND -> module with ``run_demo(args) -> int`` and ``add_arguments``.
 DEMO_COMMANDS: dict[str, tuple[str, str]] = {
-    "rover": ("firmware_host.rover_demo", "GPS fault isolation on a generated 10-minute rover run"),
-    "rov": ("firmware_host.rov_demo", "ROV compass drift 30 deg with and without FT"),
+    "rover": (
+        "firmware_host.commands.demo_rover",
+        "GPS fault isolation on a generated 10-minute rover run",
+    ),
+    "rov": ("firmware_host.commands.demo_rov", "ROV compass drift 30 deg with and without FT"),
 }
 
 

@@ -18,10 +18,10 @@ from typing import Any
 
 import pytest
 
-from firmware_host.config import BridgeConfig
-from firmware_host.replay import run_replay
-from firmware_host.rover_outputs import NmeaSink
-from firmware_host.rover_sim import RoverScenario, write_run
+from firmware_host.commands.replay import run_replay
+from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from firmware_host.rover.outputs import NmeaSink
+from firmware_host.runtime.config import BridgeConfig
 
 GPSD = shutil.which("gpsd") or ("/usr/sbin/gpsd" if Path("/usr/sbin/gpsd").exists() else None)
 

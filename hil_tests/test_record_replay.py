@@ -12,13 +12,13 @@ import threading
 import time
 from pathlib import Path
 
+from drivers.capture import CaptureReader
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings
-from firmware_host.capture import CaptureReader
-from firmware_host.config import BridgeConfig
-from firmware_host.record import record
-from firmware_host.replay import run_replay
-from firmware_host.rover_sim import RoverScenario, write_run
+from firmware_host.commands.record import record
+from firmware_host.commands.replay import run_replay
+from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from firmware_host.runtime.config import BridgeConfig
 
 
 def test_record_then_replay_reproduces_epochs(tmp_path: Path) -> None:

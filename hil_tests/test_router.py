@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from drivers import mavlink_io as mio
-from drivers.mavlink_framer import MavFramer, frame_target
-from firmware_host.mavparams import ParamSpec, ParamStore
-from firmware_host.router import EndpointConfig, MavlinkConfig, Router, load_signing_key
+from drivers.mavlink import io as mio
+from drivers.mavlink.framer import MavFramer, frame_target
+from firmware_host.mavlink.params import ParamSpec, ParamStore
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router, load_signing_key
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL_TLOG = ROOT.parent / "shared" / "corpus" / "ardusub" / "small.tlog"
@@ -321,10 +321,10 @@ def test_mavproxy_sees_heartbeat_lists_and_sets_a_parameter(tmp_path: Path) -> N
     import subprocess
     import sys
 
-    from firmware_host.config import RoverConfig
-    from firmware_host.mavlink_rover import attach_rover
-    from firmware_host.rover_pipeline import RoverPipeline
-    from firmware_host.rover_sim import RoverScenario, write_run
+    from firmware_host.devtools.rover_sim import RoverScenario, write_run
+    from firmware_host.mavlink.rover import attach_rover
+    from firmware_host.rover.pipeline import RoverPipeline
+    from firmware_host.runtime.config import RoverConfig
 
     params = ParamStore(tmp_path / "params.toml")
     router = Router(
@@ -405,7 +405,7 @@ def test_ground_station_side_of_the_dive_reaches_the_autopilot_and_tlogs_rotate(
     the camera manager, 1:194 and 1:220 as in the dive), so every packet has a route. The tlog
     is rotated at 16 KiB and its files, read in order, hold exactly what went through.
     """
-    from drivers.mavlink_framer import MavFramer
+    from drivers.mavlink.framer import MavFramer
 
     records = [r for r in mio.iter_tlog(SMALL_TLOG) if r.msg is not None]
     from_gcs = [r.raw for r in records if (r.msg.get_srcSystem(), r.msg.get_srcComponent())
@@ -480,7 +480,7 @@ def test_ground_station_side_of_the_dive_reaches_the_autopilot_and_tlogs_rotate(
 def test_tcp_links_ground_station_server_and_autopilot_client(tmp_path: Path) -> None:
     """A GCS on a TCP server link (``tcpin:``), the autopilot on a TCP client link (``tcp:``,
     as SITL listens on 5760): byte streams framed across segment boundaries, both ways."""
-    from drivers.mavlink_framer import MavFramer
+    from drivers.mavlink.framer import MavFramer
 
     listener = socket.create_server(("127.0.0.1", 0))
     ap_port = listener.getsockname()[1]

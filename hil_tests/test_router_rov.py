@@ -15,13 +15,13 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from drivers import mavlink_io as mio
-from drivers.outland import ThrusterCommand
-from firmware_host.mavlink_rov import STAT_NAMES, RovAutopilotLoop, manual_control_axes
-from firmware_host.router import EndpointConfig, MavlinkConfig, Router
-from firmware_host.rov_config import RovConfig
-from firmware_host.rov_experiment import run_experiment
-from firmware_host.rov_sim import RovPlant, parse_fault
+from drivers.mavlink import io as mio
+from drivers.outland.link import ThrusterCommand
+from firmware_host.devtools.rov_experiment import run_experiment
+from firmware_host.devtools.rov_sim import RovPlant, parse_fault
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router
+from firmware_host.rov.ardusub import STAT_NAMES, RovAutopilotLoop, manual_control_axes
+from firmware_host.rov.config import RovConfig
 
 
 def _wait(cond: Callable[[], bool], what: str, deadline_s: float = 5.0) -> None:

@@ -20,14 +20,14 @@ from typing import Any
 
 import numpy as np
 
-from drivers import mavlink_io as mio
-from firmware_host.config import RoverConfig
-from firmware_host.mavlink_rover import STAT_NAMES, LiveRoverIsolator, attach_rover
-from firmware_host.replay import load_input, replay_through_pty
-from firmware_host.router import EndpointConfig, MavlinkConfig, Router
-from firmware_host.rover_outputs import gps_week_ms, unix_time
-from firmware_host.rover_pipeline import RoverPipeline
-from firmware_host.rover_sim import RoverScenario, write_run
+from drivers.mavlink import io as mio
+from firmware_host.commands.replay import load_input, replay_through_pty
+from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router
+from firmware_host.mavlink.rover import STAT_NAMES, LiveRoverIsolator, attach_rover
+from firmware_host.rover.outputs import gps_week_ms, unix_time
+from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime.config import RoverConfig
 
 
 def _wait(cond: Callable[[], bool], what: str, deadline_s: float = 10.0) -> None:

@@ -14,13 +14,13 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from drivers.framecodec import load_protocol
-from drivers.outland import OutlandLink, ThrusterCommand
+from drivers.outland.framecodec import load_protocol
+from drivers.outland.link import OutlandLink, ThrusterCommand
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port
-from firmware_host.rov_app import run_rov
-from firmware_host.rov_config import LinkConfig, RovConfig
-from firmware_host.rov_sim import RovPlant, RovSimServer, parse_fault, serve_pty
+from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault, serve_pty
+from firmware_host.rov.app import run_rov
+from firmware_host.rov.config import LinkConfig, RovConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 PROTO = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")

@@ -13,11 +13,11 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from drivers.mavlink_io import MavEndpoint
-from firmware_host.config import BridgeConfig, RoverOutputs
-from firmware_host.replay import build_sinks, run_replay
-from firmware_host.rover_outputs import gps_week_ms, unix_time
-from firmware_host.rover_sim import RoverScenario, write_run
+from drivers.mavlink.io import MavEndpoint
+from firmware_host.commands.replay import build_sinks, run_replay
+from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from firmware_host.rover.outputs import gps_week_ms, unix_time
+from firmware_host.runtime.config import BridgeConfig, RoverOutputs
 
 
 class _Collector(threading.Thread):

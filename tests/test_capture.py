@@ -1,4 +1,4 @@
-"""firmware_host.capture: the timestamped raw-bytes capture format."""
+"""drivers.capture: the timestamped raw-bytes capture format."""
 
 from __future__ import annotations
 
@@ -8,8 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from fdi.errors import CaptureFormatError
-from firmware_host.capture import (
+from drivers.capture import (
     MAGIC,
     MAX_RECORD,
     CaptureReader,
@@ -18,6 +17,7 @@ from firmware_host.capture import (
     Record,
     is_capture,
 )
+from fdi.errors import CaptureFormatError
 
 CHANNELS = [
     Channel("gps", url="/dev/ttyUSB0", baudrate=9600),

@@ -1,4 +1,4 @@
-"""firmware_host.configload and firmware_host.config: TOML -> typed objects, errors that help.
+"""drivers.configload and firmware_host.runtime.config: TOML -> typed objects, errors that help.
 
 Every error must name the file, the dotted key, what was expected and what was found.
 """
@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from drivers.configload import load_dataclass, read_toml
 from fdi.errors import ConfigError
 from firmware_host import cli
-from firmware_host.config import CONFIG_DIR, BridgeConfig, ReferencePoint, load_config
-from firmware_host.configload import load_dataclass, read_toml
+from firmware_host.runtime.config import CONFIG_DIR, BridgeConfig, ReferencePoint, load_config
 
 
 def write(tmp_path: Path, text: str, name: str = "bad.toml") -> Path:

@@ -11,7 +11,7 @@ import pytest
 
 from drivers.ptypair import PtyPair
 from firmware_host.cli import main
-from firmware_host.doctor import Report, check_device, check_mavlink_url, diagnose
+from firmware_host.commands.doctor import Report, check_device, check_mavlink_url, diagnose
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -21,7 +21,7 @@ from fdi.baselines import (
 )
 from fdi.gate_health import GateHealth
 from fdi.geodesy import LocalFrame
-from firmware_host.score import score_rover
+from firmware_host.devtools.score import score_rover
 
 FRAME = LocalFrame(32.0, 118.0, 10.0)
 
@@ -293,7 +293,7 @@ def test_gate_health_window_follows_the_latest_epochs() -> None:
 
 
 def test_reduced_suite_table_and_default_at_least_as_good_as_every_baseline() -> None:
-    from firmware_host.eval import BASELINE_NAMES, STRATEGIES, run_suite
+    from firmware_host.devtools.eval import BASELINE_NAMES, STRATEGIES, run_suite
 
     doc = run_suite(None, quick=True, plots=False, include_rov=False, include_insgnss=False)
     (case,) = doc["rover"]
@@ -322,9 +322,9 @@ def test_reduced_suite_table_and_default_at_least_as_good_as_every_baseline() ->
 
 def test_eval_cli_scores_a_replay_output_with_the_baselines(tmp_path: Path) -> None:
     from firmware_host.cli import main
-    from firmware_host.config import load_config
-    from firmware_host.replay import run_replay
-    from firmware_host.rover_sim import RoverScenario, write_run
+    from firmware_host.commands.replay import run_replay
+    from firmware_host.devtools.rover_sim import RoverScenario, write_run
+    from firmware_host.runtime.config import load_config
 
     run_dir, out = tmp_path / "run", tmp_path / "out"
     write_run(RoverScenario(rate_hz=5.0, duration_s=120.0, seed=11), run_dir)

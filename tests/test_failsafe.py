@@ -15,17 +15,17 @@ from typing import Any
 
 import pytest
 
-from drivers.framecodec import load_protocol
-from drivers.outland import NEUTRAL
+from drivers.outland.framecodec import load_protocol
+from drivers.outland.link import NEUTRAL
 from drivers.transport import SerialSettings
-from firmware_host.config import BridgeConfig, RoverConfig
-from firmware_host.failsafe import SilenceWatchdog
-from firmware_host.loop import FakeClock
-from firmware_host.rov_config import SimConfig
-from firmware_host.rov_sim import RovPlant, RovSimServer, parse_fault
-from firmware_host.rover_sim import RoverScenario, generate
-from firmware_host.run import RoverBridge, run_rov_bridge
-from firmware_host.soak import SimDevice, rov_device, sim_opener
+from firmware_host.commands.run import RoverBridge, run_rov_bridge
+from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault
+from firmware_host.devtools.rover_sim import RoverScenario, generate
+from firmware_host.devtools.soak import SimDevice, rov_device, sim_opener
+from firmware_host.rov.config import SimConfig
+from firmware_host.runtime.config import BridgeConfig, RoverConfig
+from firmware_host.runtime.failsafe import SilenceWatchdog
+from firmware_host.runtime.loop import FakeClock
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -114,7 +114,7 @@ def test_rov_dropout_holds_then_neutral_then_resumes(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     caplog.set_level(logging.WARNING)
-    for name in ("firmware_host.rov_control", "fdi_bridge.failsafe"):  # whatever set them
+    for name in ("firmware_host.rov.control", "fdi_bridge.failsafe"):  # whatever set them
         caplog.set_level(logging.WARNING, logger=name)
     clock = FakeClock()
     proto = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")

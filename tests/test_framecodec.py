@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from drivers.framecodec import Frame, Framer, decode, encode, load_protocol
+from drivers.outland.framecodec import Frame, Framer, decode, encode, load_protocol
 from fdi.errors import ConfigError, DecodeError
 
 ROOT = Path(__file__).resolve().parent.parent

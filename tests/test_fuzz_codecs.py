@@ -3,7 +3,7 @@
 Arbitrary bytes, valid frames with bit flips and overwrites, truncations, oversize length
 fields and runs of sync bytes, fed in arbitrary chunks: no exception other than the codec's
 own rejection escapes, every rejected piece is counted by reason, and the byte counts add up
-(the invariants are :mod:`firmware_host.fuzz`'s, shared with ``fdi-bridge fuzz``).
+(the invariants are :mod:`firmware_host.devtools.fuzz`'s, shared with ``fdi-bridge fuzz``).
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from drivers.framecodec import Framer
-from drivers.mavlink_framer import MavFramer
-from drivers.mavlink_io import crc_extra_table
-from firmware_host.fuzz import (
+from drivers.mavlink.framer import MavFramer
+from drivers.mavlink.io import crc_extra_table
+from drivers.outland.framecodec import Framer
+from firmware_host.devtools.fuzz import (
     check_mavlink,
     check_nmea,
     check_outland,

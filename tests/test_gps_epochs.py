@@ -1,4 +1,4 @@
-"""drivers.gps_epochs (EpochAssembler, GpsEpoch) and drivers.gps (NmeaStream counters).
+"""drivers.gps.epochs (EpochAssembler, GpsEpoch) and drivers.gps.stream (NmeaStream counters).
 
 Messages are built as the codec's dataclasses (the assembler is pure), except for the
 ``NmeaStream`` tests, which go from bytes.
@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.gps import NmeaStream
-from drivers.gps_epochs import EpochAssembler, GpsEpoch
-from drivers.nmea import Gga, Gsa, Gst, NmeaMessage, Rmc, Vtg, Zda, with_checksum
+from drivers.gps.epochs import EpochAssembler, GpsEpoch
+from drivers.gps.nmea import Gga, Gsa, Gst, NmeaMessage, Rmc, Vtg, Zda, with_checksum
+from drivers.gps.stream import NmeaStream
 
 DATE = (2020, 3, 18)
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drivers.configload import load_file
 from fdi.errors import ConfigError, EstimatorError
 from fdi.insgnss import (
     EarthModel,
@@ -24,8 +25,7 @@ from fdi.insgnss import (
     quat_to_euler,
 )
 from fdi.three_zone import Zone
-from firmware_host.configload import load_file
-from firmware_host.insgnss_sim import (
+from firmware_host.devtools.insgnss_sim import (
     InsGnssSetup,
     bench_insgnss_step,
     generate,

@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 
 from firmware_host.cli import main
-from firmware_host.insgnss_sim import (
+from firmware_host.devtools.insgnss_sim import (
     InsGnssSetup,
     MethodRun,
     NavData,
@@ -216,7 +216,7 @@ def test_report_command_prints_the_tables(
 
 
 def test_report_seed_lists() -> None:
-    from firmware_host.insgnss_report import _seeds, range_verdict
+    from firmware_host.devtools.insgnss_report import _seeds, range_verdict
 
     assert _seeds("1-3,7") == [1, 2, 3, 7]
     pos = {"up": {"min": -1.0, "max": 1.0}}

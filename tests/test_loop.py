@@ -1,4 +1,4 @@
-"""firmware_host.loop: absolute-deadline scheduling and overrun counting, on a fake clock.
+"""firmware_host.runtime.loop: absolute-deadline scheduling and overrun counting, on a fake clock.
 
 No test here sleeps: ``FakeClock.sleep`` advances time instantly.
 """
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from firmware_host.loop import EpochTimer, FakeClock, FixedRateLoop
+from firmware_host.runtime.loop import EpochTimer, FakeClock, FixedRateLoop
 
 PERIOD = 0.125  # a binary fraction: k·PERIOD is exact in floating point
 

@@ -7,15 +7,15 @@ from pathlib import Path
 import pytest
 
 from fdi.errors import ConfigError
-from firmware_host.config import BridgeConfig
-from firmware_host.router import (
+from firmware_host.mavlink.router import (
     EndpointConfig,
     MavlinkConfig,
     TlogWriter,
     load_mavlink_config,
     load_vehicle_config,
 )
-from firmware_host.rover_pipeline import RoverPipeline
+from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime.config import BridgeConfig
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "config" / "mavlink-example.toml"
 

@@ -1,4 +1,4 @@
-"""drivers.mavlink_framer: byte-for-byte framing, resync, CRC policy, signing."""
+"""drivers.mavlink.framer: byte-for-byte framing, resync, CRC policy, signing."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers import mavlink_io as mio
-from drivers.mavlink_framer import (
+from drivers.mavlink import io as mio
+from drivers.mavlink.framer import (
     MavFrame,
     MavFramer,
     frame_target,

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from drivers.mavlink_imu import RawImuScale, imu_from_message, iter_imu
+from drivers.mavlink.imu import RawImuScale, imu_from_message, iter_imu
 from fdi.errors import DecodeError, EstimatorError
 from fdi.insgnss import InsGnssFilter, InsGnssParams, check_imu_rate, measure_imu_rate
 
@@ -75,7 +75,7 @@ def test_no_inertial_data_and_other_messages() -> None:
 def tlog_raw_imu() -> list:
     if not TLOG.is_file():
         pytest.skip(f"ArduSub corpus not found at {TLOG}")
-    mavlink_io = pytest.importorskip("drivers.mavlink_io")
+    mavlink_io = pytest.importorskip("drivers.mavlink.io")
     return list(iter_imu((r.msg for r in mavlink_io.iter_tlog(TLOG)), "RAW_IMU"))
 
 

@@ -1,4 +1,4 @@
-"""drivers.mavlink_io: typed MAVLink messages over real loopback UDP, decoding and .tlog reading."""
+"""drivers.mavlink.io: typed MAVLink messages over real loopback UDP, decoding and .tlog reading."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from drivers import mavlink_io as mio
+from drivers.mavlink import io as mio
 from fdi.errors import PortError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""drivers.nmea: the framer (bytes -> lines) and the codec (line -> typed message).
+"""drivers.gps.nmea: the framer (bytes -> lines) and the codec (line -> typed message).
 
 Framer tests use bytes literals and a byte-at-a-time reference model written from the
 ``NmeaFramer`` docstring; codec tests check every unit conversion and every rejection reason;
@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.nmea import (
+from drivers.gps.nmea import (
     KMH_MPS,
     KNOT_MPS,
     MAX_LINE,

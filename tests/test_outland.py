@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from drivers.framecodec import Framer, decode, load_protocol
-from drivers.outland import OutlandLink, Telemetry, ThrusterCommand, encode_telemetry
+from drivers.outland.framecodec import Framer, decode, load_protocol
+from drivers.outland.link import OutlandLink, Telemetry, ThrusterCommand, encode_telemetry
 from drivers.transport import SerialSettings, open_port
-from firmware_host.loop import FakeClock
-from firmware_host.rov_config import SimConfig
-from firmware_host.rov_sim import RovPlant, RovSimServer, parse_fault
+from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault
+from firmware_host.rov.config import SimConfig
+from firmware_host.runtime.loop import FakeClock
 
 ROOT = Path(__file__).resolve().parent.parent
 PROTO = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
@@ -49,7 +49,7 @@ def test_rs485_poll_times_out_without_reply() -> None:
 def test_sim_server_answers_polls_step_locked_and_ignores_other_nodes() -> None:
     plant = RovPlant(SimConfig(seed=3))
     srv = RovSimServer(plant, PROTO, "rs485", node=1)
-    from drivers.outland import encode_command
+    from drivers.outland.link import encode_command
 
     other = encode_command(PROTO, ThrusterCommand(50, -50), node=2, flags=0x80)
     assert srv.receive(other) == b""

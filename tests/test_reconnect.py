@@ -22,10 +22,10 @@ from drivers.ptypair import PtyPair
 from drivers.resilient import ResilientPort
 from drivers.transport import SerialSettings
 from fdi.errors import PortError
-from firmware_host.config import BridgeConfig, RoverConfig
-from firmware_host.loop import FakeClock
-from firmware_host.rover_sim import RoverScenario, generate
-from firmware_host.run import RoverBridge, run_rov_bridge
+from firmware_host.commands.run import RoverBridge, run_rov_bridge
+from firmware_host.devtools.rover_sim import RoverScenario, generate
+from firmware_host.runtime.config import BridgeConfig, RoverConfig
+from firmware_host.runtime.loop import FakeClock
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -226,9 +226,9 @@ def test_rover_survives_device_path_removed_and_recreated(tmp_path: Path) -> Non
 
 def test_rov_link_survives_far_end_closing(tmp_path: Path) -> None:
     """`fdi-bridge run` on an ROV config: the link's pty goes away and comes back."""
-    from drivers.framecodec import load_protocol
-    from firmware_host.rov_config import SimConfig
-    from firmware_host.rov_sim import RovPlant, RovSimServer, serve_pty
+    from drivers.outland.framecodec import load_protocol
+    from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, serve_pty
+    from firmware_host.rov.config import SimConfig
 
     proto = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
     link = tmp_path / "rovlink"
@@ -294,7 +294,7 @@ def test_rov_link_survives_far_end_closing(tmp_path: Path) -> None:
 
 def _heartbeats(data: bytes, src: tuple[int, int]) -> int:
     """HEARTBEATs from ``src`` (system, component) in a MAVLink byte stream."""
-    from drivers.mavlink_framer import MavFramer
+    from drivers.mavlink.framer import MavFramer
 
     n = 0
     for frame in MavFramer().feed(data):
@@ -307,8 +307,8 @@ def test_router_serial_link_survives_autopilot_reboot(tmp_path: Path) -> None:
     """The autopilot's USB port vanishes (a reboot) and comes back under the same path: the
     router keeps serving the ground station, drops and counts what it cannot deliver, reopens
     the path by itself, and packets flow both ways again."""
-    from drivers.mavlink_io import MavEndpoint, MavPacker
-    from firmware_host.router import EndpointConfig, MavlinkConfig, Router
+    from drivers.mavlink.io import MavEndpoint, MavPacker
+    from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router
 
     link = tmp_path / "ttyACM0"
     pty = PtyPair(link=link, baudrate=115200)
@@ -369,7 +369,7 @@ def test_router_serial_link_survives_autopilot_reboot(tmp_path: Path) -> None:
 def test_rover_serial_mavlink_output_survives_autopilot_reboot(tmp_path: Path) -> None:
     """``rover.output.mavlink_url`` is a serial device: GPS_INPUT stops while it is gone (counted
     as dropped), and resumes on the same path without a restart."""
-    from drivers.mavlink_framer import MavFramer
+    from drivers.mavlink.framer import MavFramer
 
     gps_link, ap_link = tmp_path / "gps", tmp_path / "ttyACM0"
     gps = PtyPair(link=gps_link, baudrate=9600)
@@ -428,8 +428,8 @@ def test_rover_serial_mavlink_output_survives_autopilot_reboot(tmp_path: Path) -
 def test_replay_nmea_output_survives_adapter_unplugged(tmp_path: Path) -> None:
     """Hardware-in-the-loop replay into a serial line (``replay --nmea-out /dev/ttyUSB1``): the
     adapter is unplugged and plugged back; the output reopens the same path by itself."""
-    from firmware_host.rover_outputs import NmeaSink
-    from firmware_host.rover_pipeline import RoverPipeline
+    from firmware_host.rover.outputs import NmeaSink
+    from firmware_host.rover.pipeline import RoverPipeline
 
     link = tmp_path / "ttyUSB1"
     pty = PtyPair(link=link, baudrate=9600)

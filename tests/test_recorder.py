@@ -14,15 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drivers.capture import CaptureReader, Channel
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings
-from firmware_host.capture import CaptureReader, Channel
-from firmware_host.config import BridgeConfig, RoverConfig
-from firmware_host.loop import FakeClock
-from firmware_host.recorder import FlightRecorder, RecorderConfig, read_session
-from firmware_host.replay import load_input, run_replay
-from firmware_host.rover_sim import RoverScenario, generate
-from firmware_host.run import RoverBridge
+from firmware_host.commands.replay import load_input, run_replay
+from firmware_host.commands.run import RoverBridge
+from firmware_host.devtools.rover_sim import RoverScenario, generate
+from firmware_host.runtime.config import BridgeConfig, RoverConfig
+from firmware_host.runtime.loop import FakeClock
+from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig, read_session
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import pytest
 
-from firmware_host.rov_config import RovConfig, load_rov_config, project_root
-from firmware_host.rov_experiment import run_experiment, summarize
-from firmware_host.rov_sim import parse_fault
+from firmware_host.devtools.rov_experiment import run_experiment, summarize
+from firmware_host.devtools.rov_sim import parse_fault
+from firmware_host.rov.config import RovConfig, load_rov_config, project_root
 
 SETPOINT = 150.0
 FAULT_T = 70.0

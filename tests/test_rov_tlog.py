@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from firmware_host.rov_config import load_rov_config, project_root
+from firmware_host.rov.config import load_rov_config, project_root
 
 TLOG = project_root().parent / "shared" / "corpus" / "ardusub" / "small.tlog"
 
@@ -13,7 +13,7 @@ TLOG = project_root().parent / "shared" / "corpus" / "ardusub" / "small.tlog"
 def dive():  # type: ignore[no-untyped-def]
     if not TLOG.exists():
         pytest.skip(f"real dive not found at {TLOG} (../shared/corpus relative to the project)")
-    from firmware_host.rov_tlog import load_dive
+    from firmware_host.rov.tlog import load_dive
 
     return load_dive(TLOG)
 
@@ -24,7 +24,7 @@ def test_dive_is_long_and_has_yaw_commands(dive) -> None:  # type: ignore[no-unt
 
 
 def test_clean_dive_no_confirmed_fault(dive) -> None:  # type: ignore[no-untyped-def]
-    from firmware_host.rov_tlog import replay
+    from firmware_host.rov.tlog import replay
 
     cfg, _ = load_rov_config(project_root() / "config" / "rov.toml")
     dec = replay(dive, cfg)
@@ -34,7 +34,7 @@ def test_clean_dive_no_confirmed_fault(dive) -> None:  # type: ignore[no-untyped
 
 @pytest.mark.parametrize("at_s", [60.0, 150.0, 200.0])
 def test_drift_20_confirmed_within_2_s(dive, at_s: float) -> None:  # type: ignore[no-untyped-def]
-    from firmware_host.rov_tlog import replay
+    from firmware_host.rov.tlog import replay
 
     cfg, _ = load_rov_config(project_root() / "config" / "rov.toml")
     dec = replay(dive, cfg, drift_deg=20.0, drift_at_s=at_s)

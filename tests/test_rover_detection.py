@@ -18,10 +18,10 @@ from typing import Any
 
 import pytest
 
-from firmware_host.config import BridgeConfig, load_config
-from firmware_host.rover_pipeline import RoverPipeline
-from firmware_host.rover_sim import RoverScenario, generate
-from firmware_host.score import RoverScore, score_rover
+from firmware_host.devtools.rover_sim import RoverScenario, generate
+from firmware_host.devtools.score import RoverScore, score_rover
+from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime.config import BridgeConfig, load_config
 
 SEEDS = (1, 2, 3)
 

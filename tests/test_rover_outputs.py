@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import os
 
-from drivers.nmea import parse_sentence
-from firmware_host.rover_outputs import NmeaSink, gps_week_ms, unix_time
+from drivers.gps.nmea import parse_sentence
+from firmware_host.rover.outputs import NmeaSink, gps_week_ms, unix_time
 
 
 def test_pty_output_nobody_reads_drops_and_counts_instead_of_blocking() -> None:
@@ -37,7 +37,7 @@ def test_gps_week_and_leap_seconds() -> None:
 
 
 def test_encoded_sentences_parse_back() -> None:
-    from drivers.nmea import format_lat, format_lon, with_checksum
+    from drivers.gps.nmea import format_lat, format_lon, with_checksum
 
     la, ns = format_lat(-33.8688)
     lo, ew = format_lon(151.2093)

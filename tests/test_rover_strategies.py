@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from firmware_host.cli import main
-from firmware_host.rover_sim import RoverScenario, write_run
-from firmware_host.score import read_jsonl, score_rover
+from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from firmware_host.devtools.score import read_jsonl, score_rover
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,8 @@ import pytest
 from drivers.ptypair import PtyPair
 from fdi.errors import ConfigError
 from firmware_host.cli import main
-from firmware_host.rover_sim import RoverScenario, generate
-from firmware_host.run import vehicle_of
+from firmware_host.commands.run import vehicle_of
+from firmware_host.devtools.rover_sim import RoverScenario, generate
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -65,9 +65,9 @@ def test_run_rover_from_the_cli_with_recorder(tmp_path: Path) -> None:
 
 
 def test_run_rov_from_the_cli(tmp_path: Path) -> None:
-    from drivers.framecodec import load_protocol
-    from firmware_host.rov_config import SimConfig
-    from firmware_host.rov_sim import RovPlant, RovSimServer, serve_pty
+    from drivers.outland.framecodec import load_protocol
+    from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, serve_pty
+    from firmware_host.rov.config import SimConfig
 
     proto = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
     with PtyPair(link=tmp_path / "rov") as pty:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from firmware_host.soak import run_soak
+from firmware_host.devtools.soak import run_soak
 
 
 def test_short_soak_counters_consistent(tmp_path: Path) -> None:

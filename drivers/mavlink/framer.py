@@ -1,0 +1,326 @@
+"""Bytes -> MAVLink frames, byte for byte: MAVLink 1 and 2, unknown ids, signed packets.
+
+The framer never decodes a payload: a :class:`MavFrame` carries the packet's bytes exactly as
+they arrived plus the header fields a router needs (source, sequence, message id, signing). It
+is the first of the three layers (STYLE.md rule 2); :func:`drivers.mavlink.io.decode_packet`
+is the codec for the few frames the bridge reads itself.
+
+Policy
+------
+* **Start of frame**: ``0xFE`` (MAVLink 1) or ``0xFD`` (MAVLink 2). Bytes before a start byte
+  are dropped and counted (``junk_bytes``).
+* **Length from the header**: ``6 + len + 2`` (v1), ``10 + len + 2 (+ 13 when signed)`` (v2),
+  at most 280 bytes, so a frame is capped before its body is waited for. A MAVLink 2 header
+  with an incompatibility flag other than "signed" cannot be framed and is dropped.
+* **CRC**: checked whenever the message id is in the dialect's CRC_EXTRA table
+  (ardupilotmega, taken from pymavlink through :mod:`drivers.mavlink.io`). A frame whose CRC
+  fails is counted (``bad_crc``) and only its start byte is dropped: the framer resyncs from the
+  next byte, so a corrupted length byte cannot swallow the good packets that follow.
+* **Unknown message ids** (no CRC_EXTRA) are passed through *framed but unchecked*
+  (``unchecked``), as mavlink-router does, so a dialect the bridge does not know still flows.
+  Without a CRC such a frame cannot be told from noise, so while the framer is resyncing
+  (after dropped bytes, until a CRC-checked frame has been found) unknown-id candidates are
+  dropped too (``unknown_refused``): a 0xFD inside a damaged packet must not become a frame.
+  A byte error that hits an in-sync packet's message id can turn it into an unknown one, which
+  then passes (framed whole, its neighbours intact); ``pass_unknown=False`` refuses every
+  unknown id instead.
+* **Signatures** are framed, not verified here: :func:`signature_ok` checks one with a key.
+
+Every drop goes to ``on_drop(bytes, reason)`` when given, and into :class:`FramerStats`.
+"""
+
+from __future__ import annotations
+
+import binascii
+import hashlib
+import hmac
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+MAGIC_V1 = 0xFE
+MAGIC_V2 = 0xFD
+HEADER_V1 = 6
+HEADER_V2 = 10
+CRC_LEN = 2
+SIGNATURE_LEN = 13
+IFLAG_SIGNED = 0x01
+MAX_FRAME = HEADER_V2 + 255 + CRC_LEN + SIGNATURE_LEN  # 280
+
+# CRC-16/MCRF4XX (MAVLink's "X.25" CRC) is the bit-reflected twin of CRC-16/XMODEM, which the
+# standard library computes in C (binascii.crc_hqx): reflect every input byte, run crc_hqx from
+# 0xFFFF (its own reflection), reflect the 16-bit result.
+_REV8 = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
+
+
+def x25crc(data: bytes | bytearray | memoryview, crc: int = 0xFFFF) -> int:
+    """MAVLink's CRC-16/MCRF4XX of ``data`` (initial value 0xFFFF, no final xor)."""
+    start = (_REV8[crc & 0xFF] << 8) | _REV8[crc >> 8]
+    c = binascii.crc_hqx(bytes(data).translate(_REV8), start)
+    return (_REV8[c & 0xFF] << 8) | _REV8[c >> 8]
+
+
+@dataclass(frozen=True, slots=True)
+class MavFrame:
+    """One MAVLink packet exactly as received, and its header fields."""
+
+    raw: bytes
+    version: int  # 1 or 2
+    seq: int
+    sysid: int
+    compid: int
+    msgid: int
+    signed: bool
+    crc_checked: bool  # False: message id unknown to the dialect, passed through unchecked
+
+    @property
+    def header_len(self) -> int:
+        return HEADER_V2 if self.version == 2 else HEADER_V1
+
+    @property
+    def payload(self) -> bytes:
+        return self.raw[self.header_len : self.header_len + self.raw[1]]
+
+    @property
+    def link_id(self) -> int | None:
+        """The signing link id, or None for an unsigned packet."""
+        return self.raw[-SIGNATURE_LEN] if self.signed else None
+
+    @property
+    def signature_timestamp(self) -> int | None:
+        """The signing timestamp (10 µs units since 2015-01-01), or None if unsigned."""
+        if not self.signed:
+            return None
+        return int.from_bytes(self.raw[-12:-6], "little")
+
+    def payload_byte(self, offset: int) -> int:
+        """Payload byte at ``offset``; 0 past the end (MAVLink 2 cuts trailing zeros)."""
+        if offset < self.raw[1]:
+            return self.raw[self.header_len + offset]
+        return 0
+
+
+def signature_ok(frame: MavFrame, key: bytes) -> bool:
+    """True when ``frame`` is signed and its signature matches ``key`` (32 bytes).
+
+    signature = SHA-256(key + header + payload + CRC + link id + timestamp)[:6]
+    (MAVLink 2 message signing). Replay protection (timestamps) is the caller's job.
+    """
+    if not frame.signed:
+        return False
+    expected = hashlib.sha256(key + frame.raw[:-6]).digest()[:6]
+    return hmac.compare_digest(expected, frame.raw[-6:])
+
+
+def sign_packet(raw: bytes, key: bytes, link_id: int, timestamp: int) -> bytes:
+    """Append a signature to an already-signed-flagged MAVLink 2 packet's bytes (for tests).
+
+    ``raw`` must be a MAVLink 2 packet with the signed incompat flag set and without its
+    13 signature bytes.
+    """
+    body = raw + bytes([link_id]) + timestamp.to_bytes(6, "little")
+    return body + hashlib.sha256(key + body).digest()[:6]
+
+
+@dataclass
+class FramerStats:
+    """Counters of one framer."""
+
+    bytes_in: int = 0
+    frames: int = 0
+    unchecked: int = 0  # frames with an unknown message id, passed without a CRC check
+    bad_crc: int = 0  # candidate frames whose CRC failed (their start byte dropped)
+    bad_flags: int = 0  # MAVLink 2 headers with unsupported incompatibility flags
+    unknown_refused: int = 0  # unknown-id candidates dropped (resyncing, or pass_unknown=False)
+    junk_bytes: int = 0  # bytes dropped while looking for a start byte
+    dropped_bytes: int = 0  # every byte dropped for any reason
+    by_reason: dict[str, int] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, int]:
+        return {
+            "bytes_in": self.bytes_in,
+            "frames": self.frames,
+            "unchecked": self.unchecked,
+            "bad_crc": self.bad_crc,
+            "bad_flags": self.bad_flags,
+            "unknown_refused": self.unknown_refused,
+            "junk_bytes": self.junk_bytes,
+            "dropped_bytes": self.dropped_bytes,
+        }
+
+
+OnDrop = Callable[[bytes, str], None]
+
+
+def _default_crc_extras() -> Mapping[int, int]:
+    from drivers.mavlink.io import crc_extra_table
+
+    return crc_extra_table()
+
+
+class MavFramer:
+    """Incremental MAVLink framer (see the module docstring for the policy).
+
+    ``feed(data)`` returns the frames completed by ``data``; an incomplete frame waits for more
+    bytes. ``boundary=True`` says ``data`` ended a datagram (UDP): an incomplete frame left at a
+    datagram's end is then dropped as truncated, since the next datagram starts afresh.
+    """
+
+    def __init__(
+        self,
+        crc_extras: Mapping[int, int] | None = None,
+        *,
+        on_drop: OnDrop | None = None,
+        pass_unknown: bool = True,
+    ) -> None:
+        self._pass_unknown = pass_unknown
+        self._extras = _default_crc_extras() if crc_extras is None else crc_extras
+        self._on_drop = on_drop
+        self._buf = bytearray()
+        self._in_sync = True
+        self.stats = FramerStats()
+
+    def _drop(self, data: bytes | bytearray, reason: str) -> None:
+        n = len(data)
+        if n == 0:
+            return
+        st = self.stats
+        st.dropped_bytes += n
+        st.by_reason[reason] = st.by_reason.get(reason, 0) + n
+        self._in_sync = False
+        if self._on_drop is not None:
+            self._on_drop(bytes(data), reason)
+
+    def feed(self, data: bytes, *, boundary: bool = False) -> list[MavFrame]:
+        self.stats.bytes_in += len(data)
+        buf = self._buf
+        buf += data
+        out: list[MavFrame] = []
+        pos = 0
+        n = len(buf)
+        extras = self._extras
+        st = self.stats
+        while pos < n:
+            if self._stalled(buf, pos, n, boundary):
+                # At the end of a datagram a frame cannot complete: drop its start byte and
+                # rescan the rest (a corrupt length must not take the good packets with it).
+                self._drop(buf[pos : pos + 1], "truncated")
+                pos += 1
+                continue
+            b0 = buf[pos]
+            if b0 != MAGIC_V2 and b0 != MAGIC_V1:
+                nxt = _next_magic(buf, pos + 1)
+                st.junk_bytes += nxt - pos
+                self._drop(buf[pos:nxt], "junk")
+                pos = nxt
+                continue
+            if b0 == MAGIC_V2:
+                if n - pos < 3:
+                    break
+                plen = buf[pos + 1]
+                iflags = buf[pos + 2]
+                if iflags & ~IFLAG_SIGNED:
+                    st.bad_flags += 1
+                    self._drop(buf[pos : pos + 1], "bad_flags")
+                    pos += 1
+                    continue
+                signed = bool(iflags & IFLAG_SIGNED)
+                hlen = HEADER_V2
+                total = hlen + plen + CRC_LEN + (SIGNATURE_LEN if signed else 0)
+            else:
+                if n - pos < 2:
+                    break
+                plen = buf[pos + 1]
+                signed = False
+                hlen = HEADER_V1
+                total = hlen + plen + CRC_LEN
+            end = pos + total
+            if end > n:
+                break  # the length is known: wait for the body (at most 280 bytes)
+            if hlen == HEADER_V2:
+                msgid = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
+            else:
+                msgid = buf[pos + 5]
+            extra = extras.get(msgid)
+            crc_end = pos + hlen + plen
+            if extra is not None:
+                crc = x25crc(bytes(buf[pos + 1 : crc_end]) + bytes((extra,)))
+                if crc != buf[crc_end] | (buf[crc_end + 1] << 8):
+                    st.bad_crc += 1
+                    self._drop(buf[pos : pos + 1], "bad_crc")
+                    pos += 1
+                    continue
+            elif not self._pass_unknown:
+                st.unknown_refused += 1
+                self._drop(buf[pos : pos + 1], "unknown_id")
+                pos += 1
+                continue
+            elif not self._in_sync:
+                # No CRC to trust and we are resyncing after a drop: a candidate here is as
+                # likely noise (a 0xFD inside a damaged packet) as a frame. Refuse it until a
+                # CRC-checked frame has re-established sync.
+                st.unknown_refused += 1
+                self._drop(buf[pos : pos + 1], "unchecked_resync")
+                pos += 1
+                continue
+            raw = bytes(buf[pos:end])
+            if hlen == HEADER_V2:
+                frame = MavFrame(raw, 2, raw[4], raw[5], raw[6], msgid, signed, extra is not None)
+            else:
+                frame = MavFrame(raw, 1, raw[2], raw[3], raw[4], msgid, False, extra is not None)
+            st.frames += 1
+            if extra is None:
+                st.unchecked += 1
+            self._in_sync = True
+            out.append(frame)
+            pos = end
+        if pos:
+            del buf[:pos]
+        return out
+
+    @staticmethod
+    def _stalled(buf: bytearray, pos: int, n: int, boundary: bool) -> bool:
+        """True at a datagram's end when the frame starting at ``pos`` cannot complete."""
+        if not boundary:
+            return False
+        b0 = buf[pos]
+        if b0 == MAGIC_V2:
+            if n - pos < 3:
+                return True
+            sig = SIGNATURE_LEN if buf[pos + 2] & IFLAG_SIGNED else 0
+            return pos + HEADER_V2 + buf[pos + 1] + CRC_LEN + sig > n
+        if b0 == MAGIC_V1:
+            return n - pos < 2 or pos + HEADER_V1 + buf[pos + 1] + CRC_LEN > n
+        return False
+
+    @property
+    def pending(self) -> int:
+        """Bytes held waiting for the rest of a frame."""
+        return len(self._buf)
+
+
+def _next_magic(buf: bytearray, start: int) -> int:
+    i2 = buf.find(MAGIC_V2, start)
+    i1 = buf.find(MAGIC_V1, start)
+    if i2 < 0:
+        return len(buf) if i1 < 0 else i1
+    if i1 < 0:
+        return i2
+    return min(i1, i2)
+
+
+def frame_target(
+    frame: MavFrame, offsets: Mapping[int, tuple[int | None, int | None]]
+) -> tuple[int, int] | None:
+    """``(target_system, target_component)`` of a targeted message, None if it has none.
+
+    A message without a target component field reports component 0 (all components).
+    """
+    entry = offsets.get(frame.msgid)
+    if entry is None:
+        return None
+    sys_ofs, comp_ofs = entry
+    if sys_ofs is None:
+        return None
+    target_sys = frame.payload_byte(sys_ofs)
+    target_comp = frame.payload_byte(comp_ofs) if comp_ofs is not None else 0
+    return target_sys, target_comp

@@ -1,0 +1,515 @@
+"""Non-blocking byte links for the MAVLink router: UDP server/client, TCP server/client, serial.
+
+A link moves bytes only; framing is :mod:`drivers.mavlink.framer`'s job. Links are opened from
+a URL in the mavutil / MAVProxy spelling:
+
+=======================  =========================================================
+``udpin:HOST:PORT``      UDP server: bind and answer every peer that has sent to it
+``udpin:PORT``           the same on **127.0.0.1** (a server is never public by default)
+``udpout:HOST:PORT``     UDP client: send to HOST:PORT, accept its answers
+``tcpin:HOST:PORT``      TCP server (``tcpin:PORT`` binds 127.0.0.1), any number of clients
+``tcp:HOST:PORT``        TCP client
+anything else            a pyserial URL or device path, opened with ``baud``
+=======================  =========================================================
+
+``read(max_chunks)`` yields ``(chunk, stream_key, boundary)`` one at a time as it reads them,
+so the router forwards a datagram before it reads the next one: ``stream_key`` names the byte
+stream the chunk belongs to (one framer per stream: a UDP peer, a TCP client, the serial line)
+and ``boundary`` is True when the chunk ended a datagram. ``write(data)`` returns False when the
+link cannot take the bytes now (kernel buffer full): the router keeps them in its bounded
+queue and waits for :meth:`Link.write_filenos` to become writable. Stream links (TCP, serial)
+keep a short backlog of their own (a partial write); :meth:`Link.flush` pushes it on.
+OS errors are translated into :class:`~fdi.errors.PortError` at open time; at run time a
+failing peer is dropped and counted, never raised into the forwarding loop.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import socket
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Hashable, Iterator
+
+from drivers.resilient import ResilientPort
+from drivers.transport import SerialSettings, open_port_nonblocking
+from fdi.errors import PortError
+
+Chunk = tuple[bytes, Hashable, bool]
+log = logging.getLogger("fdi_bridge.mavlink")
+
+DEFAULT_SERVER_HOST = "127.0.0.1"
+MAX_UDP_PEERS = 16
+UDP_PEER_TIMEOUT_S = 30.0
+# Receive buffer asked for on UDP sockets (the kernel caps it at net.core.rmem_max): ~1 s of a
+# 1 000 packet/s link, so a burst that arrives while the loop is descheduled is not dropped by
+# the kernel before the router's own (counted) queues see it.
+UDP_RCVBUF_BYTES = 1 << 20
+_WOULD_BLOCK = (errno.EAGAIN, errno.EWOULDBLOCK, errno.ENOBUFS)
+
+
+# The mavutil / MAVProxy network spellings; anything else is a serial device or pyserial URL.
+NETWORK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
+
+
+def is_network_url(url: str) -> bool:
+    """True for ``udpout:HOST:PORT`` and the other network spellings, False for a device."""
+    scheme, sep, _rest = url.partition(":")
+    return bool(sep) and scheme in NETWORK_SCHEMES
+
+
+def _split_hostport(rest: str, url: str, default_host: str | None) -> tuple[str, int]:
+    host, sep, port = rest.rpartition(":")
+    if not sep:
+        host, port = "", rest
+    if not host:
+        if default_host is None:
+            raise PortError(f"{url!r}: expected HOST:PORT")
+        host = default_host
+    try:
+        return host, int(port)
+    except ValueError as err:
+        raise PortError(f"{url!r}: bad port {port!r}") from err
+
+
+class Link(ABC):
+    """One endpoint's transport (see the module docstring)."""
+
+    url: str
+    errors: int = 0
+
+    @abstractmethod
+    def filenos(self) -> list[int]:
+        """File descriptors to wait on (may change as TCP clients come and go)."""
+
+    @abstractmethod
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        """Yield at most ``max_chunks`` chunks that can be read now, without blocking."""
+
+    @abstractmethod
+    def write(self, data: bytes) -> bool: ...
+
+    def backlog(self) -> bool:
+        """True when the link holds bytes of its own that a :meth:`flush` should push on."""
+        return False
+
+    def write_filenos(self) -> list[int]:
+        """Descriptors whose writability unblocks the link's backlog (default: all of them)."""
+        return self.filenos()
+
+    def flush(self) -> None:
+        """Write what the link holds back (a partial TCP or serial write); never blocks."""
+        return None  # datagram links hold nothing back
+
+    @abstractmethod
+    def close(self) -> None: ...
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        return None
+
+    def has_peer(self) -> bool:
+        """True when a write can reach someone (a UDP server has heard from a peer)."""
+        return True
+
+
+class _UdpLink(Link):
+    """A link on one UDP socket (``sock``)."""
+
+    sock: socket.socket
+
+    @property
+    def local_address(self) -> tuple[str, int]:
+        host, port = self.sock.getsockname()[:2]
+        return str(host), int(port)
+
+    def filenos(self) -> list[int]:
+        return [self.sock.fileno()]
+
+
+class UdpServerLink(_UdpLink):
+    def __init__(self, url: str, host: str, port: int) -> None:
+        self.url = url
+        self._clock = time.monotonic
+        try:
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF_BYTES)
+            self.sock.bind((host, port))
+            self.sock.setblocking(False)
+        except OSError as err:
+            raise PortError(f"could not bind {url!r}: {err}") from err
+        self.peers: dict[tuple[str, int], float] = {}
+        self.dropped = 0  # datagrams a peer lost because the socket's send buffer was full
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        now = self._clock()
+        recvfrom = self.sock.recvfrom
+        peers = self.peers
+        for _ in range(max_chunks):
+            try:
+                data, addr = recvfrom(65535)
+            except BlockingIOError:
+                return
+            except OSError:
+                self.errors += 1  # e.g. ICMP port unreachable reported on a later call
+                return
+            if addr not in peers and len(peers) >= MAX_UDP_PEERS:
+                oldest = min(peers, key=peers.__getitem__)
+                del peers[oldest]
+            peers[addr] = now
+            yield data, addr, True
+
+    def write(self, data: bytes) -> bool:
+        peers = self.peers
+        if len(peers) == 1:  # the usual case: one ground station
+            addr = next(iter(peers))
+            if self._clock() - peers[addr] > UDP_PEER_TIMEOUT_S:
+                del peers[addr]
+                return True
+            return self._sendto(data, addr)
+        now = self._clock()
+        for addr, seen in list(peers.items()):
+            if now - seen > UDP_PEER_TIMEOUT_S:
+                del peers[addr]
+            elif not self._sendto(data, addr):
+                # One peer's buffer is full: that peer loses this datagram (as on the air);
+                # returning False would send it again to the peers that already have it.
+                self.dropped += 1
+        return True
+
+    def _sendto(self, data: bytes, addr: tuple[str, int]) -> bool:
+        try:
+            self.sock.sendto(data, addr)
+        except OSError as err:
+            if err.errno in _WOULD_BLOCK:
+                return False
+            self.errors += 1
+        return True
+
+    def has_peer(self) -> bool:
+        return bool(self.peers)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class UdpClientLink(_UdpLink):
+    def __init__(self, url: str, host: str, port: int) -> None:
+        self.url = url
+        try:
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF_BYTES)
+            self.sock.setblocking(False)
+            self.target = (socket.gethostbyname(host), port)
+            self.sock.bind(("0.0.0.0" if host not in ("127.0.0.1", "localhost") else host, 0))
+        except OSError as err:
+            raise PortError(f"could not open {url!r}: {err}") from err
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        recvfrom = self.sock.recvfrom
+        for _ in range(max_chunks):
+            try:
+                data, addr = recvfrom(65535)
+            except BlockingIOError:
+                return
+            except OSError:
+                self.errors += 1  # ICMP port unreachable while nobody listens yet
+                return
+            yield data, addr, True
+
+    def write(self, data: bytes) -> bool:
+        try:
+            self.sock.sendto(data, self.target)
+        except OSError as err:
+            if err.errno in _WOULD_BLOCK:
+                return False
+            self.errors += 1  # nobody listening yet: the datagram is lost, as on the air
+        return True
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class _TcpConn:
+    def __init__(self, sock: socket.socket, key: Hashable) -> None:
+        self.sock = sock
+        self.key = key
+        self.out = bytearray()
+
+
+MAX_TCP_BACKLOG = 64 * 1024
+
+
+class _TcpBase(Link):
+    conns: list[_TcpConn]
+
+    def filenos(self) -> list[int]:
+        return [c.sock.fileno() for c in self.conns]
+
+    def _read_conns(self, max_chunks: int) -> Iterator[Chunk]:
+        for c in list(self.conns):
+            for _ in range(max_chunks):
+                try:
+                    data = c.sock.recv(65536)
+                except BlockingIOError:
+                    break
+                except OSError:
+                    data = b""
+                if not data:
+                    self._lost(c)
+                    break
+                yield data, c.key, False
+
+    def _lost(self, c: _TcpConn) -> None:
+        self.errors += 1
+        c.sock.close()
+        if c in self.conns:
+            self.conns.remove(c)
+
+    def write(self, data: bytes) -> bool:
+        ok = True
+        for c in list(self.conns):
+            if len(c.out) > MAX_TCP_BACKLOG:
+                self._send(c)
+                if len(c.out) > MAX_TCP_BACKLOG:
+                    ok = False  # this client is slow: the router keeps the packet queued
+                    continue
+            if c.out:
+                c.out += data
+                self._send(c)
+                continue
+            try:
+                sent = c.sock.send(data)
+            except BlockingIOError:
+                sent = 0
+            except OSError:
+                self._lost(c)
+                continue
+            if sent < len(data):
+                c.out += data[sent:]
+        return ok
+
+    def _send(self, c: _TcpConn) -> None:
+        try:
+            sent = c.sock.send(c.out)
+            del c.out[:sent]
+        except BlockingIOError:
+            pass
+        except OSError:
+            self._lost(c)
+
+    def backlog(self) -> bool:
+        return any(c.out for c in self.conns)
+
+    def flush(self) -> None:
+        for c in list(self.conns):
+            if c.out:
+                self._send(c)
+
+    def write_filenos(self) -> list[int]:
+        return [c.sock.fileno() for c in self.conns if c.out]
+
+    def close(self) -> None:
+        for c in self.conns:
+            c.sock.close()
+        self.conns = []
+
+
+class TcpServerLink(_TcpBase):
+    def __init__(self, url: str, host: str, port: int) -> None:
+        self.url = url
+        self.conns = []
+        self._n = 0
+        try:
+            self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.listener.bind((host, port))
+            self.listener.listen(8)
+            self.listener.setblocking(False)
+        except OSError as err:
+            raise PortError(f"could not listen on {url!r}: {err}") from err
+
+    @property
+    def local_address(self) -> tuple[str, int]:
+        host, port = self.listener.getsockname()[:2]
+        return str(host), int(port)
+
+    def filenos(self) -> list[int]:
+        return [self.listener.fileno(), *super().filenos()]
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        while True:
+            try:
+                sock, addr = self.listener.accept()
+            except (BlockingIOError, OSError):
+                break
+            sock.setblocking(False)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._n += 1
+            self.conns.append(_TcpConn(sock, ("tcp", self._n, addr)))
+        return self._read_conns(max_chunks)
+
+    def has_peer(self) -> bool:
+        return bool(self.conns)
+
+    def close(self) -> None:
+        super().close()
+        self.listener.close()
+
+
+class TcpClientLink(_TcpBase):
+    """A TCP client (``tcp:HOST:PORT``, as SITL listens on 5760) that connects again when lost.
+
+    The first connection is made at start (a refused one is a start-up error). When the server
+    closes or resets it (SITL restarted, the companion's server gone), the loss is counted in
+    ``errors`` and logged once, and the link reconnects by itself, as mavlink-router's TCP
+    endpoints do: an attempt after 0.1 s, then 0.2, 0.4 ... capped at ``retry_max_s``; each
+    attempt waits at most ``retry_timeout_s`` for the connection (the router's loop waits with
+    it). While it is down the router counts its packets as ``no_peer``.
+    """
+
+    def __init__(self, url: str, host: str, port: int, connect_timeout_s: float = 5.0,
+                 retry_max_s: float = 5.0, retry_timeout_s: float = 0.1) -> None:
+        self.url = url
+        self._addr = (host, port)
+        self.retry_max_s = retry_max_s
+        self.retry_timeout_s = retry_timeout_s
+        self.reconnects = 0
+        self._backoff = 0.1
+        self._next_try = 0.0
+        try:
+            sock = self._connect(connect_timeout_s)
+        except OSError as err:
+            raise PortError(f"could not connect to {url!r}: {err}") from err
+        self.conns = [_TcpConn(sock, ("tcp", host, port))]
+
+    def _connect(self, timeout_s: float) -> socket.socket:
+        sock = socket.create_connection(self._addr, timeout=timeout_s)
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        return sock
+
+    def _lost(self, c: _TcpConn) -> None:
+        super()._lost(c)
+        log.warning("%s: connection lost; reconnecting with backoff up to %.1f s", self.url,
+                    self.retry_max_s)
+        self._backoff = 0.1
+        self._next_try = time.monotonic() + self._backoff
+
+    def _retry(self) -> None:
+        now = time.monotonic()
+        if now < self._next_try:
+            return
+        try:
+            sock = self._connect(self.retry_timeout_s)
+        except OSError as err:
+            log.debug("%s: still down: %s", self.url, err)
+            self._backoff = min(2.0 * self._backoff, self.retry_max_s)
+            self._next_try = now + self._backoff
+            return
+        self.reconnects += 1
+        log.warning("%s: connected again", self.url)
+        self.conns = [_TcpConn(sock, ("tcp", *self._addr))]
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        if not self.conns:
+            self._retry()
+        return self._read_conns(max_chunks)
+
+    def has_peer(self) -> bool:
+        return bool(self.conns)
+
+
+class SerialLink(Link):
+    """A pyserial URL (``/dev/ttyACM0``, a pty, ``loop://``) read and written without blocking.
+
+    The port is a :class:`~drivers.resilient.ResilientPort`: when the device goes away (USB
+    unplugged, the autopilot rebooting and its USB port vanishing with it) the loss is logged
+    once and counted, the router keeps forwarding between the other links, and the same URL is
+    reopened with backoff (capped at ``backoff_max_s``); while it is down its descriptor leaves
+    the router's select and the router polls it. A device absent at start is not fatal either.
+    """
+
+    def __init__(self, url: str, baud: int, backoff_max_s: float = 5.0) -> None:
+        self.url = url
+        self.port = ResilientPort(SerialSettings(url=url, baudrate=baud, timeout_s=0.0),
+                                  name=f"mavlink {url}", backoff_max_s=backoff_max_s,
+                                  opener=open_port_nonblocking)
+        self._key = ("serial", url)
+        self._out = bytearray()
+
+    def filenos(self) -> list[int]:
+        try:
+            return [int(self.port.fileno())]
+        except (AttributeError, OSError, ValueError, NotImplementedError):
+            return []  # loop:// and friends, and a port that is down: the router polls them
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        if not self.port.service():  # down: a reopen is tried when its backoff is due
+            return iter(())
+        waiting = self.port.in_waiting
+        data = self.port.read(waiting or 1) if waiting or self.filenos() else b""
+        return iter([(data, self._key, False)] if data else ())
+
+    def write(self, data: bytes) -> bool:
+        if not self.port.up:
+            self.port.write(data)  # counted as dropped (or sent, if the reopen is due now)
+            return True
+        if len(self._out) > MAX_TCP_BACKLOG:
+            self._flush()
+            return False
+        self._out += data
+        self._flush()
+        return True
+
+    def backlog(self) -> bool:
+        return bool(self._out)
+
+    def flush(self) -> None:
+        self._flush()
+
+    def write_filenos(self) -> list[int]:
+        return self.filenos() if self._out else []
+
+    def _flush(self) -> None:
+        if not self._out:
+            return
+        losses = self.port.losses
+        n = self.port.write(bytes(self._out))
+        if self.port.losses != losses:  # lost on this write (counted as dropped): start afresh
+            self._out.clear()
+            return
+        del self._out[: n or 0]
+
+    @property
+    def errors(self) -> int:
+        """Losses of the device and failed reopen attempts."""
+        return self.port.losses + self.port.open_failures
+
+    @errors.setter
+    def errors(self, value: int) -> None:
+        raise AttributeError("SerialLink.errors counts the port's losses")
+
+    def close(self) -> None:
+        self.port.close()
+
+
+def open_link(url: str, baud: int = 115200, backoff_max_s: float = 5.0) -> Link:
+    """Open a link from its URL (see the module docstring); ``backoff_max_s``: the longest wait
+    between reconnection attempts of a serial or TCP client link."""
+    scheme, sep, rest = url.partition(":")
+    if sep and scheme == "udpin":
+        host, port = _split_hostport(rest, url, DEFAULT_SERVER_HOST)
+        return UdpServerLink(url, host, port)
+    if sep and scheme == "udpout":
+        host, port = _split_hostport(rest, url, None)
+        return UdpClientLink(url, host, port)
+    if sep and scheme == "tcpin":
+        host, port = _split_hostport(rest, url, DEFAULT_SERVER_HOST)
+        return TcpServerLink(url, host, port)
+    if sep and scheme == "tcp":
+        host, port = _split_hostport(rest, url, None)
+        return TcpClientLink(url, host, port, retry_max_s=backoff_max_s)
+    return SerialLink(url, baud, backoff_max_s)

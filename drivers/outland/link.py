@@ -1,0 +1,167 @@
+"""The Outland 1000 driver: telemetry in, thruster commands out, over either wiring.
+
+* ``rs232``: through the control converter, full duplex; the vehicle streams telemetry at 5 Hz
+  and the bridge sends a ``thrusters`` frame every period (:meth:`OutlandLink.send_command`,
+  :meth:`OutlandLink.read_telemetry`).
+* ``rs485``: directly on the vehicle's bus, half duplex; the bridge sends the ``thrusters`` frame
+  with the request flag to the vehicle's address and waits for its ``telemetry`` reply within
+  ``reply_timeout_s`` (:meth:`OutlandLink.poll`). pyserial's RS-485 driver-enable settings come
+  from ``SerialSettings.rs485``.
+
+The port is any pyserial URL (:func:`drivers.transport.open_port`); the frame layout is the
+protocol description (:mod:`drivers.outland.framecodec`). Malformed frames are counted, never
+returned.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+from drivers.outland.framecodec import Framer, Protocol, decode, encode
+from drivers.transport import Port, read_some, write_all
+from fdi.errors import DecodeError
+
+Wiring = Literal["rs232", "rs485"]
+
+
+@dataclass(frozen=True)
+class Telemetry:
+    """One telemetry message (units in the names)."""
+
+    heading_deg: float
+    depth_m: float
+    pitch_deg: float = 0.0
+    roll_deg: float = 0.0
+    status: int = 0
+
+
+@dataclass(frozen=True)
+class ThrusterCommand:
+    """Thruster setpoints, % of full thrust, -100..100."""
+
+    port_pct: float = 0.0
+    starboard_pct: float = 0.0
+    lateral_pct: float = 0.0
+    vertical_pct: float = 0.0
+
+    @property
+    def yaw_pct(self) -> float:
+        """Differential thrust (the yaw command u of the FIR)."""
+        return (self.port_pct - self.starboard_pct) / 2.0
+
+
+NEUTRAL = ThrusterCommand()
+
+
+def _clamp(x: float) -> float:
+    return min(max(x, -100.0), 100.0)
+
+
+def encode_command(proto: Protocol, cmd: ThrusterCommand, node: int, flags: int = 0) -> bytes:
+    values = {
+        "port_pct": _clamp(cmd.port_pct),
+        "starboard_pct": _clamp(cmd.starboard_pct),
+        "lateral_pct": _clamp(cmd.lateral_pct),
+        "vertical_pct": _clamp(cmd.vertical_pct),
+    }
+    return encode(proto, "thrusters", values, node=node, flags=flags)
+
+
+def encode_telemetry(proto: Protocol, tel: Telemetry, node: int) -> bytes:
+    values = {
+        "heading_deg": tel.heading_deg % 360.0,
+        "depth_m": tel.depth_m,
+        "pitch_deg": tel.pitch_deg,
+        "roll_deg": tel.roll_deg,
+        "status": float(tel.status),
+    }
+    return encode(proto, "telemetry", values, node=node)
+
+
+def to_telemetry(values: dict[str, float]) -> Telemetry:
+    return Telemetry(
+        heading_deg=values["heading_deg"] % 360.0,
+        depth_m=values.get("depth_m", float("nan")),
+        pitch_deg=values.get("pitch_deg", 0.0),
+        roll_deg=values.get("roll_deg", 0.0),
+        status=int(values.get("status", 0)),
+    )
+
+
+def to_command(values: dict[str, float]) -> ThrusterCommand:
+    return ThrusterCommand(values["port_pct"], values["starboard_pct"], values["lateral_pct"],
+                           values["vertical_pct"])
+
+
+class OutlandLink:
+    """The bridge's side of the link on an open pyserial port."""
+
+    def __init__(
+        self,
+        port: Port,
+        proto: Protocol,
+        wiring: Wiring = "rs232",
+        node: int = 1,
+        reply_timeout_s: float = 0.05,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.port = port
+        self.proto = proto
+        self.wiring = wiring
+        self.node = node
+        self.reply_timeout_s = reply_timeout_s
+        self.clock = clock
+        self.framer = Framer(proto)
+        self.counts: Counter[str] = Counter()
+
+    @property
+    def rejects(self) -> Counter[str]:
+        """Rejected input by reason (framer rejects plus decode rejects)."""
+        return self.framer.rejects + Counter(
+            {k: v for k, v in self.counts.items() if k in ("unknown_id", "short", "too_long",
+                                                            "wrong_node")}
+        )
+
+    def send_command(self, cmd: ThrusterCommand, request: bool = False) -> None:
+        flags = self.proto.request_flag if request else 0
+        write_all(self.port, encode_command(self.proto, cmd, self.node, flags))
+        self.counts["commands"] += 1
+
+    def _telemetry_from(self, data: bytes) -> list[Telemetry]:
+        out: list[Telemetry] = []
+        for frame in self.framer.feed(data):
+            if frame.node != self.node:
+                self.counts["wrong_node"] += 1
+                continue
+            try:
+                name, values = decode(self.proto, frame)
+            except DecodeError as err:
+                self.counts[err.reason] += 1
+                continue
+            if name == "telemetry":
+                out.append(to_telemetry(values))
+                self.counts["telemetry"] += 1
+        return out
+
+    def read_telemetry(self) -> list[Telemetry]:
+        """RS-232 streaming: every telemetry message waiting (may block up to the port timeout)."""
+        return self._telemetry_from(read_some(self.port))
+
+    def poll(self, cmd: ThrusterCommand) -> Telemetry | None:
+        """RS-485: send ``cmd`` with the request flag, return the reply or None on timeout."""
+        reset = getattr(self.port, "reset_input_buffer", None)
+        if reset is not None:  # drop a late reply to an earlier, timed-out poll
+            reset()
+        self.framer.buf.clear()
+        self.send_command(cmd, request=True)
+        deadline = self.clock() + self.reply_timeout_s
+        while self.clock() < deadline:
+            got = self._telemetry_from(read_some(self.port))
+            if got:
+                return got[-1]
+        self.counts["timeouts"] += 1
+        return None

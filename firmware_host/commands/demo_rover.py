@@ -1,0 +1,70 @@
+"""``fdi-bridge demo``: the rover method end to end, with no hardware.
+
+Generates a 10-minute rover run with injected GPS faults (:mod:`firmware_host.devtools.rover_sim`),
+replays it through a real pty into the pipeline with the default preset and with the paper's
+preset, scores both against the truth, and prints a table. With the ``plot`` extra installed it
+also writes a PNG like the paper's figures (track raw vs corrected; χ² statistic against its
+threshold; grey residual against its gate).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from firmware_host.commands.replay import run_replay
+from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from firmware_host.devtools.score import read_jsonl, score_rover
+from firmware_host.runtime.config import load_config
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--rate", type=float, default=10.0, choices=[1.0, 5.0, 10.0])
+    parser.add_argument("--duration", type=float, default=600.0)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--out", type=Path, default=None,
+                        help="output directory (default: a temporary directory)")
+    parser.add_argument("--presets", default="rover,rover-paper",
+                        help="comma-separated presets to compare (default: rover,rover-paper)")
+
+
+def _fmt(x: float, nd: int = 3) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
+
+
+def run(args: argparse.Namespace) -> int:
+    out = args.out or Path(tempfile.mkdtemp(prefix="fdi-bridge-demo-"))
+    sc = RoverScenario(rate_hz=args.rate, duration_s=args.duration, seed=args.seed)
+    gen = write_run(sc, out / "run")
+    truth = read_jsonl(out / "run" / "truth.jsonl")
+    rows: list[tuple[str, Any, dict[str, Any]]] = []
+    for preset in [p.strip() for p in args.presets.split(",") if p.strip()]:
+        cfg = load_config(preset)
+        summary = run_replay(cfg, out / "run" / "rover.nmea", out / preset)
+        score = score_rover(read_jsonl(out / preset / "epochs.jsonl"), truth)
+        rows.append((preset, score, summary))
+    print(f"Rover demo: {gen['epochs']} epochs at {args.rate:g} Hz, seed {args.seed}, "
+          f"replayed through a pty; output in {out}")
+    faulty = rows[0][1].faulty if rows else 0
+    print(f"faulty epochs injected: {faulty} (jumps of 3-20 sigma, sigma = 0.35 m, and bursts)\n")
+    print("| preset | detected | missed | false alarms | alarms | raw RMS clean (m) "
+          "| out RMS faulty (m) | out RMS all (m) | p99 ms/epoch |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for preset, s, summ in rows:
+        print(f"| {preset} | {s.detected}/{s.faulty} | {s.faulty - s.detected} | "
+              f"{s.false_alarms}/{s.clean} | {s.alarms} | {_fmt(s.raw_rms_clean_m)} | "
+              f"{_fmt(s.out_rms_faulty_m)} | {_fmt(s.out_rms_all_m)} | "
+              f"{summ['processing_ms']['p99']} |")
+    try:
+        from firmware_host.devtools.plots import plot_rover
+    except ImportError:
+        print("\n(install the plot extra, pip install -e '.[plot]', for a PNG)")
+        return 0
+    for preset, _, _ in rows:
+        png = plot_rover(read_jsonl(out / preset / "epochs.jsonl"), truth,
+                         out / f"{preset}.png", title=f"fdi-bridge demo, preset {preset}")
+        print(f"wrote {png}")
+    return 0

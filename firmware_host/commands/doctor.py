@@ -1,0 +1,236 @@
+"""``fdi-bridge doctor --config FILE``: start-up checks, a clear list of what is wrong.
+
+Checks, in order:
+
+1. the configuration file loads and validates (which vehicle it is: ``[rover]`` or ``[link]``);
+2. the serial ports the system has (``serial.tools.list_ports``);
+3. every configured port: a device path exists, is a character device, and this user can read
+   and write it; if not, which group owns it (``dialout`` on Debian/Ubuntu, ``uucp`` on Arch)
+   and the command to join it. URLs with a scheme (``socket://``, ``rfc2217://``, ``loop://``)
+   are parsed, not opened; ``pty:PATH`` outputs need a writable directory;
+4. the MAVLink endpoints: the URL parses (``udpout:HOST:PORT``, ``udpin:[HOST:]PORT``,
+   ``tcp:HOST:PORT``, ``tcpin:[HOST:]PORT``, or a device); a listening UDP port is test-bound on
+   127.0.0.1 only (never on a public interface) to find a port already in use;
+5. the flight recorder's directory: it exists or can be created, is writable, and its disk has
+   room for the configured cap.
+
+:func:`diagnose` returns a :class:`Report`; only :func:`run` prints. Exit status 1 when
+anything is wrong, 0 otherwise (warnings do not fail).
+"""
+
+from __future__ import annotations
+
+import argparse
+import grp
+import os
+import shutil
+import socket
+import stat
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from drivers.mavlink.links import is_network_url
+from fdi.errors import ConfigError, FdiBridgeError
+
+_SCHEMES = ("socket://", "rfc2217://", "loop://", "spy://", "alt://", "hwgrep://", "cp2110://")
+
+
+@dataclass
+class Report:
+    ok: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    ports: list[str] = field(default_factory=list)
+
+    def lines(self) -> list[str]:
+        out = ["serial ports on this system:"]
+        out += [f"  {p}" for p in self.ports] or ["  (none found)"]
+        out += [f"ok       {m}" for m in self.ok]
+        out += [f"warning  {m}" for m in self.warnings]
+        out += [f"PROBLEM  {m}" for m in self.problems]
+        if self.problems:
+            out.append(f"{len(self.problems)} problem(s): the bridge will not run as configured")
+        else:
+            out.append("no problems found")
+        return out
+
+
+def _system_ports() -> list[str]:
+    from serial.tools import list_ports
+
+    return [f"{p.device}  {p.description or ''}  {p.hwid or ''}".rstrip()
+            for p in sorted(list_ports.comports(), key=lambda p: p.device)]
+
+
+def check_device(
+    rep: Report,
+    role: str,
+    url: str,
+    *,
+    access: Callable[[str, int], bool] = os.access,
+    groups: Callable[[], list[int]] = os.getgroups,
+) -> None:
+    """A configured port: exists, character device, readable and writable (see module doc)."""
+    if not url:
+        return
+    if url.startswith(_SCHEMES):
+        rep.ok.append(f"{role}: {url} is a URL (not a device; opened at run time)")
+        return
+    if url.startswith("pty:"):
+        parent = Path(url[4:]).parent if url[4:] else Path("/tmp")
+        if parent.is_dir() and access(str(parent), os.W_OK | os.X_OK):
+            rep.ok.append(f"{role}: {url}: a pty will be linked in {parent}")
+        else:
+            rep.problems.append(f"{role}: {url}: cannot create the link in {parent}")
+        return
+    path = Path(url)
+    if not path.exists():
+        dangling = " (a symlink to a missing device)" if path.is_symlink() else ""
+        rep.problems.append(f"{role}: {url} does not exist{dangling}: is the adapter plugged "
+                            "in? (the bridge waits and reopens it, but check the name)")
+        return
+    st = path.stat()
+    if not stat.S_ISCHR(st.st_mode):
+        rep.warnings.append(f"{role}: {url} is not a character device (a serial port is)")
+    if access(url, os.R_OK | os.W_OK):
+        rep.ok.append(f"{role}: {url} exists, readable and writable")
+        return
+    try:
+        group = grp.getgrgid(st.st_gid).gr_name
+    except KeyError:
+        group = str(st.st_gid)
+    if st.st_gid in groups():
+        rep.problems.append(f"{role}: {url}: not readable and writable although you are in "
+                            f"group {group} (mode {stat.filemode(st.st_mode)}): check its "
+                            "permissions (udev rule)")
+    else:
+        rep.problems.append(f"{role}: {url}: not readable and writable by this user: join group "
+                            f"{group!r} (sudo usermod -aG {group} $USER, then log in again)")
+
+
+def check_mavlink_url(rep: Report, role: str, url: str) -> None:
+    """Parse a MAVLink URL; test-bind a listening UDP port on 127.0.0.1 only."""
+    if not url:
+        return
+    if not is_network_url(url):
+        check_device(rep, role, url)  # a serial device for the autopilot
+        return
+    scheme, _sep, rest = url.partition(":")
+    host, _, port_text = rest.rpartition(":")
+    listening = scheme in ("udpin", "udp", "tcpin")
+    if not host and not listening:
+        rep.problems.append(f"{role}: {url}: expected {scheme}:HOST:PORT")
+        return
+    try:
+        port = int(port_text)
+    except ValueError:
+        rep.problems.append(f"{role}: {url}: port {port_text!r} is not a number")
+        return
+    if not 0 <= port <= 65535 or (port == 0 and not listening):
+        rep.problems.append(f"{role}: {url}: port {port} out of range")
+        return
+    if scheme in ("udpin", "udp") and port:
+        # Only ever on 127.0.0.1: a socket already bound to the port (on any address, without
+        # SO_REUSEADDR) makes this fail, which is what we want to know.
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError as err:
+                rep.problems.append(f"{role}: {url}: UDP port {port} is already in use "
+                                    f"({err.strerror}): another MAVLink program?")
+                return
+    rep.ok.append(f"{role}: {url} parses" + (" (UDP port free on 127.0.0.1)"
+                                             if scheme in ("udpin", "udp") and port else ""))
+
+
+def check_recorder(rep: Report, directory: str, dir_max_mb: float, file_max_mb: float,
+                   access: Callable[[str, int], bool] = os.access) -> None:
+    if not directory:
+        rep.warnings.append("recorder: off (no [recorder] dir, no --record): nothing will be "
+                            "kept for a replay after an incident")
+        return
+    d = Path(directory)
+    probe = d
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        rep.problems.append(f"recorder: {directory}: {probe} is not a directory")
+        return
+    if not access(str(probe), os.W_OK | os.X_OK):
+        what = "is not writable" if probe == d else f"cannot be created ({probe} not writable)"
+        rep.problems.append(f"recorder: {directory} {what} by this user")
+        return
+    free_mb = shutil.disk_usage(probe).free / 1e6
+    if free_mb < dir_max_mb:
+        rep.warnings.append(f"recorder: {directory}: {free_mb:.0f} MB free, less than the cap "
+                            f"dir_max_mb = {dir_max_mb:g}: the disk fills first")
+    if file_max_mb > dir_max_mb:
+        rep.warnings.append("recorder: file_max_mb > dir_max_mb: only one file will be kept")
+    rep.ok.append(f"recorder: {directory} writable ({free_mb:.0f} MB free, cap "
+                  f"{dir_max_mb:g} MB)")
+
+
+def diagnose(
+    config: str | Path,
+    *,
+    mavlink_url: str | None = None,
+    record_dir: str | None = None,
+    list_ports: Callable[[], list[str]] = _system_ports,
+    access: Callable[[str, int], bool] = os.access,
+) -> Report:
+    from firmware_host.commands.run import resolve_config_path, vehicle_of
+
+    rep = Report()
+    try:
+        rep.ports = list_ports()
+    except Exception as err:  # a broken sysfs must not hide the other checks
+        rep.warnings.append(f"could not list serial ports: {err}")
+    path = resolve_config_path(config)
+    try:
+        vehicle = vehicle_of(path)
+        cfg: Any
+        if vehicle == "rover":
+            from firmware_host.runtime.config import load_config
+
+            cfg = load_config(path)
+        else:
+            from drivers.outland.framecodec import load_protocol
+            from firmware_host.rov.config import load_rov_config, protocol_path
+
+            cfg, base = load_rov_config(path)
+            load_protocol(protocol_path(cfg, base))
+    except (ConfigError, FdiBridgeError, ValueError) as err:
+        rep.problems.append(f"config: {err}")
+        return rep
+    rep.ok.append(f"config: {path} loads ({vehicle})")
+    if vehicle == "rover":
+        rc = cfg.rover
+        check_device(rep, "GPS input", rc.port.url, access=access)
+        check_device(rep, "NMEA output", rc.output.nmea_url, access=access)
+        check_mavlink_url(rep, "MAVLink output", mavlink_url or rc.output.mavlink_url)
+        if not (mavlink_url or rc.output.mavlink_url or rc.output.nmea_url):
+            rep.warnings.append("no output configured (rover.output nmea_url / mavlink_url): "
+                                "corrected data goes nowhere")
+    else:
+        check_device(rep, "ROV link", cfg.link.port.url, access=access)
+    rc_rec = cfg.recorder
+    check_recorder(rep, record_dir if record_dir is not None else rc_rec.dir,
+                   rc_rec.dir_max_mb, rc_rec.file_max_mb, access=access)
+    return rep
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", required=True, help="config file or preset name")
+    parser.add_argument("--mavlink", default=None, help="the MAVLink URL `run` will be given")
+    parser.add_argument("--record", default=None, help="the recorder directory `run` will use")
+
+
+def run(args: argparse.Namespace) -> int:
+    rep = diagnose(args.config, mavlink_url=args.mavlink, record_dir=args.record)
+    for line in rep.lines():
+        print(line)
+    return 1 if rep.problems else 0

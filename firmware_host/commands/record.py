@@ -1,0 +1,96 @@
+"""``fdi-bridge record``: capture a serial port's raw bytes, timestamped, in the capture format.
+
+The port is any pyserial URL. Every read is one record (t_us = wall-clock microseconds at the
+read). The line settings go in the capture's header, so a replay sets up its pty the same way.
+A port that goes away is reported once and reopened with capped backoff until it is back.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from drivers.capture import CaptureWriter, Channel
+from drivers.transport import SerialSettings, open_port, read_some
+from fdi.errors import PortError
+
+log = logging.getLogger("fdi_bridge.record")
+
+
+def record(
+    settings: SerialSettings,
+    path: Path,
+    *,
+    duration_s: float | None = None,
+    max_bytes: int | None = None,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+    stop: Callable[[], bool] = lambda: False,
+    backoff_max_s: float = 5.0,
+    on_open: Callable[[], None] | None = None,
+) -> dict[str, int]:
+    """Record until ``duration_s``, ``max_bytes`` or ``stop()``; return counters."""
+    channel = Channel(name="port", url=settings.url, baudrate=settings.baudrate,
+                      bytesize=settings.bytesize, parity=settings.parity,
+                      stopbits=settings.stopbits, direction="rx")
+    start = clock()
+    reopen = 0
+    backoff = 0.1
+    port = None
+    with CaptureWriter(path, [channel], note=f"fdi-bridge record {settings.url}") as cap:
+        last_flush = clock()
+        while not stop():
+            if duration_s is not None and clock() - start >= duration_s:
+                break
+            if max_bytes is not None and cap.bytes_written >= max_bytes:
+                break
+            if port is None:
+                try:
+                    port = open_port(settings)  # pyserial flushes the input on open
+                    backoff = 0.1
+                    if on_open is not None:
+                        on_open()
+                except PortError as err:
+                    if reopen == 0:
+                        log.warning("%s", err)
+                    reopen += 1
+                    sleep(backoff)
+                    backoff = min(backoff * 2, backoff_max_s)
+                    continue
+            try:
+                data = read_some(port, 65536)
+            except PortError as err:
+                log.warning("%s; reopening", err)
+                port.close()
+                port = None
+                continue
+            if data:
+                cap.write(0, data)
+            if clock() - last_flush >= 1.0:
+                cap.flush()
+                last_flush = clock()
+        if port is not None:
+            port.close()
+        return {"bytes": cap.bytes_written, "records": cap.records, "reopen_attempts": reopen}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("url", help="port URL: /dev/ttyUSB0, a pty path, socket://host:port ...")
+    parser.add_argument("--baud", type=int, default=9600)
+    parser.add_argument("--out", type=Path, required=True, help="capture file to write")
+    parser.add_argument("--duration", type=float, default=None, help="seconds (default: until ^C)")
+    parser.add_argument("--max-bytes", type=int, default=None)
+
+
+def run(args: argparse.Namespace) -> int:
+    settings = SerialSettings(url=args.url, baudrate=args.baud, timeout_s=0.1)
+    try:
+        counts = record(settings, args.out, duration_s=args.duration, max_bytes=args.max_bytes)
+    except KeyboardInterrupt:
+        print("stopped")
+        return 0
+    print(f"recorded {counts['bytes']} bytes in {counts['records']} records to {args.out}")
+    return 0

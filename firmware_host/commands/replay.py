@@ -1,0 +1,285 @@
+"""``fdi-bridge replay``: feed a capture or a plain NMEA log through a real pty into the pipeline.
+
+The input is either the project's capture format (:mod:`drivers.capture`) or a plain NMEA
+log (gpsd style: ``#`` comment lines skipped, every other byte sent as it is). A writer thread
+writes it into the master side of a real pseudo-terminal pair (line settings from the capture's
+header); the unmodified driver opens the slave side by its path, exactly as it opens
+``/dev/ttyUSB0`` on the vehicle. ``--speed 0`` (the default) sends as fast as the pty takes
+it; ``--speed 1`` paces the bytes at their recorded times (a plain log is paced by its fix
+times), ``--speed 10`` ten times faster.
+
+Outputs (the replay contract, see README): ``OUT/epochs.jsonl``, one object per receiver epoch,
+and ``OUT/summary.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+from drivers.capture import CaptureReader, is_capture
+from drivers.ptypair import PtyPair
+from drivers.transport import SerialSettings, open_port, read_some
+from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
+from firmware_host.rover.pipeline import EpochSink, RoverPipeline
+from firmware_host.runtime.config import BridgeConfig, load_config
+
+_TIME_RE = re.compile(rb"^\$..(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
+
+
+@dataclass
+class ReplayInput:
+    """Chunks of bytes with their times (seconds, from the first), and line settings."""
+
+    chunks: list[tuple[float, bytes]]
+    baudrate: int = 9600
+    kind: str = "nmea"
+    truncated: bool = False
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def total_bytes(self) -> int:
+        return sum(len(c) for _, c in self.chunks)
+
+
+def load_input(path: str | Path, channel: str | None = None) -> ReplayInput:
+    """Read a capture (its first ``rx`` channel, or the one named) or a plain NMEA log."""
+    p = Path(path)
+    if not p.exists():
+        raise CaptureFormatError(f"{p}: no such file")
+    if is_capture(p):
+        reader = CaptureReader(p)
+        idx = 0
+        for i, ch in enumerate(reader.channels):
+            if (channel is None and ch.direction == "rx") or ch.name == channel:
+                idx = i
+                break
+        records = [r for r in reader if r.channel == idx]
+        t0 = records[0].t_us if records else 0
+        chunks = [((r.t_us - t0) / 1e6, r.data) for r in records]
+        baud = reader.channels[idx].baudrate if reader.channels else 9600
+        inp = ReplayInput(chunks, baud, "capture", reader.truncated)
+        if reader.truncated:
+            inp.notes.append("last record truncated (skipped)")
+        if reader.corrupt:
+            inp.notes.append("a record failed its CRC; the rest was not replayed")
+        return inp
+    return ReplayInput(_nmea_chunks(p.read_bytes()), 9600, "nmea")
+
+
+def _nmea_chunks(raw: bytes) -> list[tuple[float, bytes]]:
+    """Plain log -> (time, line) with times from the fix times (for pacing only)."""
+    chunks: list[tuple[float, bytes]] = []
+    t = 0.0
+    first: float | None = None
+    last_fix: float | None = None
+    for line in raw.splitlines(keepends=True):
+        if line.lstrip().startswith(b"#"):
+            continue
+        m = _TIME_RE.match(line)
+        if m:
+            s = m.group(1)
+            fix = int(s[0:2]) * 3600 + int(s[2:4]) * 60 + float(s[4:])
+            if first is None:
+                first = fix
+            if last_fix is not None and 0 < fix - last_fix < 60:
+                t += fix - last_fix
+            last_fix = fix
+        chunks.append((t, line))
+    return chunks
+
+
+class PtyFeeder(threading.Thread):
+    """Writes the chunks into the pty's master side, paced by ``speed`` (0: no pacing)."""
+
+    def __init__(
+        self,
+        pty: PtyPair,
+        chunks: list[tuple[float, bytes]],
+        speed: float = 0.0,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
+        super().__init__(name="pty-feeder", daemon=True)
+        self.pty = pty
+        self.chunks = chunks
+        self.speed = speed
+        self.clock = clock
+        self.sleep = sleep
+        self.bytes_written = 0
+        self.done = threading.Event()
+        self.error: BaseException | None = None
+
+    def run(self) -> None:
+        try:
+            start = self.clock()
+            batch = bytearray()
+            for t, data in self.chunks:
+                if self.speed > 0:
+                    due = start + t / self.speed
+                    now = self.clock()
+                    if due > now:
+                        if batch:
+                            self.bytes_written += self.pty.write(bytes(batch))
+                            batch.clear()
+                        self.sleep(due - now)
+                batch += data
+                if len(batch) >= 4096:
+                    self.bytes_written += self.pty.write(bytes(batch))
+                    batch.clear()
+            if batch:
+                self.bytes_written += self.pty.write(bytes(batch))
+        except BaseException as err:  # reported by the reader side
+            self.error = err
+        finally:
+            self.done.set()
+
+
+def replay_through_pty(
+    inp: ReplayInput,
+    pipeline: RoverPipeline,
+    *,
+    speed: float = 0.0,
+    timeout_s: float = 600.0,
+    clock: Callable[[], float] = time.monotonic,
+) -> dict[str, Any]:
+    """Run ``pipeline`` on ``inp`` through a real pty; return transport facts for the summary."""
+    total = inp.total_bytes
+    with PtyPair(baudrate=inp.baudrate) as pty:
+        port = open_port(SerialSettings(url=pty.url, baudrate=inp.baudrate, timeout_s=0.05))
+        feeder = PtyFeeder(pty, inp.chunks, speed)
+        started = clock()
+        feeder.start()
+        try:
+            while True:
+                try:
+                    data = read_some(port, 65536)
+                except PortClosedError:
+                    break
+                if data:
+                    pipeline.feed(data)
+                elif feeder.done.is_set() and pipeline.stream.bytes_in >= feeder.bytes_written:
+                    break
+                if clock() - started > timeout_s:
+                    raise FdiBridgeError(f"replay did not finish within {timeout_s:.0f} s")
+        finally:
+            port.close()
+        feeder.join(timeout=5.0)
+        if feeder.error is not None:
+            raise FdiBridgeError(f"pty writer failed: {feeder.error}") from feeder.error
+    pipeline.finish()
+    return {"bytes_total": total, "bytes_written": feeder.bytes_written, "pty": True}
+
+
+def replay_direct(inp: ReplayInput, pipeline: RoverPipeline) -> dict[str, Any]:
+    """The same without a pty (for benchmarks and tests of the pipeline alone)."""
+    block = bytearray()
+    for _, data in inp.chunks:  # blocks of up to 64 KiB, as a port read would return them
+        block += data
+        if len(block) >= 65536:
+            pipeline.feed(bytes(block))
+            block.clear()
+    pipeline.feed(bytes(block))
+    pipeline.finish()
+    return {"bytes_total": inp.total_bytes, "bytes_written": inp.total_bytes, "pty": False}
+
+
+def build_sinks(
+    cfg: BridgeConfig, nmea_url: str | None, mavlink_url: str | None
+) -> list[EpochSink]:
+    from dataclasses import replace
+
+    from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
+
+    sinks: list[EpochSink] = []
+    out = cfg.rover.output
+    nmea = nmea_url if nmea_url is not None else out.nmea_url
+    mav = mavlink_url if mavlink_url is not None else out.mavlink_url
+    if nmea:
+        sinks.append(NmeaSink(nmea, out.nmea_baudrate))
+    if mav:
+        rover = replace(cfg.rover, output=replace(out, mavlink_url=mav))
+        sinks.append(MavlinkGpsSink(rover))
+    return sinks
+
+
+def run_replay(
+    cfg: BridgeConfig,
+    capture: Path,
+    out_dir: Path,
+    *,
+    speed: float = 0.0,
+    use_pty: bool = True,
+    sinks: list[EpochSink] | None = None,
+) -> dict[str, Any]:
+    """Replay ``capture`` into the rover pipeline; write epochs.jsonl and summary.json."""
+    inp = load_input(capture)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with open(out_dir / "epochs.jsonl", "w", encoding="utf-8") as jsonl:
+        pipeline = RoverPipeline(cfg.rover, jsonl=jsonl, sinks=sinks)
+        t0 = time.perf_counter()
+        if use_pty:
+            transport = replay_through_pty(inp, pipeline, speed=speed)
+        else:
+            transport = replay_direct(inp, pipeline)
+        wall = time.perf_counter() - t0
+    summary = pipeline.summary()
+    summary["config"] = cfg.name
+    summary["input"]["file"] = str(capture)
+    summary["input"]["kind"] = inp.kind
+    summary["input"]["notes"] = inp.notes
+    summary["transport"] = transport
+    summary["wall_s"] = round(wall, 4)
+    summary["epochs_per_s"] = round(pipeline.epochs / wall, 1) if wall > 0 else None
+    _write_json(out_dir / "summary.json", summary)
+    return summary
+
+
+def _write_json(path: Path, obj: Any) -> None:
+    path.write_text(json.dumps(obj, indent=2, sort_keys=False) + "\n", encoding="utf-8")
+
+
+def print_summary(s: dict[str, Any], stream: TextIO) -> None:
+    inp = s["input"]
+    stream.write(
+        f"epochs {s['epochs']}  faults {s['faults']}  alarms {s['alarms']}  "
+        f"actions {s['actions']}\n"
+        f"rejected lines {inp['rejected_total']} {inp['rejected']}  ignored {inp['ignored']}\n"
+        f"processing p50 {s['processing_ms']['p50']} ms  p99 {s['processing_ms']['p99']} ms  "
+        f"overruns {s['overruns']}  ({s['epochs_per_s']} epochs/s)\n"
+    )
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("capture", type=Path, help="a capture file or a plain NMEA log")
+    parser.add_argument("--config", help="config file or preset name (default: built-in)")
+    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--speed", type=float, default=0.0,
+                        help="0 = as fast as possible (default); 1 = recorded pace; N = N× faster")
+    parser.add_argument("--no-pty", action="store_true", help="feed the pipeline directly")
+    parser.add_argument("--nmea-out", default=None,
+                        help="corrected NMEA to this pyserial URL, or pty:LINKPATH")
+    parser.add_argument("--mavlink", default=None,
+                        help="GPS_INPUT to this MAVLink URL, e.g. udpout:127.0.0.1:14550")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    cfg = load_config(args.config)
+    sinks = build_sinks(cfg, args.nmea_out, args.mavlink)
+    summary = run_replay(cfg, args.capture, args.out, speed=args.speed,
+                         use_pty=not args.no_pty, sinks=sinks)
+    print_summary(summary, sys.stdout)
+    print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
+    return 0

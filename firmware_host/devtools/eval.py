@@ -1,0 +1,587 @@
+"""``fdi-bridge eval``: score detectors against the truth, beside the field's baselines.
+
+Two modes.
+
+* ``fdi-bridge eval EPOCHS --truth TRUTH [--input CAPTURE] [--config C] [--out DIR]`` scores an
+  existing replay or sim output (``epochs.jsonl``, or the directory holding it) against its
+  truth file, runs every baseline of :mod:`fdi.baselines` on the same fixes (the ``e/n/u`` the
+  pipeline wrote, so the conversion to local metres is the pipeline's own) and, with
+  ``--input``, also re-runs each of our strategies (grey / three_zone / combined) on the capture.
+* ``fdi-bridge eval --suite [--out DIR] [--quick] [--no-plots]`` generates the scenario suite
+  (rover at 1, 5 and 10 Hz: single jumps, bursts, a slow ramp, a frozen position, a long outage;
+  the ROV compass faults of issue 3; the INS/GNSS paper scenarios), runs everything on the same
+  data and prints markdown tables; ``DIR/eval.json`` holds every number, ``DIR/eval.md`` the
+  tables, and with matplotlib ``DIR/<scenario>.png`` one figure per rover scenario.
+
+Per detector: faulty epochs detected / missed (epochs whose injected offset is at least the
+minimum jump, 3σ = 1.05 m, or a frozen position), false alarms on clean epochs, detection delay
+from each event's first faulty epoch (epochs and seconds), and the horizontal accuracy of the
+output (RMS and maximum over clean, faulty and all epochs) beside the raw input's
+(:func:`firmware_host.devtools.score.score_rover`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import math
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from fdi.baselines import BASELINES, BaselineParams, make_baseline
+from fdi.geodesy import LocalFrame
+from firmware_host.devtools.score import RoverScore, read_jsonl, score_rover
+from firmware_host.runtime.config import BridgeConfig, load_config
+
+STRATEGIES: tuple[str, ...] = ("grey", "three_zone", "combined")
+BASELINE_NAMES: tuple[str, ...] = tuple(BASELINES)
+
+
+# --------------------------------------------------------------------------- baselines on records
+
+
+def _fixes(records: Sequence[dict[str, Any]]) -> Iterable[tuple[float, tuple[float, float,
+                                                                                float] | None]]:
+    """(monotonic time, local e/n/u or None) per record, midnight rollover handled."""
+    day = 0.0
+    last: float | None = None
+    for rec in records:
+        utc = rec.get("utc")
+        if utc is None:
+            continue
+        if last is not None and utc < last - 43200.0:
+            day += 86400.0
+        last = utc
+        e, n = rec.get("e"), rec.get("n")
+        if e is None or n is None:
+            yield utc + day, None
+        else:
+            u = rec.get("u")
+            yield utc + day, (e, n, math.nan if u is None else u)
+
+
+class _Frame:
+    """The pipeline's local frame, recovered from its own records: at the first record with a
+    fix, ``(raw_lat, raw_lon, raw_alt)`` is at ``(e, n, u)``. The tangent planes at the true
+    reference and at that fix differ by well under a millimetre over a field."""
+
+    def __init__(self, records: Sequence[dict[str, Any]]) -> None:
+        first = next(
+            (r for r in records if r.get("e") is not None and r.get("raw_lat") is not None), None
+        )
+        if first is None:
+            raise ValueError("no record with a fix: nothing to evaluate")
+        self.frame = LocalFrame(first["raw_lat"], first["raw_lon"], first.get("raw_alt") or 0.0)
+        self.off = (first["e"], first["n"], first.get("u") or 0.0)
+
+    def to_lla(self, e: float, n: float, u: float) -> tuple[float, float, float]:
+        o = self.off
+        return self.frame.to_lla(e - o[0], n - o[1], u - o[2])
+
+
+def run_baseline(name: str, records: Sequence[dict[str, Any]],
+                 params: BaselineParams | None = None) -> list[dict[str, Any]]:
+    """Run baseline ``name`` over a pipeline's records; records of the same shape back."""
+    frame = _Frame(records)
+    bl = make_baseline(name, params)
+    out: list[dict[str, Any]] = []
+    timed = [r for r in records if r.get("utc") is not None]
+    for rec, (t, z) in zip(timed, _fixes(timed), strict=True):
+        st = bl.step(t, z)
+        lat = lon = None
+        if st.out_enu is not None and z is not None:
+            u = st.out_enu[2] if math.isfinite(st.out_enu[2]) else 0.0
+            lat, lon, _ = frame.to_lla(st.out_enu[0], st.out_enu[1], u)
+        out.append({
+            "utc": rec["utc"], "raw_lat": rec.get("raw_lat"), "raw_lon": rec.get("raw_lon"),
+            "lat": lat, "lon": lon, "fault": st.fault, "action": st.action, "reason": st.reason,
+            "alarm": False, "alarm_raised": False, "stat": st.stat,
+            "stat_threshold": st.stat_threshold,
+        })
+    return out
+
+
+def baseline_params(cfg: BridgeConfig) -> BaselineParams:
+    d = cfg.rover.detector
+    return BaselineParams(sigma_m=d.sigma_m, sigma_up_m=d.sigma_up_m, q_accel=d.q_accel)
+
+
+# --------------------------------------------------------------------------- our strategies
+
+
+def run_ours(cfg: BridgeConfig, data: bytes, strategy: str | None = None
+             ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Our pipeline (no pty) on ``data`` with ``strategy`` (None: the config's); records and
+    summary."""
+    from firmware_host.rover.pipeline import RoverPipeline
+
+    rover = cfg.rover
+    if strategy is not None:
+        if strategy not in STRATEGIES:
+            raise ValueError(f"unknown strategy {strategy!r} (known: {', '.join(STRATEGIES)})")
+        rover = replace(rover, detector=replace(rover.detector, strategy=strategy))  # type: ignore[arg-type]
+    buf = io.StringIO()
+    pipe = RoverPipeline(rover, jsonl=buf)
+    pipe.feed(data)
+    pipe.finish()
+    return [json.loads(line) for line in buf.getvalue().splitlines()], pipe.summary()
+
+
+# --------------------------------------------------------------------------- one comparison
+
+
+@dataclass
+class MethodResult:
+    name: str
+    kind: str  # "ours" | "baseline" | "input"
+    score: RoverScore
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "kind": self.kind, **self.score.as_dict(), **self.extra}
+
+
+@dataclass
+class RoverComparison:
+    scenario: str
+    rate_hz: float | None
+    default: str  # name of our default method
+    methods: list[MethodResult]
+    seconds: float = 0.0
+
+    def by_name(self, name: str) -> MethodResult:
+        return next(m for m in self.methods if m.name == name)
+
+    def losses(self) -> list[str]:
+        """Where our default is worse than a baseline on detection or false alarms."""
+        d = self.by_name(self.default).score
+        out = []
+        for m in self.methods:
+            if m.kind != "baseline":
+                continue
+            s = m.score
+            if _gt(s.detection_rate, d.detection_rate):
+                out.append(f"{self.scenario}: {m.name} detects {s.detected_min}/{s.faulty_min}, "
+                           f"our default {d.detected_min}/{d.faulty_min}")
+            if s.false_alarms < d.false_alarms:
+                out.append(
+                    f"{self.scenario}: {m.name} has {s.false_alarms} false alarms "
+                    f"({s.false_alarms_after_fault} right after a fault ended), our default "
+                    f"{d.false_alarms} ({d.false_alarms_after_fault} right after a fault ended); "
+                    f"{m.name} detects {s.detected_min}/{s.faulty_min}, our default "
+                    f"{d.detected_min}/{d.faulty_min}")
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"scenario": self.scenario, "rate_hz": self.rate_hz, "default": self.default,
+                "seconds": round(self.seconds, 3), "losses": self.losses(),
+                "methods": [m.as_dict() for m in self.methods]}
+
+
+def _gt(a: float, b: float) -> bool:
+    """a > b, where NaN (nothing to detect) compares as equal to anything."""
+    if math.isnan(a) or math.isnan(b):
+        return False
+    return a > b + 1e-12
+
+
+def compare_rover(
+    scenario: str,
+    data: bytes,
+    truth: list[dict[str, Any]],
+    cfg: BridgeConfig,
+    strategies: Sequence[str] = STRATEGIES,
+    baselines: Sequence[str] = BASELINE_NAMES,
+    rate_hz: float | None = None,
+    keep_records: bool = False,
+) -> tuple[RoverComparison, dict[str, list[dict[str, Any]]]]:
+    """Every strategy and baseline on the same receiver bytes, scored against ``truth``."""
+    t0 = time.perf_counter()
+    default_strategy = cfg.rover.detector.strategy
+    order = [default_strategy] + [s for s in strategies if s != default_strategy]
+    methods: list[MethodResult] = []
+    records: dict[str, list[dict[str, Any]]] = {}
+    base_records: list[dict[str, Any]] | None = None
+    for strat in order:
+        recs, summary = run_ours(cfg, data, strat)
+        name = f"ours:{strat}" + (" (default)" if strat == default_strategy else "")
+        methods.append(MethodResult(name, "ours", score_rover(recs, truth),
+                                    {"gate_health": summary.get("gate_health")}))
+        if base_records is None:
+            base_records = recs
+        if keep_records:
+            records[name] = recs
+    assert base_records is not None
+    bp = baseline_params(cfg)
+    for b in baselines:
+        recs = run_baseline(b, base_records, bp)
+        methods.append(MethodResult(b, "baseline", score_rover(recs, truth)))
+        if keep_records:
+            records[b] = recs
+    default = methods[0].name
+    return RoverComparison(scenario, rate_hz, default, methods, time.perf_counter() - t0), records
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def _f(x: float | None, nd: int = 2) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "–"
+    return f"{x:.{nd}f}"
+
+
+def rover_table(comparisons: Sequence[RoverComparison]) -> str:
+    head = ("| scenario | method | detected / faulty | missed | events | false alarms / clean "
+            "| delay ep (s) | out RMS clean / faulty / all (m) | out max faulty (m) "
+            "| raw RMS clean / faulty (m) |")
+    lines = [head, "|" + "---|" * 10]
+    for c in comparisons:
+        for m in c.methods:
+            s = m.score
+            rate = s.detection_rate
+            det = f"{s.detected_min}/{s.faulty_min}" + (
+                f" ({100 * rate:.1f} %)" if not math.isnan(rate) else "")
+            fa = f"{s.false_alarms}/{s.clean}"
+            if s.false_alarms_after_fault:
+                fa += f" ({s.false_alarms_after_fault} after a fault)"
+            delay = f"{_f(s.mean_delay_epochs, 1)} ({_f(s.mean_delay_s, 2)})"
+            name = f"**{m.name}**" if m.name == c.default else m.name
+            lines.append(
+                f"| {c.scenario} | {name} | {det} | {s.missed} | {s.events_detected}/{s.events} "
+                f"| {fa} | {delay} | {_f(s.out_rms_clean_m)} / {_f(s.out_rms_faulty_m)} / "
+                f"{_f(s.out_rms_all_m)} | {_f(s.out_max_faulty_m)} | "
+                f"{_f(s.raw_rms_clean_m)} / {_f(s.raw_rms_faulty_m)} |"
+            )
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- the suite
+
+
+@dataclass(frozen=True)
+class RoverCase:
+    name: str
+    rate_hz: float
+    kinds: tuple[str, ...]
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+def rover_cases(quick: bool = False) -> list[RoverCase]:
+    """The rover scenarios. ``quick``: the 10 Hz jump case only (for the tests)."""
+    kinds: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
+        ("jump", ("jump",), {}),
+        ("burst", ("burst",), {}),
+        ("ramp", ("ramp",), {"fault_every_s": 45.0, "min_gap_s": 15.0}),
+        ("frozen", ("frozen",), {"fault_every_s": 30.0, "min_gap_s": 15.0}),
+        ("outage", ("outage",), {"fault_every_s": 45.0, "min_gap_s": 15.0}),
+    ]
+    cases = [RoverCase(f"rover-{int(r)}hz-{k}", r, kk, o)
+             for r in (1.0, 5.0, 10.0) for k, kk, o in kinds]
+    if quick:
+        return [c for c in cases if c.name == "rover-10hz-jump"]
+    return cases
+
+
+def generate_case(case: RoverCase, duration_s: float, seed: int
+                  ) -> tuple[bytes, list[dict[str, Any]]]:
+    from firmware_host.devtools.rover_sim import RoverScenario, generate
+
+    sc = RoverScenario(rate_hz=case.rate_hz, duration_s=duration_s, seed=seed, kinds=case.kinds,
+                       **case.options)
+    data: list[bytes] = []
+    truth: list[dict[str, Any]] = []
+    for _, d, tr in generate(sc):
+        data.append(d)
+        truth.append(tr)
+    return b"".join(data), truth
+
+
+ROV_FAULTS: tuple[tuple[str, ...], ...] = (
+    ("drift:30@70",), ("drift:20@70",), ("drift:10@70",), ("stuck@60",), ("noise:5@50-60",),
+    ("dropout@90-95",), ("spike:25@80-80.4",), (),
+)
+
+
+def rov_suite(duration_s: float = 130.0, seed: int = 1) -> list[dict[str, Any]]:
+    """The ROV compass faults of issue 3, with fault tolerance and without (the plain PID)."""
+    from firmware_host.devtools.rov_experiment import run_experiment, summarize
+    from firmware_host.devtools.rov_sim import parse_fault
+    from firmware_host.rov.config import RovConfig
+
+    cfg = RovConfig()
+    rows = []
+    for specs in ROV_FAULTS:
+        faults = [parse_fault(s) for s in specs]
+        for ft in (True, False):
+            ep = run_experiment(cfg, faults, duration_s, ft=ft, seed=seed)
+            s = summarize(ep, faults)
+            start = faults[0].start_s if faults else None
+            confirm = next((e["t"] for e in ep if e["fault"]), None)
+            suspect = next((e["t"] for e in ep if e["suspect"]), None)
+            is_fault = bool(faults) and faults[0].kind != "spike"
+            rows.append({
+                "faults": list(specs) or ["none"], "ft": ft,
+                "suspect_t": suspect, "confirmed_t": confirm,
+                "delay_s": (None if confirm is None or start is None or not is_fault
+                            else round(confirm - start, 3)),
+                "false_confirmation": bool(confirm is not None and not is_fault),
+                "max_abs_err_after_fault_deg": s.get("max_abs_err_after_fault_deg"),
+                "final_mean_err_deg": round(s["final_mean_err_deg"], 3),
+            })
+    return rows
+
+
+def rov_table(rows: Sequence[dict[str, Any]]) -> str:
+    lines = ["| fault | fault tolerance | suspect at (s) | confirmed at (s) | delay (s) "
+             "| false confirmation | final mean heading error (deg) |", "|" + "---|" * 7]
+    for r in rows:
+        lines.append(
+            f"| {' '.join(r['faults'])} | {'on' if r['ft'] else 'off (plain PID)'} "
+            f"| {_f(r['suspect_t'], 1)} | {_f(r['confirmed_t'], 1)} | {_f(r['delay_s'], 1)} "
+            f"| {'yes' if r['false_confirmation'] else 'no'} | {_f(r['final_mean_err_deg'], 2)} |"
+        )
+    return "\n".join(lines)
+
+
+def insgnss_suite(seed: int = 1, scenarios: Sequence[str] | None = None) -> list[dict[str, Any]]:
+    """The INS/GNSS paper scenarios through the four strategies (none is the plain filter)."""
+    from firmware_host.devtools.insgnss_sim import SCENARIOS, load_setup, run_scenario
+
+    setup = load_setup(None)
+    rows = []
+    for sc in scenarios or [s for s in SCENARIOS]:
+        summary, _, _ = run_scenario(setup, sc, seed)  # type: ignore[arg-type]
+        for name, m in summary["methods"].items():
+            rows.append({
+                "scenario": sc, "method": name, "fault_epochs": summary["fault_epochs"],
+                "fault_epochs_flagged": m["fault_epochs_flagged"],
+                "clean_epochs_flagged": m["clean_epochs_flagged"],
+                "clean_epochs": summary["epochs"] - 1 - summary["fault_epochs"],
+                "position_rms_3d_m": m["position_rms_3d_m"],
+                "max_horizontal_error_m": m["max_horizontal_error_m"],
+            })
+    return rows
+
+
+def insgnss_table(rows: Sequence[dict[str, Any]]) -> str:
+    lines = ["| scenario | method | faulty flagged | clean flagged | position RMS 3D (m) "
+             "| max horizontal error (m) |", "|" + "---|" * 6]
+    for r in rows:
+        lines.append(
+            f"| {r['scenario']} | {r['method']} | {r['fault_epochs_flagged']}/{r['fault_epochs']} "
+            f"| {r['clean_epochs_flagged']}/{r['clean_epochs']} | {r['position_rms_3d_m']:.2f} "
+            f"| {r['max_horizontal_error_m']:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def plot_comparison(c: RoverComparison, records: dict[str, list[dict[str, Any]]],
+                    truth: list[dict[str, Any]], path: Path) -> Path | None:
+    """Horizontal output error against time, per method, with the faulty epochs shaded."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    ref = truth[0]
+    frame = LocalFrame(ref["true_lat"], ref["true_lon"], ref["true_alt"])
+    tr_by = {round(t["utc"] * 1000): t for t in truth}
+    t0 = truth[0]["utc"]
+    fig, axes = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
+    for name, recs in records.items():
+        ts, errs = [], []
+        for r in recs:
+            tr = tr_by.get(round(r["utc"] * 1000))
+            if tr is None or r.get("lat") is None:
+                continue
+            te, tn, _ = frame.to_enu(tr["true_lat"], tr["true_lon"], tr["true_alt"])
+            oe, on, _ = frame.to_enu(r["lat"], r["lon"], tr["true_alt"])
+            ts.append(r["utc"] - t0)
+            errs.append(math.hypot(oe - te, on - tn))
+        style = "-" if name.startswith("ours") else "--"
+        axes[0].plot(ts, errs, style, lw=0.7, label=name)
+    faulty = [t["utc"] - t0 for t in truth if t["fault"]]
+    for ax in axes:
+        ax.plot(faulty, [0.0] * len(faulty), "k|", ms=8, alpha=0.3)
+    axes[0].set_ylabel("output horizontal error (m)")
+    axes[0].set_yscale("symlog", linthresh=0.5)
+    axes[0].legend(loc="upper right", fontsize=7, ncol=2)
+    axes[0].set_title(c.scenario)
+    names = [m.name for m in c.methods]
+    for i, name in enumerate(names):
+        flagged = [r["utc"] - t0 for r in records.get(name, []) if r.get("fault")]
+        axes[1].plot(flagged, [i] * len(flagged), "|", ms=6)
+    axes[1].set_yticks(range(len(names)), names, fontsize=7)
+    axes[1].set_xlabel("time (s)")
+    axes[1].set_title("flagged epochs (ticks at y = 0: injected faults)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def run_suite(
+    out: Path | None = None,
+    *,
+    quick: bool = False,
+    plots: bool = True,
+    duration_s: float = 600.0,
+    seed: int = 1,
+    cfg: BridgeConfig | None = None,
+    include_rov: bool = True,
+    include_insgnss: bool = True,
+) -> dict[str, Any]:
+    """The whole suite; returns the JSON document (also written under ``out``)."""
+    cfg = cfg or load_config("rover")
+    t0 = time.perf_counter()
+    comps: list[RoverComparison] = []
+    figures: list[str] = []
+    for case in rover_cases(quick):
+        data, truth = generate_case(case, duration_s, seed)
+        want_plot = plots and out is not None
+        comp, recs = compare_rover(case.name, data, truth, cfg, rate_hz=case.rate_hz,
+                                   keep_records=want_plot)
+        comps.append(comp)
+        if want_plot and out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            p = plot_comparison(comp, recs, truth, out / f"{case.name}.png")
+            if p is not None:
+                figures.append(str(p))
+    doc: dict[str, Any] = {
+        "config": cfg.name,
+        "duration_s": duration_s,
+        "seed": seed,
+        "rover": [c.as_dict() for c in comps],
+        "losses": [loss for c in comps for loss in c.losses()],
+        "figures": figures,
+    }
+    md = ["## Rover: every baseline beside each of our strategies (same data)", "",
+          rover_table(comps), ""]
+    if include_rov:
+        rov = rov_suite()
+        doc["rov"] = rov
+        md += ["## ROV compass (issue 3 faults)", "", rov_table(rov), ""]
+    if include_insgnss:
+        ins = insgnss_suite(seed, ["paper-single"] if quick else None)
+        doc["insgnss"] = ins
+        md += ["## INS/GNSS (paper scenarios)", "", insgnss_table(ins), ""]
+    if doc["losses"]:
+        md += ["## Where our default loses to a baseline", ""] + [f"- {x}" for x in doc["losses"]]
+    doc["seconds"] = round(time.perf_counter() - t0, 2)
+    doc["markdown"] = "\n".join(md)
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "eval.json").write_text(json.dumps(_clean(doc), indent=1) + "\n",
+                                       encoding="utf-8")
+        (out / "eval.md").write_text(doc["markdown"] + "\n", encoding="utf-8")
+    return doc
+
+
+def _clean(x: Any) -> Any:
+    """NaN (nothing to measure) as JSON null, recursively."""
+    if isinstance(x, float):
+        return None if math.isnan(x) else x
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    return x
+
+
+def evaluate_run(
+    epochs_path: Path,
+    truth_path: Path,
+    *,
+    capture: Path | None = None,
+    cfg: BridgeConfig | None = None,
+) -> RoverComparison:
+    """Score an existing ``epochs.jsonl`` ("input"), the baselines on its fixes and, with a
+    capture, each of our strategies re-run on it."""
+    cfg = cfg or load_config("rover")
+    records = read_jsonl(epochs_path)
+    truth = read_jsonl(truth_path)
+    methods = [MethodResult("this run", "input", score_rover(records, truth))]
+    if capture is not None:
+        from firmware_host.commands.replay import load_input
+
+        data = b"".join(c for _, c in load_input(capture).chunks)
+        comp, _ = compare_rover(epochs_path.parent.name or "run", data, truth, cfg)
+        methods += comp.methods
+        default = comp.default
+    else:
+        bp = baseline_params(cfg)
+        for b in BASELINE_NAMES:
+            methods.append(MethodResult(b, "baseline",
+                                        score_rover(run_baseline(b, records, bp), truth)))
+        default = "this run"
+    return RoverComparison(epochs_path.parent.name or "run", None, default, methods)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("epochs", nargs="?", type=Path, default=None,
+                        help="epochs.jsonl of a replay/sim, or its directory")
+    parser.add_argument("--truth", type=Path, default=None,
+                        help="truth.jsonl (default: next to --input, or beside EPOCHS)")
+    parser.add_argument("--input", type=Path, default=None,
+                        help="the capture or NMEA log it came from: also re-run our strategies")
+    parser.add_argument("--config", default="rover", help="config or preset (default: rover)")
+    parser.add_argument("--suite", action="store_true", help="run the whole scenario suite")
+    parser.add_argument("--quick", action="store_true", help="suite: the 10 Hz jump case only")
+    parser.add_argument("--duration", type=float, default=600.0,
+                        help="suite: seconds per rover scenario (default 600)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--no-plots", action="store_true", help="suite: no figures")
+    parser.add_argument("--out", type=Path, default=None, help="write eval.json/eval.md here")
+
+
+def run(args: argparse.Namespace) -> int:
+    import logging
+
+    # Per-epoch warnings (alarms, gate health) of the runs under test go to the tables instead.
+    for name in ("fdi_bridge.rover", "firmware_host.rov.control"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+    cfg = load_config(args.config)
+    if args.suite:
+        doc = run_suite(args.out, quick=args.quick, plots=not args.no_plots,
+                        duration_s=args.duration, seed=args.seed, cfg=cfg)
+        print(doc["markdown"])
+        print(f"\n{len(doc['rover'])} rover scenarios in {doc['seconds']} s")
+        if args.out is not None:
+            print(f"wrote {args.out / 'eval.json'} and {args.out / 'eval.md'}")
+        return 0
+    if args.epochs is None:
+        print("fdi-bridge eval: give EPOCHS (and --truth), or --suite")
+        return 2
+    epochs = args.epochs / "epochs.jsonl" if args.epochs.is_dir() else args.epochs
+    truth = args.truth
+    if truth is None:
+        for cand in ([args.input.parent / "truth.jsonl"] if args.input else []) + [
+                epochs.parent / "truth.jsonl"]:
+            if cand.exists():
+                truth = cand
+                break
+    if truth is None or not truth.exists():
+        print("fdi-bridge eval: no truth file (give --truth)")
+        return 2
+    comp = evaluate_run(epochs, truth, capture=args.input, cfg=cfg)
+    table = rover_table([comp])
+    print(table)
+    for loss in comp.losses():
+        print(f"- {loss}")
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "eval.json").write_text(
+            json.dumps(_clean(comp.as_dict()), indent=1) + "\n", encoding="utf-8")
+        (args.out / "eval.md").write_text(table + "\n", encoding="utf-8")
+        print(f"wrote {args.out / 'eval.json'}")
+    return 0

@@ -1,0 +1,469 @@
+"""INS/GNSS navigation data generator, the paper's fault scenarios and ``fdi-bridge sim insgnss``.
+
+Cai & Shao simulated an aircraft for 501 s at 1 s steps, turned its trajectory into IMU and
+GNSS data with errors, and injected GNSS faults. This module does the same:
+
+- trajectory: a small aircraft at 60 m/s (climb, turns, acceleration, S-turns, descent),
+  coordinated turns (roll = atan(V ψ̇ / g)), on the tangent plane of :mod:`fdi.insgnss`;
+- IMU at ``imu_rate_hz`` (100 Hz): the exact inverse of the filter's mechanisation
+  (:func:`fdi.insgnss.invert_mechanization`) plus a constant turn-on bias (drawn per run) and
+  white noise, from ``[sim.imu]``;
+- GNSS at 1 Hz: true position plus white noise (σ = ``gnss_sigma_h_m`` east/north,
+  ``gnss_sigma_v_m`` up) and velocity plus white noise;
+- scenarios (faults added to the GNSS position, epochs are whole seconds 1..500):
+  ``paper-random`` 100 distinct random epochs, +100 m east and north, +20 m up;
+  ``paper-single`` every 10 s, +100/+100/+20 m; ``paper-continuous`` every epoch 10..200 s,
+  +100/+100/+20 m; ``paper-deviation`` every 10 s, +20/+20/+4 m (the paper's deviation study
+  used faults every 10 s; up keeps paper-random's 5:1 ratio); ``clean`` no faults.
+
+The same data runs through the four strategies (none, downweight, replace, three_zone) and
+the summary gives per method min/max/RMS of the E, N, U position and velocity errors
+(estimate − truth, at the 500 GNSS epochs after the update) and the zone/action counts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from drivers.configload import load_file
+from fdi.errors import ConfigError
+from fdi.insgnss import (
+    DEG,
+    EarthModel,
+    ImuErrorModel,
+    InsGnssFilter,
+    InsGnssParams,
+    NavState,
+    earth_step_quat,
+    euler_to_quat,
+    invert_mechanization,
+)
+from fdi.three_zone import STRATEGIES, Action, Strategy, Zone
+
+log = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.floating[Any]]
+Scenario = Literal["clean", "paper-random", "paper-single", "paper-continuous", "paper-deviation"]
+SCENARIOS: tuple[Scenario, ...] = (
+    "clean",
+    "paper-random",
+    "paper-single",
+    "paper-continuous",
+    "paper-deviation",
+)
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
+PAPER_PRESET = CONFIG_DIR / "insgnss-paper.toml"
+
+
+@dataclass(frozen=True)
+class InsGnssSimParams:
+    """Generator parameters (the ``[sim]`` table)."""
+
+    epochs: int = field(default=501, metadata={"ge": 20, "doc": "GNSS epochs, 1 s apart"})
+    imu_rate_hz: int = field(default=100, metadata={"ge": 1, "le": 1000})
+    speed_m_s: float = field(default=60.0, metadata={"gt": 0.0})
+    imu: ImuErrorModel = field(default_factory=ImuErrorModel)
+    gnss_sigma_h_m: float = field(default=3.0, metadata={"ge": 0.0})
+    gnss_sigma_v_m: float = field(default=5.0, metadata={"ge": 0.0})
+    gnss_sigma_vel_m_s: float = field(default=0.1, metadata={"ge": 0.0})
+    fault_h_m: float = field(default=100.0, metadata={"doc": "over-limit fault, east and north"})
+    fault_v_m: float = field(default=20.0, metadata={"doc": "over-limit fault, up"})
+    deviation_h_m: float = field(default=20.0, metadata={"doc": "deviation fault, east/north"})
+    deviation_v_m: float = field(default=4.0, metadata={"doc": "deviation fault, up"})
+    random_faults: int = field(default=100, metadata={"ge": 0})
+
+
+@dataclass(frozen=True)
+class InsGnssSetup:
+    """A whole ``config/insgnss*.toml`` file: ``[filter]`` and ``[sim]``."""
+
+    filter: InsGnssParams = field(default_factory=InsGnssParams)
+    sim: InsGnssSimParams = field(default_factory=InsGnssSimParams)
+
+
+def load_setup(path: str | Path | None = None) -> InsGnssSetup:
+    """Load a preset (default: ``config/insgnss-paper.toml``; built-in defaults if absent)."""
+    if path is None:
+        if not PAPER_PRESET.is_file():
+            return InsGnssSetup()
+        path = PAPER_PRESET
+    return load_file(InsGnssSetup, path)
+
+
+# ---------------------------------------------------------------- trajectory and sensors
+
+
+def _box(t: FloatArray, a: float, b: float, ramp: float = 3.0) -> FloatArray:
+    """Smooth indicator of [a, b] (tanh edges, ``ramp`` seconds)."""
+    return 0.5 * (np.tanh((t - a) / ramp) - np.tanh((t - b) / ramp))
+
+
+# (start s, end s, yaw rate deg/s, flight-path angle deg, acceleration m/s²)
+_FLIGHT_PLAN: tuple[tuple[float, float, float, float, float], ...] = (
+    (20, 50, 0.0, 4.0, 0.0),
+    (60, 120, 1.5, 0.0, 0.0),
+    (130, 170, 0.0, 0.0, 0.4),
+    (180, 240, -3.0, 0.0, 0.0),
+    (250, 290, 0.0, -3.0, 0.0),
+    (300, 340, 2.0, 0.0, 0.0),
+    (340, 380, -2.0, 0.0, 0.0),
+    (390, 430, 0.0, 0.0, -0.3),
+    (440, 480, 2.0, 2.0, 0.0),
+)
+
+
+@dataclass
+class Trajectory:
+    """Truth on the IMU grid: times (s), positions/velocities ENU (N×3), quaternions (N×4)."""
+
+    t: FloatArray
+    p: FloatArray
+    v: FloatArray
+    q: FloatArray
+    rpy: FloatArray
+
+
+def make_trajectory(duration_s: float, rate_hz: int, speed_m_s: float,
+                    earth: EarthModel) -> Trajectory:
+    """The aircraft of the experiment, sampled at ``rate_hz``; position by (M3)."""
+    n = round(duration_s * rate_hz) + 1
+    dt = 1.0 / rate_hz
+    t = np.arange(n) * dt
+    yaw_rate = np.zeros(n)
+    gamma = np.zeros(n)
+    acc = np.zeros(n)
+    for a, b, r, g, ac in _FLIGHT_PLAN:
+        box = _box(t, a, b)
+        yaw_rate += r * DEG * box
+        gamma += g * DEG * box
+        acc += ac * box
+    cumtrapz = np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * dt)])
+    speed = speed_m_s + cumtrapz
+    yaw = 30.0 * DEG + np.concatenate([[0.0], np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * dt)])
+    roll = np.arctan(speed * yaw_rate / earth.g0)
+    pitch = gamma
+    v = np.stack(
+        [speed * np.cos(gamma) * np.sin(yaw), speed * np.cos(gamma) * np.cos(yaw),
+         speed * np.sin(gamma)], axis=1
+    )
+    p = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (v[1:] + v[:-1]) * dt, axis=0)])
+    q = np.array([euler_to_quat(r_, p_, y_) for r_, p_, y_ in zip(roll, pitch, yaw, strict=True)])
+    return Trajectory(t, p, v, q, np.stack([roll, pitch, yaw], axis=1))
+
+
+def ideal_imu(traj: Trajectory, earth: EarthModel) -> tuple[FloatArray, FloatArray]:
+    """Error-free gyro (rad/s) and specific force (m/s²), row k for the interval (k−1, k]."""
+    n = len(traj.t)
+    dt = float(traj.t[1] - traj.t[0])
+    q_e = earth_step_quat(earth, dt)
+    gyro = np.zeros((n, 3))
+    accel = np.zeros((n, 3))
+    prev = NavState(tuple(traj.q[0]), tuple(traj.v[0]), tuple(traj.p[0]))
+    for k in range(1, n):
+        cur = NavState(tuple(traj.q[k]), tuple(traj.v[k]), tuple(traj.p[k]))
+        w, f = invert_mechanization(prev, cur, dt, earth, q_e)
+        gyro[k] = w
+        accel[k] = f
+        prev = cur
+    return gyro, accel
+
+
+@lru_cache(maxsize=4)
+def _truth(epochs: int, rate: int, speed_m_s: float,
+           earth: EarthModel) -> tuple[Trajectory, FloatArray, FloatArray]:
+    """Trajectory and error-free IMU, shared by every seed and scenario (read-only arrays)."""
+    traj = make_trajectory(epochs - 1, rate, speed_m_s, earth)
+    gyro, accel = ideal_imu(traj, earth)
+    for a in (traj.t, traj.p, traj.v, traj.q, traj.rpy, gyro, accel):
+        a.flags.writeable = False
+    return traj, gyro, accel
+
+
+@dataclass
+class NavData:
+    """One generated run: truth, IMU, GNSS (with faults) and the filter's initial state."""
+
+    traj: Trajectory
+    gyro: FloatArray
+    accel: FloatArray
+    gnss_t: FloatArray
+    gnss_p: FloatArray  # with faults
+    gnss_v: FloatArray
+    fault: FloatArray  # the fault added at each GNSS epoch (E, N, U), m
+    init_p: FloatArray
+    init_v: FloatArray
+    init_rpy: FloatArray
+    imu_bias: dict[str, list[float]]
+
+
+def fault_table(scenario: Scenario, sim: InsGnssSimParams,
+                rng: np.random.Generator) -> FloatArray:
+    """Fault (E, N, U) in m added at each of the ``sim.epochs`` GNSS epochs."""
+    m = sim.epochs
+    fault = np.zeros((m, 3))
+    big = np.array([sim.fault_h_m, sim.fault_h_m, sim.fault_v_m])
+    small = np.array([sim.deviation_h_m, sim.deviation_h_m, sim.deviation_v_m])
+    epochs = np.arange(m)
+    if scenario == "paper-random":
+        k = min(sim.random_faults, m - 1)
+        fault[np.sort(rng.choice(np.arange(1, m), size=k, replace=False))] = big
+    elif scenario == "paper-single":
+        fault[(epochs % 10 == 0) & (epochs > 0)] = big
+    elif scenario == "paper-continuous":
+        fault[(epochs >= 10) & (epochs <= 200)] = big
+    elif scenario == "paper-deviation":
+        fault[(epochs % 10 == 0) & (epochs > 0)] = small
+    elif scenario != "clean":
+        raise ValueError(f"unknown scenario {scenario!r}")
+    return fault
+
+
+def generate(setup: InsGnssSetup, scenario: Scenario, seed: int) -> NavData:
+    """Generate the data of one run (deterministic in ``seed``)."""
+    sim, flt = setup.sim, setup.filter
+    earth = flt.earth
+    ss = np.random.SeedSequence(seed)
+    rng_imu, rng_gnss, rng_fault, rng_init = (np.random.default_rng(s) for s in ss.spawn(4))
+    rate = sim.imu_rate_hz
+    traj, gyro, accel = _truth(sim.epochs, rate, sim.speed_m_s, earth)
+    n = len(traj.t)
+    dt = 1.0 / rate
+    e = sim.imu
+    b_g = rng_imu.normal(0.0, e.gyro_bias_rad_s, 3)
+    b_a = rng_imu.normal(0.0, e.accel_bias_m_s2, 3)
+    gyro = gyro + b_g + rng_imu.normal(0.0, e.gyro_arw_rad_sqrt_s / math.sqrt(dt), (n, 3))
+    accel = accel + b_a + rng_imu.normal(0.0, e.accel_vrw_m_s_sqrt_s / math.sqrt(dt), (n, 3))
+    idx = np.arange(sim.epochs) * rate
+    sig = np.array([sim.gnss_sigma_h_m, sim.gnss_sigma_h_m, sim.gnss_sigma_v_m])
+    gnss_p = traj.p[idx] + rng_gnss.normal(0.0, 1.0, (sim.epochs, 3)) * sig
+    gnss_v = traj.v[idx] + rng_gnss.normal(0.0, sim.gnss_sigma_vel_m_s, (sim.epochs, 3))
+    fault = fault_table(scenario, sim, rng_fault)
+    tilt, yaw = flt.init_sigma_tilt_deg * DEG, flt.init_sigma_yaw_deg * DEG
+    return NavData(
+        traj=traj,
+        gyro=gyro,
+        accel=accel,
+        gnss_t=traj.t[idx],
+        gnss_p=gnss_p + fault,
+        gnss_v=gnss_v,
+        fault=fault,
+        init_p=traj.p[0] + rng_init.normal(0.0, flt.init_sigma_pos_m, 3),
+        init_v=traj.v[0] + rng_init.normal(0.0, flt.init_sigma_vel_m_s, 3),
+        init_rpy=traj.rpy[0] + rng_init.normal(0.0, 1.0, 3) * np.array([tilt, tilt, yaw]),
+        imu_bias={"gyro_rad_s": b_g.tolist(), "accel_m_s2": b_a.tolist()},
+    )
+
+
+# ---------------------------------------------------------------- running the filter
+
+
+@dataclass
+class MethodRun:
+    """Errors (estimate − truth) at GNSS epochs 1.., and the gate's counts."""
+
+    t: FloatArray
+    pos_err: FloatArray
+    vel_err: FloatArray
+    zone_counts: dict[str, int]
+    action_counts: dict[str, int]
+    flagged: npt.NDArray[np.bool_]  # epoch with any position component outside zone 0
+    restarts: int
+    fault_onsets: int = 0  # receiver judged faulty by the jump tracker (position)
+    returns: int = 0  # ... and healthy again
+    readmissions: int = 0  # position components accepted again after the INS drifted
+
+
+def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> MethodRun:
+    """Run the filter with ``strategy`` over ``data``."""
+    prm = replace(params, strategy=strategy)
+    traj = data.traj
+    kf = InsGnssFilter(prm, float(traj.t[0]), data.init_p, data.init_v, data.init_rpy)
+    m = len(data.gnss_t)
+    rate = round(1.0 / float(traj.t[1] - traj.t[0]))
+    pos_err = np.zeros((m - 1, 3))
+    vel_err = np.zeros((m - 1, 3))
+    flagged = np.zeros(m - 1, dtype=bool)
+    t_list = traj.t.tolist()
+    gyro, accel = data.gyro.tolist(), data.accel.tolist()
+    for j in range(1, m):
+        for k in range((j - 1) * rate + 1, j * rate + 1):
+            kf.propagate(t_list[k], gyro[k], accel[k])
+        rep = kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
+        flagged[j - 1] = any(d.zone is not Zone.NO_FAULT for d in rep.decisions[:3])
+        k = j * rate
+        pos_err[j - 1] = kf.position - traj.p[k]
+        vel_err[j - 1] = kf.velocity - traj.v[k]
+    zones = {z.name.lower(): sum(g.zone_counts[z] for g in kf.gates[:3]) for z in Zone}
+    actions = {a.value: sum(g.action_counts[a] for g in kf.gates[:3]) for a in Action}
+    tracker = kf.position_tracker
+    return MethodRun(
+        data.gnss_t[1:], pos_err, vel_err, zones, actions, flagged,
+        sum(g.restarts for g in kf.gates[:3]), tracker.fault_onsets, tracker.returns,
+        sum(g.readmissions for g in kf.gates[:3]),
+    )
+
+
+def _stats(err: FloatArray) -> dict[str, dict[str, float]]:
+    out = {}
+    for i, axis in enumerate(("east", "north", "up")):
+        e = err[:, i]
+        out[axis] = {
+            "min": round(float(e.min()), 4),
+            "max": round(float(e.max()), 4),
+            "rms": round(float(np.sqrt(np.mean(e * e))), 4),
+        }
+    return out
+
+
+def summarize(data: NavData, runs: dict[str, MethodRun], scenario: str, seed: int,
+              setup: InsGnssSetup) -> dict[str, Any]:
+    """The ``summary.json`` document."""
+    faulty = np.any(data.fault[1:] != 0, axis=1)
+    methods: dict[str, Any] = {}
+    for name, r in runs.items():
+        horiz = np.hypot(r.pos_err[:, 0], r.pos_err[:, 1])
+        pos3 = np.sqrt(np.mean(np.sum(r.pos_err**2, axis=1)))
+        methods[name] = {
+            "position_m": _stats(r.pos_err),
+            "velocity_m_s": _stats(r.vel_err),
+            "position_rms_3d_m": round(float(pos3), 4),
+            "max_horizontal_error_m": round(float(horiz.max()), 4),
+            "zones": r.zone_counts,
+            "actions": r.action_counts,
+            "window_restarts": r.restarts,
+            "receiver_fault_onsets": r.fault_onsets,
+            "receiver_returns": r.returns,
+            "readmissions": r.readmissions,
+            "fault_epochs_flagged": int(np.sum(r.flagged & faulty)),
+            "clean_epochs_flagged": int(np.sum(r.flagged & ~faulty)),
+        }
+    sim = setup.sim
+    return {
+        "scenario": scenario,
+        "seed": seed,
+        "epochs": len(data.gnss_t),
+        "fault_epochs": int(np.sum(faulty)),
+        "imu_rate_hz": sim.imu_rate_hz,
+        "gnss_sigma_m": {"h": sim.gnss_sigma_h_m, "v": sim.gnss_sigma_v_m,
+                         "vel": sim.gnss_sigma_vel_m_s},
+        "imu_truth_bias": data.imu_bias,
+        "thresholds": {"T1": setup.filter.three_zone.t1, "T2": setup.filter.three_zone.t2},
+        "errors_are": "estimate minus truth at GNSS epochs 1..N-1, after the update",
+        "methods": methods,
+    }
+
+
+def run_scenario(setup: InsGnssSetup, scenario: Scenario, seed: int,
+                 strategies: tuple[Strategy, ...] = STRATEGIES,
+                 ) -> tuple[dict[str, Any], NavData, dict[str, MethodRun]]:
+    """Generate one run and pass it through each strategy; returns (summary, data, runs)."""
+    data = generate(setup, scenario, seed)
+    runs: dict[str, MethodRun] = {s: run_method(data, setup.filter, s) for s in strategies}
+    return summarize(data, runs, scenario, seed, setup), data, runs
+
+
+def write_plots(out: Path, scenario: str, runs: dict[str, MethodRun]) -> list[Path]:
+    """PNGs like the paper's Fig. 9–18 (errors against time per method); [] without matplotlib."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return []
+    files = []
+    for kind, unit in (("position", "m"), ("velocity", "m/s")):
+        fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+        for i, axis in enumerate(("east", "north", "up")):
+            ax = axes[i]
+            for name, r in runs.items():
+                err = r.pos_err if kind == "position" else r.vel_err
+                ax.plot(r.t, err[:, i], lw=0.8, label=name)
+            ax.set_ylabel(f"{axis} error / {unit}")
+            ax.grid(True, lw=0.3)
+        axes[0].legend(loc="upper right", fontsize=8, ncol=4)
+        axes[0].set_title(f"{scenario}: {kind} error (estimate − truth)")
+        axes[-1].set_xlabel("t / s")
+        path = out / f"{kind}_errors.png"
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        files.append(path)
+    return files
+
+
+# ---------------------------------------------------------------- benchmark
+
+
+def bench_insgnss_step(n: int) -> dict[str, float]:
+    """Time ``n`` IMU propagations (100 Hz, P at 10 Hz) and ``n // 100`` GNSS updates (ms)."""
+    params = InsGnssParams()
+    earth = params.earth
+    kf = InsGnssFilter(params, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    f_rest = (0.0, 0.0, -earth.g0)  # FRD at rest, level, facing north
+    prop: list[float] = []
+    upd: list[float] = []
+    t = 0.0
+    for k in range(1, max(n, 1) + 1):
+        t = k * 0.01
+        t0 = time.perf_counter()
+        kf.propagate(t, (0.0, 0.0, 0.0), f_rest)
+        prop.append(time.perf_counter() - t0)
+        if k % 100 == 0:
+            t0 = time.perf_counter()
+            kf.update(t, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+            upd.append(time.perf_counter() - t0)
+    out = {
+        "n": float(len(prop)),
+        "p50_ms": float(np.percentile(prop, 50)) * 1e3,
+        "p99_ms": float(np.percentile(prop, 99)) * 1e3,
+    }
+    if upd:
+        out["update_p50_ms"] = float(np.percentile(upd, 50)) * 1e3
+        out["update_p99_ms"] = float(np.percentile(upd, 99)) * 1e3
+    return out
+
+
+# ---------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", choices=SCENARIOS, default="paper-random")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument(
+        "--config", type=Path, default=None,
+        help=f"preset TOML (default {PAPER_PRESET.relative_to(CONFIG_DIR.parent)})",
+    )
+    parser.add_argument("--no-plots", action="store_true", help="do not write PNGs")
+
+
+def run(args: argparse.Namespace) -> int:
+    setup = load_setup(args.config)
+    out: Path = args.out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(str(out), "--out", "a writable directory", str(err)) from err
+    summary, _data, runs = run_scenario(setup, args.scenario, args.seed)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    pngs = [] if args.no_plots else write_plots(out, args.scenario, runs)
+    for name, m in summary["methods"].items():
+        p = m["position_m"]
+        log.info(
+            "%s %-10s RMS E %.2f N %.2f U %.2f m", args.scenario, name,
+            p["east"]["rms"], p["north"]["rms"], p["up"]["rms"],
+        )
+    log.info("wrote %s%s", out / "summary.json", f" and {len(pngs)} PNGs" if pngs else "")
+    return 0

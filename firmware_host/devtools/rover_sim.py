@@ -1,0 +1,359 @@
+"""Scenario generator for the farm rover: a field path, DGPS error, injected faults, truth.
+
+``fdi-bridge sim rover --rate 10 --duration 600 --seed 1 --out DIR`` writes
+
+* ``DIR/rover.nmea``: the receiver's NMEA stream (GGA, RMC, VTG per epoch; GST and ZDA with
+  ``--gst`` / ``--zda``), a plain log with ``#`` header comments, as an AgGPS 132 would send it;
+* ``DIR/rover.cap``: the same bytes in the project's capture format, timestamped at the epochs;
+* ``DIR/truth.jsonl``: per epoch the true position, the DGPS error and the injected fault;
+* ``DIR/scenario.json``: the parameters.
+
+The model (all seeded from ``--seed``):
+
+* path: straight passes (``pass_length_m`` at ``speed_mps``) joined by semicircular headland
+  turns (radius ``turn_radius_m`` at ``turn_speed_mps``), speed changes ramped over 2 s;
+* DGPS error: a first-order Gauss-Markov process per axis (σ 0.35 m horizontal, 0.7 m
+  vertical, correlation time 60 s, so a few centimetres from one epoch to the next) plus 5 mm
+  white noise; Doppler velocity with 0.03 m/s noise per axis;
+* faults: single-epoch jumps and bursts of 2-5 epochs, of 3σ to 20σ (σ = 0.35 m), horizontal,
+  in a random direction, events at least ``min_gap_s`` apart; other kinds (ramp, frozen
+  position, outage) are available for the evaluation suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from drivers.gps.nmea import (
+    KNOT_MPS,
+    format_date,
+    format_lat,
+    format_lon,
+    format_time,
+    with_checksum,
+)
+from fdi.geodesy import LocalFrame
+
+FaultKind = Literal["jump", "burst", "ramp", "frozen", "outage"]
+
+
+@dataclass(frozen=True)
+class RoverScenario:
+    rate_hz: float = 10.0
+    duration_s: float = 600.0
+    seed: int = 1
+    origin_lat_deg: float = 32.0206  # Nanjing Agricultural University farm, roughly
+    origin_lon_deg: float = 118.8580
+    origin_alt_m: float = 12.0
+    geoid_sep_m: float = 3.0
+    speed_mps: float = 2.0
+    turn_speed_mps: float = 1.0
+    pass_length_m: float = 100.0
+    turn_radius_m: float = 6.0
+    sigma_h_m: float = 0.35
+    sigma_v_m: float = 0.7
+    tau_s: float = 60.0
+    white_m: float = 0.005
+    vel_noise_mps: float = 0.03
+    fault_sigma_m: float = 0.35
+    fault_min_sigmas: float = 3.0
+    fault_max_sigmas: float = 20.0
+    fault_every_s: float = 15.0
+    min_gap_s: float = 6.0
+    burst_fraction: float = 0.4
+    kinds: tuple[str, ...] = ("jump", "burst")
+    ramp_rate_mps: float = 0.1
+    ramp_duration_s: float = 30.0
+    outage_s: float = 20.0
+    frozen_s: float = 10.0
+    gst: bool = False
+    zda: bool = False
+    start_utc_s: float = 10 * 3600.0
+    date: tuple[int, int, int] = (2010, 5, 12)
+
+
+@dataclass
+class _Path:
+    """Arclength -> position/heading for passes and headland turns."""
+
+    length: float
+    radius: float
+    segs: list[tuple[str, float, float, float, float, float]] = field(default_factory=list)
+
+    def pose(self, s: float) -> tuple[float, float, float, bool]:
+        """(east, north, heading_rad from north, in_turn) at arclength s (periodic pattern)."""
+        L, R = self.length, self.radius
+        turn = math.pi * R
+        cycle = 2 * (L + turn)
+        k, rem = divmod(s, cycle)
+        x0 = k * 4 * R  # every cycle moves two rows (2 × 2R) east
+        if rem < L:  # northward pass
+            return x0, rem, 0.0, False
+        rem -= L
+        if rem < turn:  # turn right (east) at the north headland
+            a = rem / R
+            return x0 + R - R * math.cos(a), L + R * math.sin(a), a, True
+        rem -= turn
+        if rem < L:  # southward pass
+            return x0 + 2 * R, L - rem, math.pi, False
+        rem -= L
+        a = rem / R  # turn left (east) at the south headland
+        return x0 + 3 * R - R * math.cos(a), -R * math.sin(a), math.pi - a, True
+
+
+def _speed_at(path: _Path, s: float, sc: RoverScenario) -> float:
+    """Target speed with 2 s ramps around the turns (evaluated on the arclength)."""
+    ramp = 2.0 * 0.5 * (sc.speed_mps + sc.turn_speed_mps)
+    best = sc.speed_mps
+    for ds in (-ramp, 0.0, ramp):
+        _, _, _, turning = path.pose(s + ds)
+        if turning:
+            mid = 0.5 * (sc.speed_mps + sc.turn_speed_mps)
+            best = min(best, sc.turn_speed_mps if ds == 0.0 else mid)
+    return best
+
+
+@dataclass(frozen=True)
+class FaultEvent:
+    kind: str
+    start: int  # epoch index
+    length: int  # epochs
+    offset_e_m: float
+    offset_n_m: float
+    sigmas: float
+
+
+def plan_faults(sc: RoverScenario, n_epochs: int, rng: np.random.Generator) -> list[FaultEvent]:
+    """Fault events spread over the run, at least ``min_gap_s`` apart, after a 20 s start."""
+    dt = 1.0 / sc.rate_hz
+    events: list[FaultEvent] = []
+    t = 20.0
+    while True:
+        t += float(rng.uniform(sc.min_gap_s, 2 * sc.fault_every_s - sc.min_gap_s))
+        start = round(t * sc.rate_hz)
+        if start >= n_epochs - int(sc.min_gap_s * sc.rate_hz):
+            break
+        kind = str(rng.choice(list(sc.kinds)))
+        sig = float(rng.uniform(sc.fault_min_sigmas, sc.fault_max_sigmas))
+        mag = sig * sc.fault_sigma_m
+        ang = float(rng.uniform(0, 2 * math.pi))
+        if kind == "burst":
+            length = int(rng.integers(2, 6))
+        elif kind == "ramp":
+            length = round(sc.ramp_duration_s * sc.rate_hz)
+            mag = sc.ramp_rate_mps  # per second; offset grows
+        elif kind == "outage":
+            length = round(sc.outage_s * sc.rate_hz)
+        elif kind == "frozen":
+            length = round(sc.frozen_s * sc.rate_hz)
+        else:
+            length = 1
+        events.append(
+            FaultEvent(kind, start, length, mag * math.sin(ang), mag * math.cos(ang), sig)
+        )
+        t = (start + length) * dt
+    return events
+
+
+def generate(sc: RoverScenario) -> Iterator[tuple[float, bytes, dict[str, object]]]:
+    """Yield ``(time_s, nmea_bytes, truth_record)`` per epoch."""
+    rng = np.random.default_rng(sc.seed)
+    dt = 1.0 / sc.rate_hz
+    n = round(sc.duration_s * sc.rate_hz)
+    path = _Path(sc.pass_length_m, sc.turn_radius_m)
+    frame = LocalFrame(sc.origin_lat_deg, sc.origin_lon_deg, sc.origin_alt_m)
+    faults = plan_faults(sc, n, rng)
+    fault_at: dict[int, FaultEvent] = {}
+    for event in faults:
+        for i in range(event.start, event.start + event.length):
+            fault_at[i] = event
+    phi = math.exp(-dt / sc.tau_s)
+    q_h = sc.sigma_h_m * math.sqrt(1 - phi * phi)
+    q_v = sc.sigma_v_m * math.sqrt(1 - phi * phi)
+    err = [
+        float(rng.normal(0, sc.sigma_h_m)),
+        float(rng.normal(0, sc.sigma_h_m)),
+        float(rng.normal(0, sc.sigma_v_m)),
+    ]
+    s = 0.0
+    v = sc.speed_mps
+    sub = 10
+    hdop = 0.9
+    sats = 9
+    frozen_fix: tuple[float, float, float] | None = None
+    for k in range(n):
+        t = sc.start_utc_s + k * dt
+        e_true, n_true, heading, _ = path.pose(s)
+        u_true = 0.0
+        ve, vn = v * math.sin(heading), v * math.cos(heading)
+        ev = fault_at.get(k)
+        off = (0.0, 0.0)
+        fault = False
+        outage = False
+        if ev is not None:
+            fault = True
+            if ev.kind == "ramp":
+                grow = (k - ev.start + 1) * dt
+                off = (ev.offset_e_m * grow, ev.offset_n_m * grow)
+            elif ev.kind == "outage":
+                outage = True
+            elif ev.kind != "frozen":
+                off = (ev.offset_e_m, ev.offset_n_m)
+        we, wn, wu = (float(x) for x in rng.normal(0, sc.white_m, 3))
+        fix = (
+            e_true + err[0] + we + off[0],
+            n_true + err[1] + wn + off[1],
+            u_true + err[2] + wu,
+        )
+        if ev is not None and ev.kind == "frozen":
+            if frozen_fix is None:
+                frozen_fix = fix
+            fix = frozen_fix
+        else:
+            frozen_fix = None
+        vne = ve + float(rng.normal(0, sc.vel_noise_mps))
+        vnn = vn + float(rng.normal(0, sc.vel_noise_mps))
+        lat, lon, h = frame.to_lla(*fix)
+        tlat, tlon, th = frame.to_lla(e_true, n_true, u_true)
+        hdop = min(1.6, max(0.7, hdop + float(rng.normal(0, 0.01))))
+        if rng.random() < 0.002:
+            sats = int(np.clip(sats + rng.integers(-1, 2), 7, 11))
+        age = 1.0 + (k * dt) % 5.0
+        data = _nmea_epoch(sc, t, None if outage else (lat, lon, h), vne, vnn, hdop, sats, age)
+        truth: dict[str, object] = {
+            "k": k,
+            "utc": round(t % 86400.0, 6),
+            "true_lat": tlat,
+            "true_lon": tlon,
+            "true_alt": th,
+            "true_e": e_true,
+            "true_n": n_true,
+            "true_u": u_true,
+            "err_e": err[0] + we,
+            "err_n": err[1] + wn,
+            "err_u": err[2] + wu,
+            "fault": fault,
+            "fault_kind": ev.kind if ev else None,
+            "fault_event": faults.index(ev) if ev else None,
+            "fault_offset_m": math.hypot(*off) if ev else 0.0,
+            "fault_sigmas": ev.sigmas if ev else 0.0,
+            "outage": outage,
+        }
+        yield t, data, truth
+        # Advance truth and error to the next epoch.
+        for _ in range(sub):
+            target = _speed_at(path, s, sc)
+            acc = max(-0.5, min(0.5, (target - v) / 0.5))
+            v += acc * dt / sub
+            s += v * dt / sub
+        err[0] = phi * err[0] + float(rng.normal(0, q_h))
+        err[1] = phi * err[1] + float(rng.normal(0, q_h))
+        err[2] = phi * err[2] + float(rng.normal(0, q_v))
+
+
+def _nmea_epoch(
+    sc: RoverScenario,
+    t: float,
+    fix: tuple[float, float, float] | None,
+    ve: float,
+    vn: float,
+    hdop: float,
+    sats: int,
+    age: float,
+) -> bytes:
+    ts = format_time(t)
+    date = format_date(sc.date)
+    if fix is None:
+        gga = f"GPGGA,{ts},,,,,0,{sats:02d},,,M,,M,,"
+        rmc = f"GPRMC,{ts},V,,,,,,,{date},,,N"
+        out = with_checksum(gga) + with_checksum(rmc) + with_checksum("GPVTG,,T,,M,,N,,K,N")
+        return out
+    lat, lon, h = fix
+    la, ns = format_lat(lat)
+    lo, ew = format_lon(lon)
+    speed = math.hypot(ve, vn)
+    course = math.degrees(math.atan2(ve, vn)) % 360.0
+    msl = h - sc.geoid_sep_m
+    gga = (
+        f"GPGGA,{ts},{la},{ns},{lo},{ew},2,{sats:02d},{hdop:.1f},{msl:.3f},M,"
+        f"{sc.geoid_sep_m:.3f},M,{age:.1f},0133"
+    )
+    kn = speed / KNOT_MPS
+    rmc = f"GPRMC,{ts},A,{la},{ns},{lo},{ew},{kn:.3f},{course:.1f},{date},,,D"
+    vtg = f"GPVTG,{course:.1f},T,,M,{kn:.3f},N,{speed * 3.6:.3f},K,D"
+    out = with_checksum(gga)
+    if sc.gst:
+        sd = sc.sigma_h_m
+        out += with_checksum(
+            f"GPGST,{ts},{sd:.2f},{sd:.2f},{sd:.2f},0.0,{sd:.2f},{sd:.2f},{sc.sigma_v_m:.2f}"
+        )
+    out += with_checksum(rmc) + with_checksum(vtg)
+    if sc.zda:
+        y, m, d = sc.date
+        out += with_checksum(f"GPZDA,{ts},{d:02d},{m:02d},{y:04d},00,00")
+    return out
+
+
+def write_run(sc: RoverScenario, out_dir: Path) -> dict[str, object]:
+    """Write rover.nmea, rover.cap, truth.jsonl and scenario.json; return a short summary."""
+    from drivers.capture import CaptureWriter, Channel
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    n_epochs = n_fault = 0
+    header = (
+        "# fdi-bridge generated rover run (Trimble AgGPS 132 style NMEA, DGPS)\n"
+        f"# rate_hz: {sc.rate_hz}  duration_s: {sc.duration_s}  seed: {sc.seed}\n"
+        "# faults: see truth.jsonl; parameters: scenario.json\n"
+    )
+    channel = Channel(name="gps", url="/dev/ttyUSB0", baudrate=9600, direction="rx")
+    with (
+        open(out_dir / "rover.nmea", "wb") as nmea,
+        open(out_dir / "truth.jsonl", "w", encoding="utf-8") as truth_f,
+        CaptureWriter(out_dir / "rover.cap", [channel], note="generated rover run") as cap,
+    ):
+        nmea.write(header.encode("ascii"))
+        for t, data, truth in generate(sc):
+            nmea.write(data)
+            cap.write(0, data, t_us=round((t - sc.start_utc_s) * 1e6) + 1_273_622_400_000_000)
+            truth_f.write(json.dumps(truth) + "\n")
+            n_epochs += 1
+            n_fault += bool(truth["fault"])
+    params = asdict(sc)
+    (out_dir / "scenario.json").write_text(json.dumps(params, indent=2) + "\n", encoding="utf-8")
+    return {"epochs": n_epochs, "faulty_epochs": n_fault, "out": str(out_dir)}
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--rate", type=float, default=10.0, choices=[1.0, 5.0, 10.0],
+                        help="receiver rate in Hz (1, 5 or 10)")
+    parser.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--gst", action="store_true", help="also send GST error estimates")
+    parser.add_argument("--zda", action="store_true", help="also send ZDA")
+    parser.add_argument("--kinds", default="jump,burst",
+                        help="fault kinds, comma separated: jump,burst,ramp,frozen,outage")
+    parser.add_argument("--out", required=True, type=Path, help="output directory")
+
+
+def run(args: argparse.Namespace) -> int:
+    kinds = tuple(k.strip() for k in args.kinds.split(",") if k.strip())
+    bad = [k for k in kinds if k not in ("jump", "burst", "ramp", "frozen", "outage")]
+    if bad:
+        print(f"fdi-bridge sim rover: unknown fault kind(s): {', '.join(bad)}")
+        return 2
+    sc = RoverScenario(rate_hz=args.rate, duration_s=args.duration, seed=args.seed,
+                       gst=args.gst, zda=args.zda, kinds=kinds)
+    summary = write_run(sc, args.out)
+    print(json.dumps(summary))
+    return 0

@@ -1,0 +1,803 @@
+"""MAVLink passthrough: forward every packet byte for byte, and add the bridge's own component.
+
+The router sits on the companion link between the autopilot and one or more ground stations
+(``[mavlink]`` in the vehicle's TOML, :class:`MavlinkConfig`). Each packet a link delivers is
+framed (:mod:`drivers.mavlink.framer`: corrupt bytes counted and dropped there) and sent, bytes
+unchanged and in order, to every *other* endpoint, except that a message with a target system
+goes only to endpoints where that system (or system + component) has been seen, as
+mavlink-router and the MAVLink routing rules do. A ``.tlog`` records all of it.
+
+The bridge's own component (``system_id``/``component_id``, default 1/191) sends a
+MAV_TYPE_ONBOARD_CONTROLLER heartbeat, STATUSTEXT and NAMED_VALUE_FLOAT at configured rates,
+GPS_INPUT / MANUAL_CONTROL for the pipelines, and answers the parameter protocol from a
+:class:`~firmware_host.mavlink.params.ParamStore`. With signing on a ground-station link, unsigned
+(or badly signed, or replayed) COMMAND_LONG / COMMAND_INT / PARAM_SET addressed to the bridge's
+component are refused and counted; reads (PARAM_REQUEST_*) stay open.
+
+Forwarding is event-driven: one ``select`` (epoll) waits on every link's descriptors, a
+wake-up socket for the pipelines' packets, and the next periodic job's deadline. A datagram is
+framed, routed and written to its destinations before the next one is read, so a packet waits
+for nothing but the packets ahead of it. A write that the kernel refuses (buffer full) puts the
+packet in the destination's bounded queue, and the loop waits for that link to become writable;
+when a queue is full the oldest packet is dropped and counted. Reads are capped per endpoint
+and round (``read_burst``), so a flood on one link stalls neither the other direction nor the
+thread that runs the detectors (that thread only hands packets over, through
+:meth:`Router.send_gps_input` and friends, and never blocks on a socket). Packets for a UDP
+server endpoint nobody has spoken to yet are dropped and counted (``no_peer``): there is
+nowhere to send them, and a ground station that connects later wants fresh telemetry, not a
+backlog.
+
+The loop owns time: ``clock`` (monotonic seconds) is an argument; :meth:`Router.tick` runs the
+periodic jobs for a given time so tests drive it with
+:class:`~firmware_host.runtime.loop.FakeClock`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import selectors
+import socket
+import struct
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from drivers.configload import load_dataclass, read_toml
+from drivers.mavlink import io as mio
+from drivers.mavlink.framer import MavFrame, MavFramer, frame_target, signature_ok
+from drivers.mavlink.links import Link, open_link
+from fdi.errors import ConfigError, PortError
+from firmware_host.mavlink.params import ParamStore
+
+log = logging.getLogger("fdi_bridge.router")
+
+Clock = Callable[[], float]
+
+# ---------------------------------------------------------------------------------------------
+# Configuration
+
+
+@dataclass(frozen=True)
+class EndpointConfig:
+    """One link: ``url`` in the mavutil spelling (see :mod:`drivers.mavlink.links`)."""
+
+    url: str
+    baud: int = field(default=115200, metadata={"gt": 0, "doc": "serial links only"})
+    signing: bool = field(default=False, metadata={"doc": "require signed commands (GCS only)"})
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class MavlinkConfig:
+    """The ``[mavlink]`` table of a vehicle's TOML file."""
+
+    autopilot: EndpointConfig = EndpointConfig("udpin:127.0.0.1:14555")
+    gcs: tuple[EndpointConfig, ...] = (EndpointConfig("udpin:127.0.0.1:14550"),)
+    system_id: int = field(default=1, metadata={"ge": 1, "le": 255})
+    component_id: int = field(default=191, metadata={"ge": 1, "le": 255})
+    pilot_system_id: int = field(
+        default=255, metadata={"ge": 1, "le": 255, "doc": "GCS id for MANUAL_CONTROL"}
+    )
+    heartbeat_hz: float = field(default=1.0, metadata={"gt": 0.0, "le": 50.0})
+    stats_hz: float = field(default=2.0, metadata={"ge": 0.0, "le": 50.0})
+    statustext_per_s: float = field(default=5.0, metadata={"gt": 0.0, "le": 50.0})
+    queue_packets: int = field(default=2000, metadata={"ge": 16})
+    read_burst: int = field(default=64, metadata={"ge": 1})
+    tlog_dir: str = ""
+    tlog_max_bytes: int = field(default=64 * 1024 * 1024, metadata={"ge": 4096})
+    param_file: str = ""
+    signing_key_file: str = ""
+    reconnect_max_s: float = field(
+        default=5.0, metadata={"gt": 0.0, "doc": "serial links: longest wait between reopens"}
+    )
+
+    def __post_init__(self) -> None:
+        if any(g.signing for g in self.gcs) and not self.signing_key_file:
+            raise ValueError("signing is on for a GCS link but signing_key_file is empty")
+
+
+def load_mavlink_config(path: str | Path) -> MavlinkConfig:
+    """The ``[mavlink]`` table of the TOML file at ``path`` (defaults when absent)."""
+    table = read_toml(path).get("mavlink", {})
+    if not isinstance(table, dict):
+        raise ConfigError(str(path), "mavlink", "a table", type(table).__name__)
+    return load_dataclass(MavlinkConfig, table, str(path), "mavlink")
+
+
+def load_vehicle_config(path: str | Path) -> Any:
+    """The rest of the file at ``path`` as a :class:`~firmware_host.runtime.config.BridgeConfig`
+    when it
+    has a ``[rover]`` table (the one-process mode), else None. ``[mavlink]`` is left out: it is
+    :func:`load_mavlink_config`'s."""
+    from firmware_host.runtime.config import BridgeConfig
+
+    table = read_toml(path)
+    if "rover" not in table:
+        return None
+    rest = {k: v for k, v in table.items() if k != "mavlink"}
+    return load_dataclass(BridgeConfig, rest, str(path))
+
+
+def load_signing_key(path: str | Path) -> bytes:
+    """A 32-byte MAVLink signing key from a file holding 64 hexadecimal characters.
+
+    MAVProxy's and QGroundControl's passphrase keys are ``sha256(passphrase)``; write that as
+    hex. The file must not be readable by other users and must not sit inside a git working
+    tree (a key is never committed).
+    """
+    p = Path(path).expanduser()
+    try:
+        mode = p.stat().st_mode
+        text = p.read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(str(p), "(file)", "a readable key file", str(err)) from err
+    if mode & 0o007:
+        raise ConfigError(str(p), "(mode)", "a file only its owner can read (chmod 600)", oct(mode))
+    for parent in p.resolve().parents:
+        if (parent / ".git").exists():
+            raise ConfigError(
+                str(p), "(location)", "a path outside any git repository", str(parent)
+            )
+    try:
+        key = bytes.fromhex(text)
+    except ValueError as err:
+        raise ConfigError(
+            str(p), "(key)", "64 hexadecimal characters", f"{len(text)} chars"
+        ) from err
+    if len(key) != 32:
+        raise ConfigError(str(p), "(key)", "64 hexadecimal characters", f"{len(text)} chars")
+    return key
+
+
+# ---------------------------------------------------------------------------------------------
+# .tlog recorder
+
+
+class TlogWriter:
+    """QGroundControl ``.tlog``: 8-byte big-endian µs (Unix time) before each packet; rotated."""
+
+    def __init__(self, directory: str | Path, max_bytes: int, wall_clock: Clock = time.time):
+        self.dir = Path(directory)
+        self.max_bytes = max_bytes
+        self.wall_clock = wall_clock
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.files: list[Path] = []
+        self._f: Any = None
+        self._size = 0
+        self.packets = 0
+        self._open()
+
+    def _open(self) -> None:
+        if self._f is not None:
+            self._f.close()
+        stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime(self.wall_clock()))
+        path = self.dir / f"fdi-{stamp}-{len(self.files):03d}.tlog"
+        self._f = open(path, "ab")  # noqa: SIM115  (kept open across calls, closed in close())
+        self.files.append(path)
+        self._size = 0
+
+    def write(self, raw: bytes, t_s: float | None = None) -> None:
+        if self._size + 8 + len(raw) > self.max_bytes and self._size > 0:
+            self._open()
+        t = self.wall_clock() if t_s is None else t_s
+        self._f.write(struct.pack(">Q", int(t * 1e6)) + raw)
+        self._size += 8 + len(raw)
+        self.packets += 1
+
+    def flush(self) -> None:
+        self._f.flush()
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+
+
+# ---------------------------------------------------------------------------------------------
+# Router
+
+
+@dataclass
+class EndpointStats:
+    rx_packets: int = 0
+    tx_packets: int = 0
+    dropped_queue_full: int = 0
+    no_peer: int = 0  # packets for this endpoint while nobody was there to take them
+    unroutable: int = 0  # targeted packets from here that no other endpoint could take
+
+
+class Endpoint:
+    """A link, its framers (one per stream), its outgoing queue and what it has seen."""
+
+    def __init__(self, name: str, link: Link, *, is_gcs: bool, signing: bool, queue: int):
+        self.name = name
+        self.link = link
+        self.is_gcs = is_gcs
+        self.signing = signing
+        self.queue: deque[bytes] = deque()
+        self.queue_max = queue
+        self.framers: dict[Hashable, MavFramer] = {}
+        self.seen_sys: set[int] = set()
+        self.seen: set[tuple[int, int]] = set()
+        self.stats = EndpointStats()
+
+    def send(self, raw: bytes) -> None:
+        """Write ``raw`` now when nothing waits before it; else queue it behind the others."""
+        if self.queue:
+            self.enqueue(raw)
+        elif not self.link.has_peer():
+            self.stats.no_peer += 1
+        elif self.link.write(raw):
+            self.stats.tx_packets += 1
+        else:
+            self.enqueue(raw)
+
+    def enqueue(self, raw: bytes) -> None:
+        if len(self.queue) >= self.queue_max:
+            self.queue.popleft()
+            self.stats.dropped_queue_full += 1
+        self.queue.append(raw)
+
+    def blocked(self) -> bool:
+        """True when packets or bytes wait for the link to become writable."""
+        return bool(self.queue) or self.link.backlog()
+
+    def flush(self) -> None:
+        link = self.link
+        if link.backlog():
+            link.flush()
+        q = self.queue
+        if q and not link.has_peer():
+            self.stats.no_peer += len(q)  # the peer went away (TCP client closed)
+            q.clear()
+        while q:
+            if not link.write(q[0]):
+                break
+            q.popleft()
+            self.stats.tx_packets += 1
+
+    def accepts(self, target: tuple[int, int]) -> bool:
+        """mavlink-router's rule for a message addressed to ``target`` (system, component)."""
+        sysid, compid = target
+        if sysid == 0:
+            return True
+        if compid == 0:
+            return sysid in self.seen_sys
+        return (sysid, compid) in self.seen
+
+
+@dataclass
+class RouterStats:
+    forwarded: int = 0
+    for_bridge: int = 0
+    bad_crc: int = 0
+    dropped_bytes: int = 0
+    unchecked: int = 0
+    refused_unsigned: int = 0
+    bad_signature: int = 0
+    replayed_signature: int = 0
+    params_set: int = 0
+    params_rejected: int = 0
+    own_sent: int = 0
+    statustext_dropped: int = 0
+
+
+_COMMAND_IDS = frozenset(
+    {mio.message_id("COMMAND_LONG"), mio.message_id("COMMAND_INT"), mio.message_id("PARAM_SET")}
+)
+_PARAM_READ_IDS = frozenset(
+    {mio.message_id("PARAM_REQUEST_LIST"), mio.message_id("PARAM_REQUEST_READ")}
+)
+_FOR_BRIDGE_IDS = _COMMAND_IDS | _PARAM_READ_IDS
+
+
+class Router:
+    """The passthrough and the bridge's own component (see the module docstring)."""
+
+    def __init__(
+        self,
+        cfg: MavlinkConfig,
+        *,
+        params: ParamStore | None = None,
+        clock: Clock = time.monotonic,
+        wall_clock: Clock = time.time,
+        signing_key: bytes | None = None,
+        tlog: TlogWriter | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.clock = clock
+        self.params = params if params is not None else ParamStore()
+        self.stats = RouterStats()
+        self._offsets = mio.target_offsets()
+        self._lock = threading.Lock()
+        self._own = mio.MavPacker(cfg.system_id, cfg.component_id)
+        self._pilot = mio.MavPacker(cfg.pilot_system_id, 190)
+        if any(g.signing for g in cfg.gcs) and signing_key is None:
+            signing_key = load_signing_key(cfg.signing_key_file)
+        self._key = signing_key
+        if signing_key is not None:
+            self._own.setup_signing(signing_key, link_id=0)
+            self._pilot.setup_signing(signing_key, link_id=1)  # an ArduSub that checks signatures
+        self._sig_last: dict[tuple[int, int, int], int] = {}
+        self.tlog = tlog
+        if tlog is None and cfg.tlog_dir:
+            self.tlog = TlogWriter(cfg.tlog_dir, cfg.tlog_max_bytes, wall_clock)
+        self.endpoints: list[Endpoint] = []
+        try:
+            ap = open_link(cfg.autopilot.url, cfg.autopilot.baud, cfg.reconnect_max_s)
+            self.autopilot = Endpoint(
+                cfg.autopilot.name or "autopilot", ap, is_gcs=False, signing=False,
+                queue=cfg.queue_packets,
+            )  # fmt: skip
+            self.endpoints.append(self.autopilot)
+            for i, g in enumerate(cfg.gcs):
+                link = open_link(g.url, g.baud, cfg.reconnect_max_s)
+                self.endpoints.append(
+                    Endpoint(g.name or f"gcs{i}", link, is_gcs=True, signing=g.signing,
+                             queue=cfg.queue_packets)
+                )  # fmt: skip
+        except PortError:
+            self.close()
+            raise
+        self._sel = selectors.DefaultSelector()
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        self._sel.register(self._wake_r, selectors.EVENT_READ, None)
+        self._registered: dict[int, tuple[int, Endpoint]] = {}
+        self._outbox: deque[tuple[bytes, Endpoint | None]] = deque(maxlen=cfg.queue_packets)
+        self._texts: deque[tuple[int, str]] = deque(maxlen=64)
+        self._values: dict[str, float] = {}
+        self._listeners: dict[int, list[Callable[[MavFrame], None]]] = {}
+        self._t0 = clock()
+        self._next_hb = self._t0
+        self._next_stats = self._t0
+        self._text_tokens = cfg.statustext_per_s
+        self._last_tick = self._t0
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    # -- thread-safe API for the pipelines -------------------------------------------------
+
+    def _post(self, raw: bytes, dest: Endpoint | None) -> None:
+        self._outbox.append((raw, dest))
+        self._wake()
+
+    def _wake(self) -> None:
+        with contextlib.suppress(OSError):  # wake-up socket full: the loop is awake anyway
+            self._wake_w.send(b"\0")
+
+    def send_gps_input(self, fix: mio.GpsInputFix) -> bytes:
+        """GPS_INPUT to the autopilot (rover: the corrected fix)."""
+        with self._lock:
+            raw = self._own.send_gps_input(fix)
+        self._post(raw, self.autopilot)
+        return raw
+
+    def send_manual_control(
+        self, x: int, y: int, z: int, r: int, buttons: int = 0, target_system: int | None = None
+    ) -> bytes:
+        """MANUAL_CONTROL to the autopilot from the pilot's (GCS) system id (ArduSub).
+
+        ``target_system`` is the vehicle's system id (default: the bridge's own, as on a
+        companion computer that shares the vehicle's id).
+        """
+        target = self.cfg.system_id if target_system is None else target_system
+        with self._lock:
+            raw = self._pilot.send_manual_control(target, x, y, z, r, buttons)
+        self._post(raw, self.autopilot)
+        return raw
+
+    def request_mode(
+        self, mode: str, vehicle: str = "rover", target_system: int | None = None
+    ) -> bytes:
+        """COMMAND_LONG DO_SET_MODE (``"HOLD"``) to the autopilot (system ``target_system``)."""
+        target = self.cfg.system_id if target_system is None else target_system
+        with self._lock:
+            raw = self._own.request_mode(target, mode, vehicle)
+        self._post(raw, self.autopilot)
+        return raw
+
+    def post_statustext(self, severity: int, text: str) -> None:
+        """Queue a STATUSTEXT (sent at most ``statustext_per_s``; oldest dropped when full)."""
+        with self._lock:
+            if len(self._texts) == self._texts.maxlen:
+                self.stats.statustext_dropped += 1
+            self._texts.append((severity, text))
+        self._wake()
+
+    def listen(self, message: str, callback: Callable[[MavFrame], None]) -> None:
+        """Call ``callback(frame)`` (in the router's thread) for each ``message`` (a name such as
+        ``"ATTITUDE"``) that arrives from the autopilot. Register before :meth:`start`; the
+        callback must be quick (it runs in the forwarding path) and must not raise."""
+        self._listeners.setdefault(mio.message_id(message), []).append(callback)
+
+    def set_named_value(self, name: str, value: float) -> None:
+        """Latest value of a detector statistic, sent as NAMED_VALUE_FLOAT at ``stats_hz``."""
+        with self._lock:
+            self._values[name] = float(value)
+
+    # -- the loop ----------------------------------------------------------------------------
+
+    def _sync_selector(self) -> bool:
+        """Register each link's descriptors: read always, write while it is blocked.
+
+        Returns True when some endpoint has no descriptor to wait on (``loop://``): the loop
+        then polls it every few milliseconds.
+        """
+        want: dict[int, tuple[int, Endpoint]] = {}
+        polled = False
+        for ep in self.endpoints:
+            fds = ep.link.filenos()
+            if not fds:
+                polled = True
+            for fd in fds:
+                want[fd] = (selectors.EVENT_READ, ep)
+            if ep.blocked():
+                for fd in ep.link.write_filenos():
+                    want[fd] = (selectors.EVENT_READ | selectors.EVENT_WRITE, ep)
+        registered = self._registered
+        if want == registered:
+            return polled
+        for fd in list(registered):
+            if fd not in want:
+                with contextlib.suppress(KeyError, ValueError, OSError):
+                    self._sel.unregister(fd)
+                del registered[fd]
+        for fd, entry in want.items():
+            old = registered.get(fd)
+            if old == entry:
+                continue
+            if old is None:
+                self._sel.register(fd, entry[0], entry[1])
+            else:
+                self._sel.modify(fd, entry[0], entry[1])
+            registered[fd] = entry
+        return polled
+
+    def _next_due(self, now: float) -> float:
+        """Seconds until the next periodic job (heartbeat, statistics, a paced STATUSTEXT)."""
+        due = self._next_hb
+        if self.cfg.stats_hz > 0 and self._values:
+            due = min(due, self._next_stats)
+        if self._texts:
+            rate = self.cfg.statustext_per_s
+            due = min(due, now + max(0.0, 1.0 - self._text_tokens) / rate)
+        return max(0.0, due - now)
+
+    def poll(self, timeout_s: float = 0.05) -> None:
+        """One round: wait for input (at most ``timeout_s``), route, send, run periodic jobs.
+
+        The wait ends at the first of: a datagram or bytes on any link, a link that was blocked
+        becoming writable, a packet handed over by a pipeline thread, the next periodic job.
+        """
+        polled = self._sync_selector()
+        now = self.clock()
+        wait = min(timeout_s, self._next_due(now))
+        if polled:
+            wait = min(wait, 0.005)
+        if self._outbox:
+            wait = 0.0
+        events = self._sel.select(wait)
+        self._drain_outbox()
+        done: list[Endpoint] = []
+        for key, mask in events:
+            ep = key.data
+            if ep is None:
+                with contextlib.suppress(BlockingIOError):
+                    while self._wake_r.recv(4096):
+                        pass
+                continue
+            if mask & selectors.EVENT_WRITE:
+                ep.flush()
+            if mask & selectors.EVENT_READ and ep not in done:
+                done.append(ep)
+                self._read(ep)
+        if polled:
+            for ep in self.endpoints:
+                if not ep.link.filenos() and ep not in done:
+                    self._read(ep)
+        self._drain_outbox()
+        self.tick(self.clock())
+        for ep in self.endpoints:
+            if ep.blocked():
+                ep.flush()
+
+    def _read(self, src: Endpoint) -> None:
+        framers = src.framers
+        route = self._route
+        for data, key, boundary in src.link.read(self.cfg.read_burst):
+            framer = framers.get(key)
+            if framer is None:
+                framer = framers[key] = MavFramer(on_drop=self._on_drop)
+            for frame in framer.feed(data, boundary=boundary):
+                route(src, frame)
+
+    def _on_drop(self, data: bytes, reason: str) -> None:
+        self.stats.dropped_bytes += len(data)
+        if reason == "bad_crc":
+            self.stats.bad_crc += 1
+
+    def _route(self, src: Endpoint, frame: MavFrame) -> None:
+        src.stats.rx_packets += 1
+        src.seen_sys.add(frame.sysid)
+        src.seen.add((frame.sysid, frame.compid))
+        if not frame.crc_checked:
+            self.stats.unchecked += 1
+        raw = frame.raw
+        if self.tlog is not None:
+            self.tlog.write(raw)
+        target = frame_target(frame, self._offsets)
+        sent = False
+        for dst in self.endpoints:
+            if dst is src:
+                continue
+            if target is None or dst.accepts(target):
+                dst.send(raw)
+                sent = True
+        if sent:
+            self.stats.forwarded += 1
+        if self._listeners and src is self.autopilot:
+            for cb in self._listeners.get(frame.msgid, ()):
+                cb(frame)
+        mine = target is not None and self._addressed_to_me(target)
+        if mine and frame.msgid in _FOR_BRIDGE_IDS:
+            self.stats.for_bridge += 1
+            self._handle(src, frame)
+        elif not sent:
+            src.stats.unroutable += 1  # addressed to a system no other endpoint has shown
+
+    def _addressed_to_me(self, target: tuple[int, int]) -> bool:
+        sysid, compid = target
+        return sysid in (0, self.cfg.system_id) and compid in (0, self.cfg.component_id)
+
+    def _signature_accepted(self, frame: MavFrame) -> bool:
+        """Signed with our key and newer than the last packet of its (sys, comp, link) stream."""
+        if self._key is None or not frame.signed:
+            return False
+        if not signature_ok(frame, self._key):
+            self.stats.bad_signature += 1
+            return False
+        stream = (frame.sysid, frame.compid, frame.link_id or 0)
+        ts = frame.signature_timestamp or 0
+        if ts <= self._sig_last.get(stream, -1):
+            self.stats.replayed_signature += 1
+            return False
+        self._sig_last[stream] = ts
+        return True
+
+    def _handle(self, src: Endpoint, frame: MavFrame) -> None:
+        if src.signing and frame.msgid in _COMMAND_IDS and not self._signature_accepted(frame):
+            self.stats.refused_unsigned += 1
+            return
+        msg = mio.decode_packet(frame.raw)
+        if msg is None:
+            return
+        kind = msg.get_type()
+        if kind == "PARAM_REQUEST_LIST":
+            names = self.params.names()
+            for i, name in enumerate(names):
+                self._emit(self._param_value(name, i, len(names)), src)
+        elif kind == "PARAM_REQUEST_READ":
+            names = self.params.names()
+            name = _param_name(msg.param_id)
+            idx = int(msg.param_index)
+            if idx >= 0:
+                name = names[idx] if idx < len(names) else ""
+            if name in names:
+                self._emit(self._param_value(name, names.index(name), len(names)), src)
+        elif kind == "PARAM_SET":
+            name = _param_name(msg.param_id)
+            names = self.params.names()
+            if name not in names:
+                self.stats.params_rejected += 1
+                return
+            if self.params.set(name, float(msg.param_value)):
+                self.stats.params_set += 1
+            else:
+                self.stats.params_rejected += 1
+            # Answer with the value now in force (new, or unchanged when refused) to every GCS.
+            raw = self._param_value(name, names.index(name), len(names))
+            for ep in self.endpoints:
+                if ep.is_gcs:
+                    self._emit(raw, ep)
+        elif kind in ("COMMAND_LONG", "COMMAND_INT"):
+            with self._lock:
+                raw = self._own.send_command_ack(
+                    int(msg.command), mio.MAV_RESULT_UNSUPPORTED,
+                    frame.sysid, frame.compid,
+                )  # fmt: skip
+            self._emit(raw, src)
+
+    def _param_value(self, name: str, index: int, count: int) -> bytes:
+        with self._lock:
+            return self._own.send_param_value(name, self.params.get(name), index, count)
+
+    def _emit(self, raw: bytes, dest: Endpoint | None) -> None:
+        """Queue one of the bridge's own packets: to ``dest``, or to every endpoint."""
+        self.stats.own_sent += 1
+        if self.tlog is not None:
+            self.tlog.write(raw)
+        if dest is not None:
+            dest.send(raw)
+            return
+        for ep in self.endpoints:
+            ep.send(raw)
+
+    def _drain_outbox(self) -> None:
+        while self._outbox:
+            raw, dest = self._outbox.popleft()
+            self._emit(raw, dest)
+
+    def tick(self, now: float) -> None:
+        """Periodic jobs due at ``now``: heartbeat, NAMED_VALUE_FLOAT, paced STATUSTEXT."""
+        cfg = self.cfg
+        if now >= self._next_hb:
+            with self._lock:
+                raw = self._own.send_heartbeat()
+            self._emit(raw, None)
+            self._next_hb += 1.0 / cfg.heartbeat_hz
+            if self._next_hb <= now:  # we were late: skip missed beats, stay on the grid
+                periods = int((now - self._next_hb) * cfg.heartbeat_hz) + 1
+                self._next_hb += periods / cfg.heartbeat_hz
+        if cfg.stats_hz > 0 and now >= self._next_stats:
+            with self._lock:
+                values = list(self._values.items())
+                t_ms = int((now - self._t0) * 1000)
+                packets = [self._own.send_named_value_float(n, v, t_ms) for n, v in values]
+            for raw in packets:
+                self._emit(raw, None)
+            self._next_stats += 1.0 / cfg.stats_hz
+            if self._next_stats <= now:
+                periods = int((now - self._next_stats) * cfg.stats_hz) + 1
+                self._next_stats += periods / cfg.stats_hz
+        dt = max(0.0, now - self._last_tick)
+        self._last_tick = now
+        self._text_tokens = min(cfg.statustext_per_s, self._text_tokens + dt * cfg.statustext_per_s)
+        while self._texts and self._text_tokens >= 1.0:
+            with self._lock:
+                severity, text = self._texts.popleft()
+                raw = self._own.send_statustext(severity, text)
+            self._text_tokens -= 1.0
+            self._emit(raw, None)
+
+    def run(self, stop: threading.Event | None = None, poll_s: float = 0.05) -> None:
+        """Poll until ``stop`` is set (or :meth:`stop` is called)."""
+        stop = stop or self._stop
+        while not stop.is_set():
+            self.poll(poll_s)
+        if self.tlog is not None:
+            self.tlog.flush()
+
+    def start(self) -> threading.Thread:
+        """Run the loop in a daemon thread; :meth:`close` stops it."""
+        self._thread = threading.Thread(target=self.run, name="mavlink-router", daemon=True)
+        self._thread.start()
+        return self._thread
+
+    def close(self) -> None:
+        self._stop.set()
+        if hasattr(self, "_wake_w"):
+            self._wake()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        for ep in self.endpoints:
+            ep.link.close()
+        if hasattr(self, "_sel"):
+            self._sel.close()
+            self._wake_r.close()
+            self._wake_w.close()
+        if self.tlog is not None:
+            self.tlog.close()
+
+    def summary(self) -> dict[str, Any]:
+        """Counters of the router and of each endpoint (for logs and tests)."""
+        out: dict[str, Any] = dict(self.stats.__dict__)
+        out["params_rejected"] += self.params.rejected - self.stats.params_rejected
+        for ep in self.endpoints:
+            out[ep.name] = dict(ep.stats.__dict__, queued=len(ep.queue), link_errors=ep.link.errors)
+        return out
+
+
+def _param_name(raw: Any) -> str:
+    if isinstance(raw, bytes | bytearray):
+        raw = raw.split(b"\0", 1)[0].decode("ascii", errors="replace")
+    return str(raw).split("\0", 1)[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", help="vehicle TOML file with a [mavlink] table")
+    parser.add_argument("--autopilot", help="override [mavlink].autopilot.url")
+    parser.add_argument("--baud", type=int, help="override the autopilot's baud rate")
+    parser.add_argument("--gcs", action="append", help="GCS endpoint URL (repeatable)")
+    parser.add_argument("--tlog-dir", help="record a .tlog here")
+    parser.add_argument("--seconds", type=float, default=0.0, help="stop after this long")
+    parser.add_argument(
+        "--bench", action="store_true", help="measure forwarding latency at 1 000 and 10 000 pkt/s"
+    )
+    parser.add_argument("--bench-rate", type=int, action="append", help="packets/s (repeatable)")
+    parser.add_argument("--bench-seconds", type=float, default=5.0, help="seconds per run")
+    parser.add_argument("--bench-runs", type=int, default=1, help="runs per rate")
+
+
+def run(args: argparse.Namespace) -> int:
+    import dataclasses
+    import json
+
+    if args.bench:
+        from firmware_host.devtools.router_bench import bench_forwarding
+
+        for rate in args.bench_rate or (1000, 10000):
+            for _ in range(max(1, args.bench_runs)):
+                print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
+        return 0
+    cfg = load_mavlink_config(args.config) if args.config else MavlinkConfig()
+    changes: dict[str, Any] = {}
+    if args.autopilot or args.baud:
+        changes["autopilot"] = dataclasses.replace(
+            cfg.autopilot,
+            url=args.autopilot or cfg.autopilot.url,
+            baud=args.baud or cfg.autopilot.baud,
+        )
+    if args.gcs:
+        changes["gcs"] = tuple(EndpointConfig(u) for u in args.gcs)
+    if args.tlog_dir:
+        changes["tlog_dir"] = args.tlog_dir
+    cfg = dataclasses.replace(cfg, **changes)
+    params = ParamStore(cfg.param_file or None)
+    router = Router(cfg, params=params)
+    log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
+    rover = _start_rover(args.config, router) if args.config else None
+    deadline = time.monotonic() + args.seconds if args.seconds > 0 else None
+    summary: dict[str, Any] = {}
+    try:
+        while deadline is None or time.monotonic() < deadline:
+            router.poll(0.05)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if rover is not None:
+            summary["rover"] = rover()
+        router.close()
+        summary["router"] = router.summary()
+        print(json.dumps(summary))
+    return 0
+
+
+def _start_rover(path: str, router: Router) -> Callable[[], dict[str, Any]] | None:
+    """With a ``[rover]`` table in the config, run the rover pipeline on its receiver port.
+
+    Returns a function that stops it and gives its summary; None without a ``[rover]`` table.
+    """
+    from firmware_host.mavlink.rover import attach_rover, run_rover_reader
+    from firmware_host.rover.pipeline import RoverPipeline
+
+    bridge = load_vehicle_config(path)
+    if bridge is None:
+        return None
+    pipeline = RoverPipeline(bridge.rover)
+    attach_rover(pipeline, router)
+    stop = threading.Event()
+    thread = threading.Thread(
+        target=run_rover_reader, args=(pipeline, stop), name="rover", daemon=True
+    )
+    thread.start()
+    log.info("rover pipeline on %s, corrected fixes to the autopilot", bridge.rover.port.url)
+
+    def finish() -> dict[str, Any]:
+        stop.set()
+        thread.join(timeout=2.0)
+        pipeline.finish()
+        return pipeline.summary()
+
+    return finish

@@ -1,0 +1,99 @@
+"""One 200 ms step of the ROV heading hold: telemetry in, thruster command out, an epoch record.
+
+Shared by the simulation (in-process or over a pty) and the real-vehicle mode, so both use the
+same detector, substitution, PID and dropout rule. Dropout: when no telemetry arrived, the last
+safe command is kept for ``dropout_hold_s``, then all thrusters go neutral (``action`` says so).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from drivers.outland.link import NEUTRAL, ThrusterCommand
+from drivers.ratelog import RateLimitedLog
+from fdi.heading_ft import FaultTolerantHeading, HeadingDecision
+from fdi.pid import HeadingPid
+from firmware_host.rov.config import RovConfig
+
+log = logging.getLogger(__name__)
+
+
+class RovController:
+    """Compass FDI + heading PID + dropout policy. ``ft=False`` is the ``--no-ft`` loop."""
+
+    def __init__(self, cfg: RovConfig, ft: bool = True, setpoint_deg: float | None = None):
+        self.cfg = cfg
+        self.heading = FaultTolerantHeading(cfg.detector, cfg.ft, enabled=ft)
+        self.pid = HeadingPid(cfg.pid)
+        self.setpoint_deg = cfg.setpoint_deg if setpoint_deg is None else setpoint_deg
+        self.command = NEUTRAL
+        self._last_safe = NEUTRAL
+        self._since_telemetry = 0.0
+        self.action = "init"
+        # One per controller: a process-wide limiter let one run's reports silence the next's.
+        self._ratelog = RateLimitedLog(log)
+
+    def step(
+        self, heading_meas: float | None, dt: float
+    ) -> tuple[ThrusterCommand, HeadingDecision]:
+        """``heading_meas`` (deg) from this period's telemetry, None when none arrived."""
+        dec = self.heading.step(self.command.yaw_pct, heading_meas)
+        if heading_meas is None:
+            self._since_telemetry += dt
+            if self._since_telemetry <= self.cfg.dropout_hold_s + 1e-9:
+                action = "hold"
+                cmd = self._last_safe
+            else:
+                action = "neutral"
+                cmd = NEUTRAL
+                self.pid.reset()
+            if action != self.action:  # rate-limited: line noise can make this flap
+                what = "holding last command" if action == "hold" else "neutral thrust"
+                self._ratelog.warning(f"compass telemetry lost: {what}",
+                                 f"for {self._since_telemetry:.1f} s")
+        else:
+            self._since_telemetry = 0.0
+            assert dec.heading_used is not None
+            u = self.pid.update(self.setpoint_deg, dec.heading_used, dt)
+            s = self.cfg.surge_pct
+            cmd = ThrusterCommand(min(max(s + u, -100.0), 100.0), min(max(s - u, -100.0), 100.0))
+            self._last_safe = cmd
+            action = "substitute" if dec.source != "sensor" else "control"
+        if dec.event:
+            log.info("compass: %s (%s)", dec.event, dec.kind or "-")
+        self.action = action
+        self.command = cmd
+        return cmd, dec
+
+
+def epoch_record(
+    t: float,
+    heading_true: float | None,
+    heading_meas: float | None,
+    setpoint: float,
+    cmd: ThrusterCommand,
+    dec: HeadingDecision,
+    action: str,
+) -> dict[str, Any]:
+    """One line of ``epochs.jsonl`` (the issue's contract; degrees, deg^2, %)."""
+    return {
+        "t": round(t, 3),
+        "heading_true": None if heading_true is None else round(heading_true % 360.0, 4),
+        "heading_meas": None if heading_meas is None else round(heading_meas, 4),
+        "heading_used": None if dec.heading_used is None else round(dec.heading_used, 4),
+        "setpoint": setpoint,
+        "e2": round(dec.e2, 6),
+        "snr": round(dec.snr, 6),
+        "V": round(dec.V, 6),
+        "suspect": dec.suspect,
+        "fault": dec.fault,
+        "fault_kind": dec.kind,
+        "source": dec.source,
+        "event": dec.event,
+        "action": action,
+        "port_pct": round(cmd.port_pct, 3),
+        "starboard_pct": round(cmd.starboard_pct, 3),
+        "lateral_pct": round(cmd.lateral_pct, 3),
+        "vertical_pct": round(cmd.vertical_pct, 3),
+    }
