@@ -32,7 +32,11 @@ from pathlib import Path
 from typing import Any
 
 from drivers.mavlink.links import is_network_url
+from drivers.outland.framecodec import load_protocol
 from fdi.errors import ConfigError, FdiBridgeError
+from firmware_host.commands.run import resolve_config_path, vehicle_of
+from firmware_host.rov.config import load_rov_config, protocol_path
+from firmware_host.runtime.config import load_config
 
 _SCHEMES = ("socket://", "rfc2217://", "loop://", "spy://", "alt://", "hwgrep://", "cp2110://")
 
@@ -182,8 +186,6 @@ def diagnose(
     list_ports: Callable[[], list[str]] = _system_ports,
     access: Callable[[str, int], bool] = os.access,
 ) -> Report:
-    from firmware_host.commands.run import resolve_config_path, vehicle_of
-
     rep = Report()
     try:
         rep.ports = list_ports()
@@ -194,13 +196,8 @@ def diagnose(
         vehicle = vehicle_of(path)
         cfg: Any
         if vehicle == "rover":
-            from firmware_host.runtime.config import load_config
-
             cfg = load_config(path)
         else:
-            from drivers.outland.framecodec import load_protocol
-            from firmware_host.rov.config import load_rov_config, protocol_path
-
             cfg, base = load_rov_config(path)
             load_protocol(protocol_path(cfg, base))
     except (ConfigError, FdiBridgeError, ValueError) as err:

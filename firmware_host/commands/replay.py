@@ -28,6 +28,7 @@ from drivers.capture import CaptureReader, is_capture
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port, read_some
 from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
+from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 
@@ -196,7 +197,6 @@ def build_sinks(
 ) -> list[EpochSink]:
     from dataclasses import replace
 
-    from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 
     sinks: list[EpochSink] = []
     out = cfg.rover.output

@@ -37,9 +37,14 @@ from pathlib import Path
 from typing import Any, Literal, TextIO
 
 from drivers.capture import Channel
+from drivers.mavlink.io import MavEndpoint, PortEndpoint
+from drivers.mavlink.links import is_network_url
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port, open_port_nonblocking
 from fdi.errors import ConfigError
+from firmware_host.commands import mavlink as mavlink_cmd
+from firmware_host.rov.app import run_rov
+from firmware_host.rov.config import RovConfig, load_rov_config
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import CONFIG_DIR, BridgeConfig, load_config
@@ -76,7 +81,6 @@ def vehicle_of(path: str | Path) -> Vehicle:
     and ``[recorder]`` are shared and do not count). Both or neither: a ConfigError."""
     import dataclasses
 
-    from firmware_host.rov.config import RovConfig
 
     p = resolve_config_path(path)
     try:
@@ -177,9 +181,6 @@ class RoverBridge:
                                  opener=opener, tap=tap)
             sinks.append(self.nmea)
         if endpoint is None and mav:
-            from drivers.mavlink.io import MavEndpoint, PortEndpoint
-            from drivers.mavlink.links import is_network_url
-
             if is_network_url(mav):
                 endpoint = MavEndpoint(mav, source_system=out.mavlink_system,
                                        source_component=out.mavlink_component)
@@ -279,8 +280,6 @@ def run_rov_bridge(
     on_epoch: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
     """The ROV config at ``path`` through :func:`run_rov`, with a resilient, recorded link."""
-    from firmware_host.rov.app import run_rov
-    from firmware_host.rov.config import load_rov_config
 
     cfg, base = load_rov_config(resolve_config_path(path))
     rx_tap = tx_tap = None
@@ -347,14 +346,12 @@ def _recorder(cfg: RecorderConfig, override: Path | None, note: str) -> FlightRe
 def run(args: argparse.Namespace) -> int:
     if "mavlink" in _tables(args.config):
         # A vehicle with an autopilot: one process, the MAVLink router running the pipeline.
-        from firmware_host.mavlink import router
-
         rparser = argparse.ArgumentParser(prog="fdi-bridge mavlink")
-        router.add_arguments(rparser)
+        mavlink_cmd.add_arguments(rparser)
         path = str(resolve_config_path(args.config))
         log.warning("%s has a [mavlink] table: running it as `fdi-bridge mavlink`", path)
         extra = ["--seconds", str(args.duration)] if args.duration else []
-        return int(router.run(rparser.parse_args(["--config", path, *extra])))
+        return int(mavlink_cmd.run(rparser.parse_args(["--config", path, *extra])))
     vehicle = vehicle_of(args.config)
     stop_event = threading.Event()
     t0 = time.monotonic()
@@ -384,8 +381,6 @@ def run(args: argparse.Namespace) -> int:
                                mavlink_url=args.mavlink, stop=stop, recorder=rec)
             summary = bridge.summary()
         else:
-            from firmware_host.rov.config import load_rov_config
-
             rcfg, _ = load_rov_config(resolve_config_path(args.config))
             rec = _recorder(rcfg.recorder, args.record, f"fdi-bridge run --config {args.config}")
             if args.duration is not None:
