@@ -53,8 +53,10 @@ def test_paper_preset_loads_and_differs_where_it_says() -> None:
     [
         # an unknown key (a typo), with the known keys listed
         ("[rover]\nmax_lines = 120\n", "rover.max_lines", "one of the keys detector, max_line",
-         "an unknown key"),
-        ("nmae = 'x'\n", "nmae", "one of the keys description, name", "an unknown key"),
+         "an unknown key (did you mean 'max_line'?)"),
+        ("nmae = 'x'\n", "nmae", "one of the keys description, insgnss, mavlink, name",
+         "an unknown key (did you mean 'name'?)"),
+        ("[rover]\nzzz = 1\n", "rover.zzz", "one of the keys", "an unknown key"),  # none close
         # wrong types
         ("[rover]\nmax_line = \"120\"\n", "rover.max_line", "an integer", "'120' (str)"),
         ("[rover.port]\nbaudrate = 9600.0\n", "rover.port.baudrate", "an integer",

@@ -18,11 +18,11 @@ from collections.abc import Callable
 from typing import Any
 
 from firmware_host.devtools.router_bench import bench_forwarding
-from firmware_host.mavlink.config import EndpointConfig, MavlinkConfig
 from firmware_host.mavlink.params import ParamStore
 from firmware_host.mavlink.router import Router, load_mavlink_config, load_vehicle_config
 from firmware_host.mavlink.rover import attach_rover, run_rover_reader
 from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime.config_mavlink import EndpointConfig, MavlinkConfig
 
 log = logging.getLogger("fdi_bridge.router")
 

@@ -47,15 +47,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from drivers.configload import load_dataclass, read_toml
 from drivers.mavlink import io as mio
 from drivers.mavlink.framer import MavFrame, MavFramer, frame_target, signature_ok
 from drivers.mavlink.links import Link, open_link
 from fdi.errors import ConfigError, PortError
-from firmware_host.mavlink.config import EndpointConfig as EndpointConfig  # re-exported
-from firmware_host.mavlink.config import MavlinkConfig
 from firmware_host.mavlink.params import ParamStore
-from firmware_host.runtime.config import BridgeConfig
+from firmware_host.runtime.config import (
+    BridgeConfig,
+    bridge_config,
+    load_bridge_file,
+    mavlink_config,
+)
+from firmware_host.runtime.config_mavlink import EndpointConfig as EndpointConfig  # re-exported
+from firmware_host.runtime.config_mavlink import MavlinkConfig
 
 log = logging.getLogger("fdi_bridge.router")
 
@@ -66,23 +70,15 @@ Clock = Callable[[], float]
 
 
 def load_mavlink_config(path: str | Path) -> MavlinkConfig:
-    """The ``[mavlink]`` table of the TOML file at ``path`` (defaults when absent)."""
-    table = read_toml(path).get("mavlink", {})
-    if not isinstance(table, dict):
-        raise ConfigError(str(path), "mavlink", "a table", type(table).__name__)
-    return load_dataclass(MavlinkConfig, table, str(path), "mavlink")
+    """The ``[mavlink]`` table of a file or preset (its defaults when absent)."""
+    return mavlink_config(load_bridge_file(path))
 
 
-def load_vehicle_config(path: str | Path) -> Any:
-    """The rest of the file at ``path`` as a :class:`~firmware_host.runtime.config.BridgeConfig`
-    when it
-    has a ``[rover]`` table (the one-process mode), else None. ``[mavlink]`` is left out: it is
-    :func:`load_mavlink_config`'s."""
-    table = read_toml(path)
-    if "rover" not in table:
-        return None
-    rest = {k: v for k, v in table.items() if k != "mavlink"}
-    return load_dataclass(BridgeConfig, rest, str(path))
+def load_vehicle_config(path: str | Path) -> BridgeConfig | None:
+    """The rover's view of the file at ``path`` when it has a ``[rover]`` table (the
+    one-process mode), else None."""
+    bf = load_bridge_file(path)
+    return bridge_config(bf) if bf.rover is not None else None
 
 
 def load_signing_key(path: str | Path) -> bytes:

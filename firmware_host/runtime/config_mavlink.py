@@ -1,7 +1,7 @@
-"""The ``[mavlink]`` table of a vehicle's TOML file: the router's links and its own component.
+"""Schema of the ``[mavlink]`` table: the router's links and its own component.
 
-Schema only (frozen dataclasses, validated by :mod:`drivers.configload`); the router that uses
-it is :mod:`firmware_host.mavlink.router`.
+Schema only (frozen dataclasses, loaded by :func:`firmware_host.runtime.config.load_bridge_file`);
+the router that uses it is :mod:`firmware_host.mavlink.router`.
 """
 
 from __future__ import annotations
