@@ -284,7 +284,8 @@ def run_rov_bridge(
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True,
-                        help="config file or preset name; [rover] -> rover, [link] etc. -> ROV")
+                        help="config file or preset name; [rover] -> rover, [rov] -> ROV, "
+                             "[mavlink] -> the router (with [rover])")
     parser.add_argument("--out", type=Path, default=None, help="write epochs.jsonl/summary.json")
     parser.add_argument("--nmea-out", default=None, help="rover: corrected NMEA to this URL")
     parser.add_argument("--mavlink", default=None, help="rover: GPS_INPUT to this MAVLink URL")
