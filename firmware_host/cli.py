@@ -161,10 +161,12 @@ def _command_of(argv: Sequence[str]) -> tuple[str | None, str | None]:
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Defaults shown where there is one to show (not ``None`` or ``False``)."""
+    """Defaults shown where there is one to show (not ``None`` or ``False``) and the help text
+    does not state it already."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        if action.default in (None, False) or action.default is argparse.SUPPRESS:
+        if (action.default in (None, False) or action.default is argparse.SUPPRESS
+                or "default" in (action.help or "")):
             return action.help
         return super()._get_help_string(action)
 
