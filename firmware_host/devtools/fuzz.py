@@ -53,13 +53,13 @@ from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, enc
 from drivers.ratelog import RateLimitedLog
 from fdi.errors import DecodeError
 from firmware_host.devtools.rover_sim import RoverScenario, generate
+from firmware_host.runtime.config import resolve_protocol
 
 CODECS = ("nmea", "outland", "mavlink")
 _quiet_logger = logging.getLogger("fdi_bridge.fuzz.rejects")
 _quiet_logger.addHandler(logging.NullHandler())
 _quiet_logger.propagate = False  # a million bad sentences are counted, not logged
 _QUIET = RateLimitedLog(_quiet_logger, interval_s=1e9)
-ROOT = Path(__file__).resolve().parents[2]
 
 
 class InvariantError(AssertionError):
@@ -101,7 +101,7 @@ def nmea_corpus() -> list[bytes]:
 
 
 def outland_protocol() -> Any:
-    return load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
+    return load_protocol(resolve_protocol("protocols/outland1000.toml", None))  # packaged
 
 
 def outland_corpus(proto: Any) -> list[bytes]:

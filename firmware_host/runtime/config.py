@@ -330,14 +330,14 @@ def load_config(path: str | Path | None) -> BridgeConfig:
 
 def rov_config(bf: BridgeFile) -> tuple[RovConfig, Path]:
     """The ROV's view and the directory its relative paths start from."""
-    if bf.path is None:
+    if bf.rov is not None:
+        return bf.rov, bf.base_dir
+    if bf.path is None:  # no file: the built-in defaults, with the packaged protocol
         defaults = parse_bridge_file({"rov": {}}, "(built-in defaults)")
         assert defaults.rov is not None
         return defaults.rov, presets_dir()
-    if bf.rov is None:
-        raise ConfigError(str(bf.path), "rov", "an [rov] table",
-                          f"a file for {' and '.join(bf.sections) or 'no vehicle'}")
-    return bf.rov, bf.base_dir
+    raise ConfigError(str(bf.path), "rov", "an [rov] table",
+                      f"a file for {' and '.join(bf.sections) or 'no vehicle'}")
 
 
 def mavlink_config(bf: BridgeFile) -> MavlinkConfig:
