@@ -83,6 +83,8 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Installed]:
                             "--disable-pip-version-check", "-w", str(dist), str(src)],
                            capture_output=True, text=True, timeout=120, env=_clean_env(),
                            cwd=base)
+    if build.returncode != 0 and "satisfies the requirement setuptools" in build.stderr:
+        pytest.skip("pip cannot get the build backend (setuptools) here: no index reachable")
     assert build.returncode == 0, build.stdout + build.stderr
     wheels = list(dist.glob("fdi_bridge-*.whl"))
     assert len(wheels) == 1

@@ -19,10 +19,11 @@ from typing import Any
 
 from firmware_host.devtools.router_bench import bench_forwarding
 from firmware_host.mavlink.params import ParamStore
-from firmware_host.mavlink.router import Router, load_mavlink_config, load_vehicle_config
+from firmware_host.mavlink.router import Router
 from firmware_host.mavlink.rover import attach_rover, run_rover_reader
 from firmware_host.rover.pipeline import RoverPipeline
-from firmware_host.runtime.config_mavlink import EndpointConfig, MavlinkConfig
+from firmware_host.runtime.config import BridgeFile, load_bridge_file, mavlink_config
+from firmware_host.runtime.config_mavlink import EndpointConfig
 
 log = logging.getLogger("fdi_bridge.router")
 
@@ -48,7 +49,10 @@ def run(args: argparse.Namespace) -> int:
             for _ in range(max(1, args.bench_runs)):
                 print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
         return 0
-    cfg = load_mavlink_config(args.config) if args.config else MavlinkConfig()
+    bf: BridgeFile | None = getattr(args, "bridge_file", None)  # already read by `run`
+    if bf is None:
+        bf = load_bridge_file(args.config) if args.config else BridgeFile()
+    cfg = mavlink_config(bf)
     changes: dict[str, Any] = {}
     if args.autopilot or args.baud:
         changes["autopilot"] = dataclasses.replace(
@@ -64,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     params = ParamStore(cfg.param_file or None)
     router = Router(cfg, params=params)
     log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
-    rover = _start_rover(args.config, router) if args.config else None
+    rover = _start_rover(bf, router)
     deadline = time.monotonic() + args.seconds if args.seconds > 0 else None
     summary: dict[str, Any] = {}
     try:
@@ -81,22 +85,21 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _start_rover(path: str, router: Router) -> Callable[[], dict[str, Any]] | None:
+def _start_rover(bf: BridgeFile, router: Router) -> Callable[[], dict[str, Any]] | None:
     """With a ``[rover]`` table in the config, run the rover pipeline on its receiver port.
 
     Returns a function that stops it and gives its summary; None without a ``[rover]`` table.
     """
-    bridge = load_vehicle_config(path)
-    if bridge is None:
+    if bf.rover is None:
         return None
-    pipeline = RoverPipeline(bridge.rover)
+    pipeline = RoverPipeline(bf.rover)
     attach_rover(pipeline, router)
     stop = threading.Event()
     thread = threading.Thread(
         target=run_rover_reader, args=(pipeline, stop), name="rover", daemon=True
     )
     thread.start()
-    log.info("rover pipeline on %s, corrected fixes to the autopilot", bridge.rover.port.url)
+    log.info("rover pipeline on %s, corrected fixes to the autopilot", bf.rover.port.url)
 
     def finish() -> dict[str, Any]:
         stop.set()

@@ -311,7 +311,9 @@ def run(args: argparse.Namespace) -> int:
         path = str(bf.path)
         log.warning("%s has a [mavlink] table: running it as `fdi-bridge mavlink`", path)
         extra = ["--seconds", str(args.duration)] if args.duration else []
-        return int(mavlink_cmd.run(rparser.parse_args(["--config", path, *extra])))
+        margs = rparser.parse_args(["--config", path, *extra])
+        margs.bridge_file = bf  # read once
+        return int(mavlink_cmd.run(margs))
     vehicle = vehicle_of(bf)
     stop_event = threading.Event()
     t0 = time.monotonic()
