@@ -185,6 +185,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fdi-bridge",
         description="Fault detection and isolation between navigation sensors and a controller.",
+        allow_abbrev=False,  # _command_of skips the global options by their full names
     )
     parser.add_argument("--version", action="version", version=f"fdi-bridge {version()}")
     _logging_options(parser, sub=False)
@@ -265,6 +266,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args is None:
         parser = build_parser(argv)
         args = parser.parse_args(argv)
+        if args.command is not None and not hasattr(args, "_module"):
+            parser = build_parser(None)  # the command was not where _command_of looked
+            args = parser.parse_args(argv)
         if args.command is None:
             parser.print_help()
             return 2
