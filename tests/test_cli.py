@@ -175,3 +175,19 @@ def test_a_file_that_is_not_utf8_is_a_config_error(tmp_path: Path, command: list
     else:
         assert out.returncode == 2, out.stderr
         assert f"{binary}: (file): expected UTF-8 text, found invalid byte at" in out.stderr
+
+
+def test_an_abbreviated_global_option_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        cli.main(["--log", "debug", "config", "check", "rover"])
+    assert info.value.code == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_a_directory_named_like_a_preset_does_not_hide_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "rov").mkdir()  # `fdi-bridge demo rov --out rov/` made it
+    assert cli.main(["config", "check", "rov"]) == 0
+    assert str(ROOT / "config" / "rov.toml") in capsys.readouterr().out
