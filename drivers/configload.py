@@ -7,25 +7,31 @@ dataclass, or ``X | None``) and optional bounds in the field metadata::
     alpha: float = field(default=0.05, metadata={"gt": 0.0, "lt": 1.0, "doc": "false-alarm rate"})
 
 :func:`load_dataclass` checks a TOML table against the class: unknown keys, wrong types and
-values out of range fail with a :class:`~fdi.errors.ConfigError` that names the file, the dotted
-key, what was expected and what was found. Missing keys take the dataclass default, so a preset
-only states what it changes, and the built-in defaults are the dataclass defaults.
+values out of range (bounds ``ge``, ``gt``, ``le``, ``lt``, ``ne``; ``inf`` and ``nan`` are never a
+number here) fail with a :class:`~fdi.errors.ConfigError` that names the file, the dotted key,
+what was expected and what was found; an unknown key says which known key it is close to ("did
+you mean"). All the errors of a file are collected (:class:`~fdi.errors.ConfigErrors` when more
+than one). Missing keys take the dataclass default, so a preset only states what it changes, and
+the built-in defaults are the dataclass defaults. A field with ``metadata={"toml": False}`` is
+not a key of the file (the loader fills it in).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import math
 import tomllib
 import types
 import typing
 from pathlib import Path
 from typing import Any, Literal, TypeVar, get_args, get_origin, get_type_hints
 
-from fdi.errors import ConfigError
+from fdi.errors import ConfigError, ConfigErrors
 
 T = TypeVar("T")
 
-_BOUND_TEXT = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
+_BOUND_TEXT = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<", "ne": "!="}
 
 
 def _found(value: object) -> str:
@@ -58,16 +64,26 @@ def _describe(tp: Any) -> str:
     return str(tp)
 
 
-def _convert(value: Any, tp: Any, file: str, key: str) -> Any:
+class _Invalid(Exception):
+    """A table whose errors are already recorded (one per bad key)."""
+
+
+def _convert(value: Any, tp: Any, file: str, key: str, errors: list[ConfigError]) -> Any:
+    """``value`` as ``tp``; a mismatch of this key raises ConfigError, a nested table's errors
+    are recorded in ``errors`` (all of them) and raise :class:`_Invalid`."""
     origin = get_origin(tp)
     if origin in (typing.Union, types.UnionType):
         args = [a for a in get_args(tp) if a is not type(None)]
         for arg in args:
+            trial: list[ConfigError] = []
             try:
-                return _convert(value, arg, file, key)
+                return _convert(value, arg, file, key, trial)
             except ConfigError:
+                continue
+            except _Invalid:
                 if isinstance(value, dict) and dataclasses.is_dataclass(arg):
-                    raise  # a table for a table-typed key: its own error is the precise one
+                    errors.extend(trial)  # a table for a table-typed key: its own errors
+                    raise
         raise ConfigError(file, key, _describe(tp), _found(value))
     if tp is bool:
         if isinstance(value, bool):
@@ -77,6 +93,8 @@ def _convert(value: Any, tp: Any, file: str, key: str) -> Any:
             return value
     elif tp is float:
         if isinstance(value, int | float) and not isinstance(value, bool):
+            if not math.isfinite(value):  # TOML has inf and nan; no parameter means them
+                raise ConfigError(file, key, "a finite number", _found(value))
             return float(value)
     elif tp is str:
         if isinstance(value, str):
@@ -88,14 +106,22 @@ def _convert(value: Any, tp: Any, file: str, key: str) -> Any:
         if isinstance(value, list):
             args = [a for a in get_args(tp) if a is not Ellipsis]
             inner = args[0] if args else Any
-            items = [
-                _convert(v, inner, file, f"{key}[{i}]") if inner is not Any else v
-                for i, v in enumerate(value)
-            ]
+            items: list[Any] = []
+            bad = False
+            for i, v in enumerate(value):
+                try:
+                    items.append(_convert(v, inner, file, f"{key}[{i}]", errors))
+                except ConfigError as err:
+                    errors.append(err)
+                    bad = True
+                except _Invalid:
+                    bad = True
+            if bad:
+                raise _Invalid
             return tuple(items) if origin is tuple else items
     elif dataclasses.is_dataclass(tp) and isinstance(tp, type):
         if isinstance(value, dict):
-            return load_dataclass(tp, value, file, key)
+            return _load(tp, value, file, key, errors)
     elif tp is Any:
         return value
     raise ConfigError(file, key, _describe(tp), _found(value))
@@ -113,35 +139,80 @@ def _check_bounds(value: Any, meta: typing.Mapping[str, Any], file: str, key: st
             "gt": value > bound,
             "le": value <= bound,
             "lt": value < bound,
+            "ne": value != bound,
         }[name]
         if not ok:
-            raise ConfigError(file, key, f"a number {op} {bound}", _found(value))
+            what = f"a number other than {bound}" if name == "ne" else f"a number {op} {bound}"
+            raise ConfigError(file, key, what, _found(value))
 
 
-def load_dataclass(cls: type[T], table: dict[str, Any], file: str, prefix: str = "") -> T:
-    """Build ``cls`` from a TOML table, validating every key (see the module docstring)."""
-    if not dataclasses.is_dataclass(cls):
-        raise TypeError(f"{cls!r} is not a dataclass")
+def _unknown_key(file: str, dotted: str, key: str, known: list[str]) -> ConfigError:
+    close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+    found = f"an unknown key (did you mean {close[0]!r}?)" if close else "an unknown key"
+    return ConfigError(file, dotted, "one of the keys " + ", ".join(sorted(known)), found)
+
+
+def toml_fields(cls: type[Any]) -> dict[str, dataclasses.Field[Any]]:
+    """The fields of ``cls`` a TOML table may set (``metadata={"toml": False}``: none)."""
+    return {f.name: f for f in dataclasses.fields(cls) if f.metadata.get("toml", True)}
+
+
+def _load(cls: type[T], table: dict[str, Any], file: str, prefix: str,
+          errors: list[ConfigError]) -> T:
     hints = get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
+    fields = toml_fields(cls)
     kwargs: dict[str, Any] = {}
+    n_errors = len(errors)
     for key, value in table.items():
         dotted = f"{prefix}.{key}" if prefix else key
         if key not in fields:
-            known = ", ".join(sorted(fields))
-            raise ConfigError(file, dotted, f"one of the keys {known}", "an unknown key")
+            errors.append(_unknown_key(file, dotted, key, list(fields)))
+            continue
         fld = fields[key]
-        converted = _convert(value, hints[key], file, dotted)
-        _check_bounds(converted, fld.metadata, file, dotted)
-        if isinstance(converted, tuple | list):
-            for i, item in enumerate(converted):
-                _check_bounds(item, fld.metadata, file, f"{dotted}[{i}]")
+        try:
+            converted = _convert(value, hints[key], file, dotted, errors)
+            _check_bounds(converted, fld.metadata, file, dotted)
+            if isinstance(converted, tuple | list):
+                for i, item in enumerate(converted):
+                    _check_bounds(item, fld.metadata, file, f"{dotted}[{i}]")
+        except ConfigError as err:
+            errors.append(err)
+            continue
+        except _Invalid:
+            continue
         kwargs[key] = converted
+    if len(errors) > n_errors:
+        raise _Invalid
     try:
         obj = cls(**kwargs)
-    except (TypeError, ValueError) as err:  # __post_init__ cross-checks
-        raise ConfigError(file, prefix or "(top level)", "consistent values", str(err)) from err
-    return typing.cast(T, obj)
+    except (TypeError, ValueError, ArithmeticError) as err:  # __post_init__ cross-checks
+        errors.append(ConfigError(file, prefix or "(top level)", "consistent values", str(err)))
+        raise _Invalid from err
+    return obj
+
+
+def raise_all(errors: list[ConfigError]) -> None:
+    """Raise the errors found in one file: the error itself when one, else
+    :class:`~fdi.errors.ConfigErrors` listing all of them in file order."""
+    if len(errors) == 1:
+        raise errors[0]
+    if errors:
+        raise ConfigErrors(errors)
+
+
+def load_dataclass(cls: type[T], table: dict[str, Any], file: str, prefix: str = "") -> T:
+    """Build ``cls`` from a TOML table, validating every key (see the module docstring).
+
+    Every bad key of the table is reported, not only the first: one error raises that
+    :class:`ConfigError`, several raise :class:`~fdi.errors.ConfigErrors`."""
+    if not dataclasses.is_dataclass(cls):
+        raise TypeError(f"{cls!r} is not a dataclass")
+    errors: list[ConfigError] = []
+    try:
+        return _load(cls, table, file, prefix, errors)
+    except _Invalid:
+        raise_all(errors)
+        raise  # unreachable: _Invalid is raised only after recording an error
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:

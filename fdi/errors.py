@@ -8,6 +8,8 @@ conditions a caller must act on.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 
 class FdiBridgeError(Exception):
     """Root of every exception fdi-bridge raises on purpose."""
@@ -25,6 +27,19 @@ class ConfigError(FdiBridgeError):
         self.expected = expected
         self.found = found
         super().__init__(f"{file}: {key}: expected {expected}, found {found}")
+
+
+class ConfigErrors(ConfigError):
+    """Several errors in one configuration file; ``errors`` lists each, in file order.
+
+    The attributes of :class:`ConfigError` are the first error's; the message has one line per
+    error."""
+
+    def __init__(self, errors: Sequence[ConfigError]) -> None:
+        first = errors[0]
+        super().__init__(first.file, first.key, first.expected, first.found)
+        self.errors = list(errors)
+        self.args = ("\n".join(str(e) for e in self.errors),)
 
 
 class PortError(FdiBridgeError):

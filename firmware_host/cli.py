@@ -1,9 +1,16 @@
 """The ``fdi-bridge`` command line.
 
-Commands are listed in tables ``{name: "module:attribute"}`` and imported only when used (the
-python-can backend pattern), so ``fdi-bridge replay`` never pays for what ``sim insgnss`` needs.
-Each target module exposes ``add_arguments(parser)`` and ``run(args) -> int``; the attribute named
-in the table is a small object or module with those two functions.
+Commands are listed in tables ``{name: (module, help)}`` and imported only when used: the parser
+is built for the one command on the command line (``fdi-bridge --help`` imports no command at
+all), so ``fdi-bridge replay`` never pays for what ``sim insgnss`` needs. A module exposes
+``add_arguments(parser)`` and ``run(args) -> int``; where a command's module is heavy (it
+imports pymavlink or numpy) and its ``--help`` should not be, the table names a light
+argument-definition module for ``add_arguments`` as ``"ARGS_MODULE:RUN_MODULE"``
+(``replay``: :mod:`firmware_host.commands.replay_args`).
+
+The logging options ``-v``/``--verbose``, ``-q``/``--quiet`` and ``--log-level`` are accepted
+before the command and after it (``fdi-bridge run -v ...`` as gpsd's and MAVProxy's users
+type it); ``--version`` prints the installed version.
 
 Only this module configures logging, prints and chooses the exit status: 0 success, 1 failure
 of the job, 2 bad configuration or usage.
@@ -13,12 +20,14 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.metadata
 import logging
 import sys
 from collections.abc import Sequence
 from typing import Protocol
 
-from fdi.errors import ConfigError, FdiBridgeError
+import firmware_host
+from fdi.errors import ConfigError, ConfigErrors, FdiBridgeError
 
 log = logging.getLogger("fdi_bridge")
 
@@ -29,11 +38,11 @@ class Command(Protocol):
     def run(self, args: argparse.Namespace) -> int: ...
 
 
-# Top-level commands: name -> (module, help).
+# Top-level commands: name -> (module, help); module "ARGS:RUN" splits the two (module doc).
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("", "run a built-in demo with no hardware (rover by default)"),
+    "demo": ("", "run a built-in demo with no hardware (rover by default; demo rov: the ROV)"),
     "replay": (
-        "firmware_host.commands.replay",
+        "firmware_host.commands.replay_args:firmware_host.commands.replay",
         "replay a capture or NMEA log through a pty into a pipeline",
     ),
     "record": (
@@ -62,8 +71,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "rover + ROV together, accelerated, faults and port drops",
     ),
     "mavlink": (
-        "firmware_host.mavlink.router",
+        "firmware_host.commands.mavlink",
         "MAVLink passthrough between autopilot and ground stations",
+    ),
+    "presets": ("firmware_host.commands.presets", "list the packaged configuration presets"),
+    "config": (
+        "firmware_host.commands.config_cmd",
+        "check a configuration file, or show it with every default filled in",
     ),
 }
 
@@ -84,7 +98,7 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
     ),
 }
 
-# ``fdi-bridge demo KIND``: KIND -> module with ``run_demo(args) -> int`` and ``add_arguments``.
+# ``fdi-bridge demo KIND``: KIND -> module with ``run(args) -> int`` and ``add_arguments``.
 DEMO_COMMANDS: dict[str, tuple[str, str]] = {
     "rover": (
         "firmware_host.commands.demo_rover",
@@ -93,52 +107,123 @@ DEMO_COMMANDS: dict[str, tuple[str, str]] = {
     "rov": ("firmware_host.commands.demo_rov", "ROV compass drift 30 deg with and without FT"),
 }
 
+LOG_LEVELS = ("debug", "info", "warning", "error", "critical")
+_VALUE_OPTIONS = ("--log-level",)  # global options that take a value
+
 
 def _load(module: str) -> Command:
     return importlib.import_module(module)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _args_module(spec: str) -> str:
+    return spec.split(":", 1)[0]
+
+
+def _run_module(spec: str) -> str:
+    return spec.rsplit(":", 1)[-1]
+
+
+def version() -> str:
+    try:
+        return importlib.metadata.version("fdi-bridge")
+    except importlib.metadata.PackageNotFoundError:  # a source tree on PYTHONPATH
+        return firmware_host.__version__
+
+
+def _logging_options(parser: argparse.ArgumentParser, *, sub: bool) -> None:
+    """``-v``/``-q``/``--log-level``; after the command they count too (``dest`` ``*_sub``)."""
+    suffix = "_sub" if sub else ""
+    default = argparse.SUPPRESS if sub else None
+    group = parser.add_argument_group("logging")
+    group.add_argument("-v", "--verbose", action="count", dest="verbose" + suffix,
+                       default=default if sub else 0,
+                       help="more log output (-vv: debug)")
+    group.add_argument("-q", "--quiet", action="count", dest="quiet" + suffix,
+                       default=default if sub else 0,
+                       help="less log output (errors only; -qq: critical only)")
+    group.add_argument("--log-level", choices=LOG_LEVELS, dest="log_level" + suffix,
+                       default=default, help="set the log level (overrides -v/-q)")
+
+
+def _command_of(argv: Sequence[str]) -> tuple[str | None, str | None]:
+    """The command (and ``sim``/``demo`` kind) named on the command line, skipping the global
+    options before it."""
+    rest = list(argv)
+    while rest and rest[0].startswith("-"):
+        opt = rest.pop(0)
+        if opt in _VALUE_OPTIONS and rest:
+            rest.pop(0)
+    if not rest:
+        return None, None
+    command = rest.pop(0)
+    kind = rest[0] if rest and not rest[0].startswith("-") else None
+    return command, kind
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Defaults shown where there is one to show (not ``None`` or ``False``) and the help text
+    does not state it already."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if (action.default in (None, False) or action.default is argparse.SUPPRESS
+                or "default" in (action.help or "")):
+            return action.help
+        return super()._get_help_string(action)
+
+
+def _subparser(sub: argparse._SubParsersAction[argparse.ArgumentParser], name: str,
+               help_text: str) -> argparse.ArgumentParser:
+    return sub.add_parser(name, help=help_text, description=help_text,
+                          formatter_class=_HelpFormatter)
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The parser; only the command named in ``argv`` gets its arguments (and is imported).
+    ``argv=None``: every command's (imports all of them; for documentation tools)."""
+    command, kind = _command_of(argv) if argv is not None else (None, None)
+    everything = argv is None
     parser = argparse.ArgumentParser(
         prog="fdi-bridge",
         description="Fault detection and isolation between navigation sensors and a controller.",
+        allow_abbrev=False,  # _command_of skips the global options by their full names
     )
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
+    parser.add_argument("--version", action="version", version=f"fdi-bridge {version()}")
+    _logging_options(parser, sub=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_text) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_text, description=help_text)
-        if name == "demo":
+        p = _subparser(sub, name, help_text)
+        if name == "demo":  # parsed by _demo_args; here for the list of commands and -h
             p.add_argument("kind", nargs="?", default="rover", choices=sorted(DEMO_COMMANDS),
-                           help="which demo (default: rover)")
+                           help="which demo: " + "; ".join(
+                               f"{k}: {h}" for k, (_, h) in DEMO_COMMANDS.items()))
             p.add_argument("demo_args", nargs=argparse.REMAINDER,
                            help="the demo's own options (see: fdi-bridge demo KIND -h)")
-            p.set_defaults(_demo=True)
             continue
-        p.set_defaults(_module=module)
-        _load(module).add_arguments(p)
-    sim = sub.add_parser("sim", help="simulate a vehicle and its sensors", description="simulate")
+        if everything or name == command:
+            _logging_options(p, sub=True)
+            p.set_defaults(_module=_run_module(module))
+            _load(_args_module(module)).add_arguments(p)
+    sim = _subparser(sub, "sim", "simulate a vehicle and its sensors")
     ssub = sim.add_subparsers(dest="sim_kind", metavar="KIND", required=True)
-    for kind, (smod, shelp) in SIM_COMMANDS.items():
-        sp = ssub.add_parser(kind, help=shelp, description=shelp)
-        sp.set_defaults(_module=smod)
-        _load(smod).add_arguments(sp)
+    for skind, (smod, shelp) in SIM_COMMANDS.items():
+        sp = _subparser(ssub, skind, shelp)
+        if everything or (command == "sim" and skind == kind):
+            _logging_options(sp, sub=True)
+            sp.set_defaults(_module=_run_module(smod))
+            _load(_args_module(smod)).add_arguments(sp)
     return parser
 
 
-def _setup_logging(verbosity: int) -> None:
-    level = logging.WARNING - 10 * min(verbosity, 2)
-    logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-
-
 def _demo_args(argv: list[str]) -> argparse.Namespace | None:
-    """``fdi-bridge [-v] demo [KIND] [options]``: the KIND's own parser takes the options."""
-    verbose = 0
-    rest = list(argv)
-    while rest and rest[0] in ("-v", "--verbose", "-vv"):
-        verbose += 2 if rest.pop(0) == "-vv" else 1
-    if not rest or rest[0] != "demo":
+    """``fdi-bridge [options] demo [KIND] [options]``: the KIND's own parser takes the options."""
+    command, _ = _command_of(argv)
+    if command != "demo":
         return None
-    rest.pop(0)
+    head = argv[: argv.index("demo")]
+    top = argparse.ArgumentParser(prog="fdi-bridge", add_help=False)
+    _logging_options(top, sub=False)
+    glob = top.parse_args(head)
+    rest = argv[argv.index("demo") + 1:]
     kind = "rover"
     if rest and not rest[0].startswith("-"):
         kind = rest.pop(0)
@@ -146,28 +231,57 @@ def _demo_args(argv: list[str]) -> argparse.Namespace | None:
         known = ", ".join(sorted(DEMO_COMMANDS))
         raise SystemExit(f"fdi-bridge demo: unknown demo {kind!r} (known: {known})")
     dmod, dhelp = DEMO_COMMANDS[kind]
-    dparser = argparse.ArgumentParser(prog=f"fdi-bridge demo {kind}", description=dhelp)
-    _load(dmod).add_arguments(dparser)
+    others = ", ".join(f"fdi-bridge demo {k}" for k in DEMO_COMMANDS if k != kind)
+    dparser = argparse.ArgumentParser(prog=f"fdi-bridge demo {kind}", description=dhelp,
+                                      epilog=f"other demos: {others}",
+                                      formatter_class=_HelpFormatter)
+    _logging_options(dparser, sub=True)
+    _load(_args_module(dmod)).add_arguments(dparser)
     args = dparser.parse_args(rest)
-    args.verbose = verbose
+    for key, value in vars(glob).items():
+        setattr(args, key, value)
     args.command = "demo"
-    args._module = dmod
+    args._module = _run_module(dmod)
     return args
+
+
+def _log_level(args: argparse.Namespace) -> int:
+    name = getattr(args, "log_level_sub", None) or args.log_level
+    if name:
+        return int(getattr(logging, name.upper()))
+    verbose = args.verbose + getattr(args, "verbose_sub", 0)
+    quiet = args.quiet + getattr(args, "quiet_sub", 0)
+    steps = max(-2, min(2, verbose - quiet))
+    return {-2: logging.CRITICAL, -1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO,
+            2: logging.DEBUG}[steps]
+
+
+def _setup_logging(level: int) -> None:
+    logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = _demo_args(argv)
     if args is None:
-        parser = build_parser()
+        parser = build_parser(argv)
         args = parser.parse_args(argv)
+        if args.command is not None and not hasattr(args, "_module"):
+            parser = build_parser(None)  # the command was not where _command_of looked
+            args = parser.parse_args(argv)
         if args.command is None:
             parser.print_help()
             return 2
-    _setup_logging(args.verbose)
-    module = _load(args._module)
+    _setup_logging(_log_level(args))
     try:
+        module = _load(args._module)
         return int(module.run(args))
+    except ConfigErrors as err:
+        print(f"fdi-bridge: configuration error: {len(err.errors)} errors in {err.file}:",
+              file=sys.stderr)
+        for e in err.errors:
+            print(f"  {e}", file=sys.stderr)
+        return 2
     except ConfigError as err:
         print(f"fdi-bridge: configuration error: {err}", file=sys.stderr)
         return 2

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import argparse
 import grp
 import os
+import signal
 import socket
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from drivers.configload import read_toml
 from drivers.ptypair import PtyPair
 from firmware_host.cli import main
+from firmware_host.commands import mavlink as mavlink_cmd
 from firmware_host.commands.doctor import Report, check_device, check_mavlink_url, diagnose
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,3 +97,44 @@ def test_rov_config_checks_the_link(tmp_path: Path) -> None:
                    record_dir=str(tmp_path))
     assert rep.ok[0].endswith("(rov)")
     assert any("ROV link" in p for p in rep.problems) or any("ROV link" in o for o in rep.ok)
+
+
+SHIPPED = sorted((ROOT / "config").glob("*.toml"))
+
+
+@pytest.fixture
+def keep_signal_handlers() -> Iterator[None]:
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for s, h in saved.items():
+        signal.signal(s, h)
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_doctor_and_run_accept_the_same_files(
+        path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        keep_signal_handlers: None, capsys: pytest.CaptureFixture[str]) -> None:
+    """Every shipped config: doctor reports a config problem exactly when run refuses it."""
+    rep = diagnose(path, list_ports=lambda: [], record_dir=str(tmp_path / "rec"))
+    doctor_accepts = not any(p.startswith("config:") for p in rep.problems)
+    routed: list[list[str]] = []
+
+    def router_instead(args: argparse.Namespace) -> int:
+        # A [mavlink] file runs the router: not started here (mavlink-example sends to a
+        # radio-network address); run got as far as handing it the file.
+        routed.append([args.config])
+        return 0
+
+    monkeypatch.setattr(mavlink_cmd, "run", router_instead)
+    status = main(["run", "--config", str(path), "--duration", "0.3",
+                   "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert status in (0, 2), err
+    run_accepts = status == 0
+    assert doctor_accepts == run_accepts, (rep.problems, err)
+    if "mavlink" in read_toml(path):
+        assert routed == [[str(path)]]
+        assert any(o.startswith("config:") and "(mavlink; tables rover, mavlink)" in o
+                   for o in rep.ok)
+        assert any("MAVLink autopilot" in line for line in rep.ok + rep.problems)
+    assert run_accepts == (not path.stem.startswith("insgnss"))  # an INS/GNSS file: sim only

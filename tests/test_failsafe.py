@@ -123,9 +123,9 @@ def test_rov_dropout_holds_then_neutral_then_resumes(
     dev = rov_device(server, clock)
     cfg_file = tmp_path / "rov.toml"
     cfg_file.write_text(
-        "period_s = 0.2\ndropout_hold_s = 1.0\n[link]\nwiring = \"rs232\"\n"
+        "[rov]\nperiod_s = 0.2\ndropout_hold_s = 1.0\n[rov.link]\nwiring = \"rs232\"\n"
         f"protocol = \"{ROOT / 'config' / 'protocols' / 'outland1000.toml'}\"\n"
-        "[link.port]\nurl = \"sim://rov\"\nbaudrate = 115200\n")
+        "[rov.link.port]\nurl = \"sim://rov\"\nbaudrate = 115200\n")
     seen: list[tuple[float, str, Any]] = []
 
     def on_epoch(rec: dict[str, Any]) -> None:

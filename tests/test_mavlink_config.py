@@ -49,6 +49,9 @@ def test_bad_values_name_the_key(tmp_path: Path) -> None:
     bad.write_text('[mavlink]\nheartbeat = 1\n')
     with pytest.raises(ConfigError, match=r"mavlink\.heartbeat"):
         load_mavlink_config(bad)
+    with pytest.raises(ConfigError, match=r"did you mean 'heartbeat_hz'"):
+        load_vehicle_config(bad)  # one loader: the whole file is checked, whichever view
+    bad.write_text('[mavlink]\nheartbeat_hz = 1\n')
     assert load_vehicle_config(bad) is None  # no [rover]: the router alone
 
 

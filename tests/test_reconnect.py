@@ -234,9 +234,9 @@ def test_rov_link_survives_far_end_closing(tmp_path: Path) -> None:
     link = tmp_path / "rovlink"
     cfg_file = tmp_path / "rov.toml"
     cfg_file.write_text(
-        "period_s = 0.05\ndropout_hold_s = 0.1\n[link]\nwiring = \"rs232\"\n"
+        "[rov]\nperiod_s = 0.05\ndropout_hold_s = 0.1\n[rov.link]\nwiring = \"rs232\"\n"
         f"protocol = \"{ROOT / 'config' / 'protocols' / 'outland1000.toml'}\"\n"
-        "reconnect_max_s = 0.2\n[link.port]\n"
+        "reconnect_max_s = 0.2\n[rov.link.port]\n"
         f"url = \"{link}\"\nbaudrate = 115200\n"
     )
 

@@ -1,4 +1,4 @@
-"""``fdi-bridge run --config FILE`` picks the vehicle from the file: [rover] or [link]."""
+"""``fdi-bridge run --config FILE`` picks the vehicle from the file: [rover] or [rov]."""
 
 from __future__ import annotations
 
@@ -24,15 +24,20 @@ def test_vehicle_rule(tmp_path: Path) -> None:
     assert vehicle_of("rov") == "rov"
     assert vehicle_of(ROOT / "config" / "rov-paper.toml") == "rov"
     both = tmp_path / "both.toml"
-    both.write_text("[rover]\n[link]\n")
+    both.write_text("[rover]\n[rov]\n")
     with pytest.raises(ConfigError, match="both"):
         vehicle_of(both)
     neither = tmp_path / "neither.toml"
     neither.write_text("[recorder]\ndir = '/tmp/x'\n")
     with pytest.raises(ConfigError, match="neither"):
         vehicle_of(neither)
-    with pytest.raises(ConfigError, match="no such file"):
+    with pytest.raises(ConfigError, match=r"(?i)no such file"):
         vehicle_of(tmp_path / "missing.toml")
+    with pytest.raises(ConfigError, match="no such file or preset"):
+        vehicle_of("no-such-preset")
+    legacy = tmp_path / "legacy.toml"  # the ROV's keys at the top level: still the ROV
+    legacy.write_text("period_s = 0.1\n[link]\nwiring = 'rs232'\n")
+    assert vehicle_of(legacy) == "rov"
 
 
 def test_run_rover_from_the_cli_with_recorder(tmp_path: Path) -> None:
@@ -77,9 +82,9 @@ def test_run_rov_from_the_cli(tmp_path: Path) -> None:
         th.start()
         cfg = tmp_path / "rov.toml"
         cfg.write_text(
-            "period_s = 0.05\n[link]\nwiring = \"rs232\"\n"
+            "[rov]\nperiod_s = 0.05\n[rov.link]\nwiring = \"rs232\"\n"
             f"protocol = \"{ROOT / 'config' / 'protocols' / 'outland1000.toml'}\"\n"
-            f"[link.port]\nurl = \"{pty.url}\"\nbaudrate = 115200\n")
+            f"[rov.link.port]\nurl = \"{pty.url}\"\nbaudrate = 115200\n")
         try:
             rc = main(["run", "--config", str(cfg), "--out", str(tmp_path / "out"),
                        "--duration", "1.0"])

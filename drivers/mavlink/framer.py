@@ -37,6 +37,8 @@ import hmac
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
+from drivers.mavlink.io import crc_extra_table
+
 MAGIC_V1 = 0xFE
 MAGIC_V2 = 0xFD
 HEADER_V1 = 6
@@ -152,8 +154,6 @@ OnDrop = Callable[[bytes, str], None]
 
 
 def _default_crc_extras() -> Mapping[int, int]:
-    from drivers.mavlink.io import crc_extra_table
-
     return crc_extra_table()
 
 

@@ -37,7 +37,7 @@ REJECT_REASONS = ("garbage", "bad_header_checksum", "bad_checksum", "too_long", 
 class FieldSpec:
     name: str
     type: FieldType = "u16"
-    scale: float = 1.0
+    scale: float = field(default=1.0, metadata={"ne": 0.0})  # value = raw * scale + offset
     offset: float = 0.0
     unit: str = ""
 

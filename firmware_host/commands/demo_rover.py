@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from firmware_host.commands.replay import run_replay
+from firmware_host.devtools.plots import HAVE_MATPLOTLIB, plot_rover
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 from firmware_host.devtools.score import read_jsonl, score_rover
 from firmware_host.runtime.config import load_config
@@ -58,9 +59,7 @@ def run(args: argparse.Namespace) -> int:
               f"{s.false_alarms}/{s.clean} | {s.alarms} | {_fmt(s.raw_rms_clean_m)} | "
               f"{_fmt(s.out_rms_faulty_m)} | {_fmt(s.out_rms_all_m)} | "
               f"{summ['processing_ms']['p99']} |")
-    try:
-        from firmware_host.devtools.plots import plot_rover
-    except ImportError:
+    if not HAVE_MATPLOTLIB:
         print("\n(install the plot extra, pip install -e '.[plot]', for a PNG)")
         return 0
     for preset, _, _ in rows:

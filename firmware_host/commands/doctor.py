@@ -2,7 +2,9 @@
 
 Checks, in order:
 
-1. the configuration file loads and validates (which vehicle it is: ``[rover]`` or ``[link]``);
+1. the configuration file loads and validates exactly as ``fdi-bridge run --config`` loads it
+   (:func:`~firmware_host.runtime.config.load_bridge_file`, then ``run_mode``):
+   which vehicle it is (``[rover]`` or ``[rov]``) or whether it runs the router (``[mavlink]``);
 2. the serial ports the system has (``serial.tools.list_ports``);
 3. every configured port: a device path exists, is a character device, and this user can read
    and write it; if not, which group owns it (``dialout`` on Debian/Ubuntu, ``uucp`` on Arch)
@@ -29,10 +31,10 @@ import stat
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from drivers.mavlink.links import is_network_url
 from fdi.errors import ConfigError, FdiBridgeError
+from firmware_host.runtime.config import load_bridge_file, run_mode
 
 _SCHEMES = ("socket://", "rfc2217://", "loop://", "spy://", "alt://", "hwgrep://", "cp2110://")
 
@@ -182,42 +184,39 @@ def diagnose(
     list_ports: Callable[[], list[str]] = _system_ports,
     access: Callable[[str, int], bool] = os.access,
 ) -> Report:
-    from firmware_host.commands.run import resolve_config_path, vehicle_of
-
     rep = Report()
     try:
         rep.ports = list_ports()
     except Exception as err:  # a broken sysfs must not hide the other checks
         rep.warnings.append(f"could not list serial ports: {err}")
-    path = resolve_config_path(config)
     try:
-        vehicle = vehicle_of(path)
-        cfg: Any
-        if vehicle == "rover":
-            from firmware_host.runtime.config import load_config
-
-            cfg = load_config(path)
-        else:
-            from drivers.outland.framecodec import load_protocol
-            from firmware_host.rov.config import load_rov_config, protocol_path
-
-            cfg, base = load_rov_config(path)
-            load_protocol(protocol_path(cfg, base))
+        bf = load_bridge_file(config)  # what `run --config` reads, with the same checks
+        mode = run_mode(bf)
     except (ConfigError, FdiBridgeError, ValueError) as err:
         rep.problems.append(f"config: {err}")
         return rep
-    rep.ok.append(f"config: {path} loads ({vehicle})")
-    if vehicle == "rover":
-        rc = cfg.rover
+    tables = "" if bf.sections == (mode,) else f"; tables {', '.join(bf.sections)}"
+    rep.ok.append(f"config: {bf.path} loads ({mode}{tables})")
+    if bf.rover is not None and mode != "rov":
+        rc = bf.rover
         check_device(rep, "GPS input", rc.port.url, access=access)
         check_device(rep, "NMEA output", rc.output.nmea_url, access=access)
         check_mavlink_url(rep, "MAVLink output", mavlink_url or rc.output.mavlink_url)
-        if not (mavlink_url or rc.output.mavlink_url or rc.output.nmea_url):
+        if mode == "rover" and not (mavlink_url or rc.output.mavlink_url or rc.output.nmea_url):
             rep.warnings.append("no output configured (rover.output nmea_url / mavlink_url): "
                                 "corrected data goes nowhere")
-    else:
-        check_device(rep, "ROV link", cfg.link.port.url, access=access)
-    rc_rec = cfg.recorder
+    if bf.rov is not None:
+        if mode == "mavlink":
+            rep.warnings.append("rov: `run` on a file with [mavlink] runs the router and the "
+                                "rover only; the [rov] table is not used")
+        else:
+            check_device(rep, "ROV link", bf.rov.link.port.url, access=access)
+    if bf.mavlink is not None:
+        mc = bf.mavlink
+        check_mavlink_url(rep, "MAVLink autopilot", mc.autopilot.url)
+        for i, gcs in enumerate(mc.gcs):
+            check_mavlink_url(rep, f"MAVLink gcs {gcs.name or i}", gcs.url)
+    rc_rec = bf.recorder
     check_recorder(rep, record_dir if record_dir is not None else rc_rec.dir,
                    rc_rec.dir_max_mb, rc_rec.file_max_mb, access=access)
     return rep

@@ -28,6 +28,8 @@ from drivers.capture import CaptureReader, is_capture
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port, read_some
 from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
+from firmware_host.commands.replay_args import add_arguments as add_arguments
+from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 
@@ -196,7 +198,6 @@ def build_sinks(
 ) -> list[EpochSink]:
     from dataclasses import replace
 
-    from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 
     sinks: list[EpochSink] = []
     out = cfg.rover.output
@@ -258,19 +259,6 @@ def print_summary(s: dict[str, Any], stream: TextIO) -> None:
 
 
 # --------------------------------------------------------------------------- CLI
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("capture", type=Path, help="a capture file or a plain NMEA log")
-    parser.add_argument("--config", help="config file or preset name (default: built-in)")
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
-    parser.add_argument("--speed", type=float, default=0.0,
-                        help="0 = as fast as possible (default); 1 = recorded pace; N = N× faster")
-    parser.add_argument("--no-pty", action="store_true", help="feed the pipeline directly")
-    parser.add_argument("--nmea-out", default=None,
-                        help="corrected NMEA to this pyserial URL, or pty:LINKPATH")
-    parser.add_argument("--mavlink", default=None,
-                        help="GPS_INPUT to this MAVLink URL, e.g. udpout:127.0.0.1:14550")
 
 
 def run(args: argparse.Namespace) -> int:

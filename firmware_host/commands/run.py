@@ -1,9 +1,10 @@
 """``fdi-bridge run --config FILE``: the bridge on the vehicle, with the configured ports.
 
-The config file says which vehicle: a file with a ``[rover]`` table runs the rover (GPS fault
-isolation, :class:`RoverBridge`); a file with the ROV's keys (``[link]``, ``[detector]``,
-``period_s`` ..., as ``config/rov.toml``) runs the ROV heading hold
-(:func:`firmware_host.rov.app.run_rov`). A file with both or neither is a configuration error.
+The config file (a path, or a preset name: :func:`firmware_host.runtime.config.resolve_config_path`)
+says which vehicle: a file with a ``[rover]`` table runs the rover (GPS fault isolation,
+:class:`RoverBridge`); a file with an ``[rov]`` table (as ``config/rov.toml``) runs the ROV heading
+hold (:func:`firmware_host.rov.app.run_rov`). A file with both or neither is a configuration
+error; a file with ``[mavlink]`` runs the router (``fdi-bridge mavlink``).
 
 Reliability (``docs/reliability.md``):
 
@@ -30,74 +31,34 @@ import logging
 import signal
 import threading
 import time
-import tomllib
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal, TextIO
 
 from drivers.capture import Channel
+from drivers.mavlink.io import MavEndpoint, PortEndpoint
+from drivers.mavlink.links import is_network_url
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port, open_port_nonblocking
-from fdi.errors import ConfigError
+from firmware_host.commands import mavlink as mavlink_cmd
+from firmware_host.rov.app import run_rov
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
-from firmware_host.runtime.config import CONFIG_DIR, BridgeConfig, load_config
+from firmware_host.runtime.config import (
+    BridgeConfig,
+    BridgeFile,
+    bridge_config,
+    load_bridge_file,
+    rov_config,
+)
+from firmware_host.runtime.config import Vehicle as Vehicle
+from firmware_host.runtime.config import resolve_config_path as resolve_config_path
+from firmware_host.runtime.config import vehicle_of as vehicle_of
 from firmware_host.runtime.failsafe import RoverFailsafe, RovFailsafeMonitor
 from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
 
 log = logging.getLogger("fdi_bridge.run")
-
-Vehicle = Literal["rover", "rov"]
-
-
-# --------------------------------------------------------------------------- which vehicle
-
-
-def resolve_config_path(name: str | Path) -> Path:
-    """A path, or a preset name (``rov``, ``rover-paper``) looked up in ``config/``."""
-    p = Path(name)
-    if not p.exists() and not p.suffix and (CONFIG_DIR / f"{p.name}.toml").exists():
-        return CONFIG_DIR / f"{p.name}.toml"
-    return p
-
-
-def _tables(path: str | Path) -> set[str]:
-    try:
-        with open(resolve_config_path(path), "rb") as fh:
-            return {k for k, v in tomllib.load(fh).items() if isinstance(v, dict)}
-    except (OSError, tomllib.TOMLDecodeError):
-        return set()  # vehicle_of() reports it precisely
-
-
-def vehicle_of(path: str | Path) -> Vehicle:
-    """``rover`` for a file with a ``[rover]`` table; ``rov`` for one with the ROV's own keys
-    (``[link]``, ``[detector]``, ``[ft]``, ``[pid]``, ``period_s``, ``setpoint_deg`` ...; ``[sim]``
-    and ``[recorder]`` are shared and do not count). Both or neither: a ConfigError."""
-    import dataclasses
-
-    from firmware_host.rov.config import RovConfig
-
-    p = resolve_config_path(path)
-    try:
-        with open(p, "rb") as fh:
-            table = tomllib.load(fh)
-    except FileNotFoundError as err:
-        raise ConfigError(str(p), "(file)", "an existing TOML file", "no such file") from err
-    except OSError as err:
-        raise ConfigError(str(p), "(file)", "a readable TOML file", str(err.strerror)) from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(str(p), "(syntax)", "valid TOML", str(err)) from err
-    rov_keys = {f.name for f in dataclasses.fields(RovConfig)} - {"sim", "recorder"}
-    rover = isinstance(table.get("rover"), dict)
-    rov = sorted(rov_keys & set(table))
-    if rover and rov:
-        raise ConfigError(str(p), ", ".join(["rover", *rov]),
-                          "the keys of one vehicle: [rover] or the ROV's", "both")
-    if not rover and not rov:
-        raise ConfigError(str(p), "[rover] / [link]", "a [rover] table (rover) or the ROV's "
-                          "keys ([link], [detector], period_s ...)", "neither")
-    return "rover" if rover else "rov"
 
 
 # --------------------------------------------------------------------------- outputs
@@ -177,9 +138,6 @@ class RoverBridge:
                                  opener=opener, tap=tap)
             sinks.append(self.nmea)
         if endpoint is None and mav:
-            from drivers.mavlink.io import MavEndpoint, PortEndpoint
-            from drivers.mavlink.links import is_network_url
-
             if is_network_url(mav):
                 endpoint = MavEndpoint(mav, source_system=out.mavlink_system,
                                        source_component=out.mavlink_component)
@@ -266,7 +224,7 @@ def run_rover(
 
 
 def run_rov_bridge(
-    path: str | Path,
+    path: str | Path | BridgeFile,
     *,
     jsonl: TextIO | None = None,
     clock: Callable[[], float] = time.monotonic,
@@ -279,10 +237,9 @@ def run_rov_bridge(
     on_epoch: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
     """The ROV config at ``path`` through :func:`run_rov`, with a resilient, recorded link."""
-    from firmware_host.rov.app import run_rov
-    from firmware_host.rov.config import load_rov_config
 
-    cfg, base = load_rov_config(resolve_config_path(path))
+    bf = path if isinstance(path, BridgeFile) else load_bridge_file(path)
+    cfg, base = rov_config(bf)
     rx_tap = tx_tap = None
     if recorder is not None:
         s = cfg.link.port
@@ -327,7 +284,8 @@ def run_rov_bridge(
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True,
-                        help="config file or preset name; [rover] -> rover, [link] etc. -> ROV")
+                        help="config file or preset name; [rover] -> rover, [rov] -> ROV, "
+                             "[mavlink] -> the router (with [rover])")
     parser.add_argument("--out", type=Path, default=None, help="write epochs.jsonl/summary.json")
     parser.add_argument("--nmea-out", default=None, help="rover: corrected NMEA to this URL")
     parser.add_argument("--mavlink", default=None, help="rover: GPS_INPUT to this MAVLink URL")
@@ -345,17 +303,18 @@ def _recorder(cfg: RecorderConfig, override: Path | None, note: str) -> FlightRe
 
 
 def run(args: argparse.Namespace) -> int:
-    if "mavlink" in _tables(args.config):
+    bf = load_bridge_file(args.config)  # the one read of the file
+    if bf.mavlink is not None:
         # A vehicle with an autopilot: one process, the MAVLink router running the pipeline.
-        from firmware_host.mavlink import router
-
         rparser = argparse.ArgumentParser(prog="fdi-bridge mavlink")
-        router.add_arguments(rparser)
-        path = str(resolve_config_path(args.config))
+        mavlink_cmd.add_arguments(rparser)
+        path = str(bf.path)
         log.warning("%s has a [mavlink] table: running it as `fdi-bridge mavlink`", path)
         extra = ["--seconds", str(args.duration)] if args.duration else []
-        return int(router.run(rparser.parse_args(["--config", path, *extra])))
-    vehicle = vehicle_of(args.config)
+        margs = rparser.parse_args(["--config", path, *extra])
+        margs.bridge_file = bf  # read once
+        return int(mavlink_cmd.run(margs))
+    vehicle = vehicle_of(bf)
     stop_event = threading.Event()
     t0 = time.monotonic()
 
@@ -378,21 +337,19 @@ def run(args: argparse.Namespace) -> int:
         jsonl = open(args.out / "epochs.jsonl", "w", encoding="utf-8")  # noqa: SIM115
     try:
         if vehicle == "rover":
-            cfg = load_config(resolve_config_path(args.config))
+            cfg = bridge_config(bf)
             rec = _recorder(cfg.recorder, args.record, f"fdi-bridge run --config {args.config}")
             bridge = run_rover(cfg, jsonl=jsonl, nmea_url=args.nmea_out,
                                mavlink_url=args.mavlink, stop=stop, recorder=rec)
             summary = bridge.summary()
         else:
-            from firmware_host.rov.config import load_rov_config
-
-            rcfg, _ = load_rov_config(resolve_config_path(args.config))
+            rcfg, _ = rov_config(bf)
             rec = _recorder(rcfg.recorder, args.record, f"fdi-bridge run --config {args.config}")
             if args.duration is not None:
                 timer = threading.Timer(args.duration, stop_event.set)
                 timer.daemon = True
                 timer.start()
-            summary = run_rov_bridge(args.config, jsonl=jsonl, stop_event=stop_event,
+            summary = run_rov_bridge(bf, jsonl=jsonl, stop_event=stop_event,
                                      recorder=rec)
     finally:
         if jsonl is not None:

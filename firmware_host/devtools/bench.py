@@ -38,10 +38,17 @@ from typing import Any
 
 import numpy as np
 
+from drivers.mavlink.io import MavEndpoint
+from drivers.ptypair import PtyPair
+from drivers.transport import SerialSettings, open_port, read_some
 from firmware_host.commands.replay import load_input, replay_direct, replay_through_pty
+from firmware_host.devtools.insgnss_sim import bench_insgnss_step
 from firmware_host.devtools.rover_sim import RoverScenario, generate, write_run
+from firmware_host.rov.app import bench_rov_step
+from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, gps_week_ms, unix_time
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig
+from firmware_host.runtime.loop import FixedRateLoop
 
 STRATEGIES = ("grey", "three_zone", "combined")
 
@@ -102,7 +109,6 @@ def bench_rover(duration_s: float = 600.0, rate_hz: float = 10.0) -> dict[str, A
 
 def _epochs_gga_last(n: int, rate_hz: float) -> list[tuple[bytes, bytes, int]]:
     """``n`` generated epochs as (RMC + VTG, GGA, GPS milliseconds of week), GGA last."""
-    from firmware_host.rover.outputs import gps_week_ms, unix_time
 
     sc = RoverScenario(rate_hz=rate_hz, duration_s=n / rate_hz + 1.0, seed=3, kinds=("jump",),
                        fault_every_s=1e9)
@@ -128,8 +134,6 @@ class _PortReader(threading.Thread):
         self.error: BaseException | None = None
 
     def run(self) -> None:
-        from drivers.transport import read_some
-
         try:
             while not self.stop.is_set():
                 data = read_some(self.port, 65536)
@@ -142,10 +146,6 @@ class _PortReader(threading.Thread):
 def bench_end_to_end(epochs: int = 200, rate_hz: float = 10.0, warmup: int = 20
                      ) -> dict[str, Any]:
     """Last byte of a GGA into the receiver pty -> GPS_INPUT on a UDP socket (ms)."""
-    from drivers.mavlink.io import MavEndpoint
-    from drivers.ptypair import PtyPair
-    from drivers.transport import SerialSettings, open_port
-    from firmware_host.rover.outputs import MavlinkGpsSink
 
     rx = MavEndpoint("udpin:127.0.0.1:0")
     addr = rx.local_address
@@ -196,10 +196,6 @@ def bench_end_to_end(epochs: int = 200, rate_hz: float = 10.0, warmup: int = 20
 
 def bench_loop(rate_hz: float, duration_s: float) -> dict[str, Any]:
     """The fixed-rate loop at ``rate_hz`` with real ptys on both ends (see the module doc)."""
-    from drivers.ptypair import PtyPair
-    from drivers.transport import SerialSettings, open_port, read_some
-    from firmware_host.rover.outputs import NmeaSink
-    from firmware_host.runtime.loop import FixedRateLoop
 
     period = 1.0 / rate_hz
     n = max(1, round(duration_s * rate_hz))
@@ -302,9 +298,6 @@ def _machine() -> dict[str, Any]:
 
 def run_bench(duration_s: float = 60.0, replay_s: float = 600.0, e2e_epochs: int = 200,
               fwd_seconds: float = 5.0, fwd_rate: int = 200) -> dict[str, Any]:
-    from firmware_host.devtools.insgnss_sim import bench_insgnss_step
-    from firmware_host.rov.app import bench_rov_step
-
     t0 = time.perf_counter()
     res: dict[str, Any] = {"machine": _machine(), "rover": bench_rover(replay_s)}
     res["rov_step"] = bench_rov_step(5000)

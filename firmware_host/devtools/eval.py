@@ -34,7 +34,14 @@ from typing import Any
 
 from fdi.baselines import BASELINES, BaselineParams, make_baseline
 from fdi.geodesy import LocalFrame
+from firmware_host.commands.replay import load_input
+from firmware_host.devtools.insgnss_sim import SCENARIOS, load_setup, run_scenario
+from firmware_host.devtools.rov_experiment import run_experiment, summarize
+from firmware_host.devtools.rov_sim import parse_fault
+from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.devtools.score import RoverScore, read_jsonl, score_rover
+from firmware_host.rov.config import RovConfig
+from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 
 STRATEGIES: tuple[str, ...] = ("grey", "three_zone", "combined")
@@ -117,7 +124,6 @@ def run_ours(cfg: BridgeConfig, data: bytes, strategy: str | None = None
              ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Our pipeline (no pty) on ``data`` with ``strategy`` (None: the config's); records and
     summary."""
-    from firmware_host.rover.pipeline import RoverPipeline
 
     rover = cfg.rover
     if strategy is not None:
@@ -289,8 +295,6 @@ def rover_cases(quick: bool = False) -> list[RoverCase]:
 
 def generate_case(case: RoverCase, duration_s: float, seed: int
                   ) -> tuple[bytes, list[dict[str, Any]]]:
-    from firmware_host.devtools.rover_sim import RoverScenario, generate
-
     sc = RoverScenario(rate_hz=case.rate_hz, duration_s=duration_s, seed=seed, kinds=case.kinds,
                        **case.options)
     data: list[bytes] = []
@@ -309,9 +313,6 @@ ROV_FAULTS: tuple[tuple[str, ...], ...] = (
 
 def rov_suite(duration_s: float = 130.0, seed: int = 1) -> list[dict[str, Any]]:
     """The ROV compass faults of issue 3, with fault tolerance and without (the plain PID)."""
-    from firmware_host.devtools.rov_experiment import run_experiment, summarize
-    from firmware_host.devtools.rov_sim import parse_fault
-    from firmware_host.rov.config import RovConfig
 
     cfg = RovConfig()
     rows = []
@@ -350,7 +351,6 @@ def rov_table(rows: Sequence[dict[str, Any]]) -> str:
 
 def insgnss_suite(seed: int = 1, scenarios: Sequence[str] | None = None) -> list[dict[str, Any]]:
     """The INS/GNSS paper scenarios through the four strategies (none is the plain filter)."""
-    from firmware_host.devtools.insgnss_sim import SCENARIOS, load_setup, run_scenario
 
     setup = load_setup(None)
     rows = []
@@ -509,8 +509,6 @@ def evaluate_run(
     truth = read_jsonl(truth_path)
     methods = [MethodResult("this run", "input", score_rover(records, truth))]
     if capture is not None:
-        from firmware_host.commands.replay import load_input
-
         data = b"".join(c for _, c in load_input(capture).chunks)
         comp, _ = compare_rover(epochs_path.parent.name or "run", data, truth, cfg)
         methods += comp.methods

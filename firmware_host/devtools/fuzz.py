@@ -35,15 +35,31 @@ from typing import Any
 
 import numpy as np
 
+from drivers.gps.nmea import (
+    Gga,
+    Gll,
+    Ignored,
+    NmeaFramer,
+    Rejected,
+    Rmc,
+    parse_sentence,
+    with_checksum,
+)
+from drivers.gps.stream import NmeaStream
+from drivers.mavlink.framer import MAX_FRAME, MavFramer, x25crc
+from drivers.mavlink.io import GpsInputFix, MavPacker, crc_extra_table, decode_packet
+from drivers.outland.framecodec import Framer, checksum, decode, load_protocol
+from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, encode_telemetry
 from drivers.ratelog import RateLimitedLog
 from fdi.errors import DecodeError
+from firmware_host.devtools.rover_sim import RoverScenario, generate
+from firmware_host.runtime.config import resolve_protocol
 
 CODECS = ("nmea", "outland", "mavlink")
 _quiet_logger = logging.getLogger("fdi_bridge.fuzz.rejects")
 _quiet_logger.addHandler(logging.NullHandler())
 _quiet_logger.propagate = False  # a million bad sentences are counted, not logged
 _QUIET = RateLimitedLog(_quiet_logger, interval_s=1e9)
-ROOT = Path(__file__).resolve().parents[2]
 
 
 class InvariantError(AssertionError):
@@ -64,9 +80,6 @@ def _chunks(data: bytes, cuts: list[int]) -> list[bytes]:
 
 
 def nmea_corpus() -> list[bytes]:
-    from drivers.gps.nmea import with_checksum
-    from firmware_host.devtools.rover_sim import RoverScenario, generate
-
     sc = RoverScenario(rate_hz=5.0, duration_s=4.0, seed=1, gst=True, zda=True)
     lines: list[bytes] = []
     for _, data, _ in generate(sc):
@@ -88,14 +101,10 @@ def nmea_corpus() -> list[bytes]:
 
 
 def outland_protocol() -> Any:
-    from drivers.outland.framecodec import load_protocol
-
-    return load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
+    return load_protocol(resolve_protocol("protocols/outland1000.toml", None))  # packaged
 
 
 def outland_corpus(proto: Any) -> list[bytes]:
-    from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, encode_telemetry
-
     out = []
     for h in (0.0, 123.45, 359.99):
         out.append(encode_telemetry(proto, Telemetry(h, 12.3, -5.0, 3.0, 1), node=1))
@@ -106,8 +115,6 @@ def outland_corpus(proto: Any) -> list[bytes]:
 
 
 def mavlink_corpus() -> list[bytes]:
-    from drivers.mavlink.io import GpsInputFix, MavPacker
-
     p = MavPacker(1, 191)
     fix = GpsInputFix(1_600_000_000_000_000, 2100, 123456, 3, 32.02, 118.85, 12.0, 0.9, None,
                       1.0, 0.5, None, 0.1, 0.5, 1.0, 9)
@@ -119,8 +126,6 @@ def mavlink_corpus() -> list[bytes]:
     out.append(s.send_heartbeat())
     out.append(s.send_gps_input(fix))
     # MAVLink 1 (0xFE): a HEARTBEAT packed by hand (CRC_EXTRA 50).
-    from drivers.mavlink.framer import x25crc
-
     body = bytes([9, 0, 1, 1, 0]) + bytes([0, 0, 0, 0, 18, 8, 0, 0, 3])
     crc = x25crc(body + bytes([50]))
     out.append(bytes([0xFE]) + body + crc.to_bytes(2, "little"))
@@ -182,9 +187,6 @@ def check_nmea(data: bytes, cuts: list[int], max_line: int = 120) -> Counter[str
     broken invariant; returns the rejections by reason."""
     import math
 
-    from drivers.gps.nmea import Gga, Gll, Ignored, NmeaFramer, Rejected, Rmc, parse_sentence
-    from drivers.gps.stream import NmeaStream
-
     framer = NmeaFramer(max_line)
     items: list[bytes | Rejected] = []
     for chunk in _chunks(data, cuts):
@@ -243,8 +245,6 @@ def check_nmea(data: bytes, cuts: list[int], max_line: int = 120) -> Counter[str
 
 
 def check_outland(data: bytes, cuts: list[int], proto: Any) -> Counter[str]:
-    from drivers.outland.framecodec import Framer, checksum, decode
-
     framer = Framer(proto)
     frames = []
     for chunk in _chunks(data, cuts):
@@ -271,9 +271,6 @@ def check_outland(data: bytes, cuts: list[int], proto: Any) -> Counter[str]:
 
 
 def check_mavlink(data: bytes, cuts: list[int]) -> Counter[str]:
-    from drivers.mavlink.framer import MAX_FRAME, MavFramer, x25crc
-    from drivers.mavlink.io import crc_extra_table, decode_packet
-
     extras = crc_extra_table()
     framer = MavFramer(extras)
     frames = []

@@ -28,7 +28,7 @@ import json
 import logging
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
@@ -36,12 +36,10 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from drivers.configload import load_file
 from fdi.errors import ConfigError
 from fdi.insgnss import (
     DEG,
     EarthModel,
-    ImuErrorModel,
     InsGnssFilter,
     InsGnssParams,
     NavState,
@@ -50,6 +48,10 @@ from fdi.insgnss import (
     invert_mechanization,
 )
 from fdi.three_zone import STRATEGIES, Action, Strategy, Zone
+from firmware_host.runtime.config import CONFIG_DIR as CONFIG_DIR
+from firmware_host.runtime.config import insgnss_setup, load_bridge_file
+from firmware_host.runtime.config_insgnss import InsGnssSetup as InsGnssSetup
+from firmware_host.runtime.config_insgnss import InsGnssSimParams as InsGnssSimParams
 
 log = logging.getLogger(__name__)
 
@@ -62,43 +64,16 @@ SCENARIOS: tuple[Scenario, ...] = (
     "paper-continuous",
     "paper-deviation",
 )
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 PAPER_PRESET = CONFIG_DIR / "insgnss-paper.toml"
 
 
-@dataclass(frozen=True)
-class InsGnssSimParams:
-    """Generator parameters (the ``[sim]`` table)."""
-
-    epochs: int = field(default=501, metadata={"ge": 20, "doc": "GNSS epochs, 1 s apart"})
-    imu_rate_hz: int = field(default=100, metadata={"ge": 1, "le": 1000})
-    speed_m_s: float = field(default=60.0, metadata={"gt": 0.0})
-    imu: ImuErrorModel = field(default_factory=ImuErrorModel)
-    gnss_sigma_h_m: float = field(default=3.0, metadata={"ge": 0.0})
-    gnss_sigma_v_m: float = field(default=5.0, metadata={"ge": 0.0})
-    gnss_sigma_vel_m_s: float = field(default=0.1, metadata={"ge": 0.0})
-    fault_h_m: float = field(default=100.0, metadata={"doc": "over-limit fault, east and north"})
-    fault_v_m: float = field(default=20.0, metadata={"doc": "over-limit fault, up"})
-    deviation_h_m: float = field(default=20.0, metadata={"doc": "deviation fault, east/north"})
-    deviation_v_m: float = field(default=4.0, metadata={"doc": "deviation fault, up"})
-    random_faults: int = field(default=100, metadata={"ge": 0})
-
-
-@dataclass(frozen=True)
-class InsGnssSetup:
-    """A whole ``config/insgnss*.toml`` file: ``[filter]`` and ``[sim]``."""
-
-    filter: InsGnssParams = field(default_factory=InsGnssParams)
-    sim: InsGnssSimParams = field(default_factory=InsGnssSimParams)
-
-
 def load_setup(path: str | Path | None = None) -> InsGnssSetup:
-    """Load a preset (default: ``config/insgnss-paper.toml``; built-in defaults if absent)."""
+    """Load a file or preset (default: ``insgnss-paper``; built-in defaults if absent)."""
     if path is None:
         if not PAPER_PRESET.is_file():
             return InsGnssSetup()
         path = PAPER_PRESET
-    return load_file(InsGnssSetup, path)
+    return insgnss_setup(load_bridge_file(path))
 
 
 # ---------------------------------------------------------------- trajectory and sensors

@@ -1,14 +1,19 @@
-"""Figures like the papers' (needs the ``plot`` extra: matplotlib). Imported only on demand."""
+"""Figures like the papers' (needs the ``plot`` extra: matplotlib; see :data:`HAVE_MATPLOTLIB`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+try:  # the optional ``plot`` extra: without it this module imports, and callers check
+    import matplotlib  # HAVE_MATPLOTLIB before drawing
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    HAVE_MATPLOTLIB = True
+except ImportError:  # pragma: no cover - depends on the install
+    HAVE_MATPLOTLIB = False
 
 from fdi.geodesy import LocalFrame
 

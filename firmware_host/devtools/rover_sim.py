@@ -32,6 +32,7 @@ from typing import Literal
 
 import numpy as np
 
+from drivers.capture import CaptureWriter, Channel
 from drivers.gps.nmea import (
     KNOT_MPS,
     format_date,
@@ -304,7 +305,6 @@ def _nmea_epoch(
 
 def write_run(sc: RoverScenario, out_dir: Path) -> dict[str, object]:
     """Write rover.nmea, rover.cap, truth.jsonl and scenario.json; return a short summary."""
-    from drivers.capture import CaptureWriter, Channel
 
     out_dir.mkdir(parents=True, exist_ok=True)
     n_epochs = n_fault = 0

@@ -44,11 +44,13 @@ from typing import Any
 import numpy as np
 
 from drivers.capture import Channel
+from drivers.mavlink.io import MavPacker
 from drivers.outland.framecodec import load_protocol
 from drivers.outland.link import OutlandLink
 from drivers.resilient import ResilientPort
 from drivers.transport import SerialSettings
 from fdi.errors import PortError
+from firmware_host.commands.run import RoverBridge
 from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.rov.app import link_step
@@ -285,8 +287,6 @@ def run_soak(
                               wall_us=wall_us, background_sync=background_sync)
 
     # The rover bridge (the same class `fdi-bridge run` uses).
-    from drivers.mavlink.io import MavPacker
-    from firmware_host.commands.run import RoverBridge
 
     class Packer(MavPacker):  # the autopilot's link: packets encoded, recorded, not sent
         def close(self) -> None:

@@ -34,7 +34,6 @@ periodic jobs for a given time so tests drive it with
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import logging
 import selectors
@@ -44,16 +43,23 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Hashable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from drivers.configload import load_dataclass, read_toml
 from drivers.mavlink import io as mio
 from drivers.mavlink.framer import MavFrame, MavFramer, frame_target, signature_ok
 from drivers.mavlink.links import Link, open_link
 from fdi.errors import ConfigError, PortError
 from firmware_host.mavlink.params import ParamStore
+from firmware_host.runtime.config import (
+    BridgeConfig,
+    bridge_config,
+    load_bridge_file,
+    mavlink_config,
+)
+from firmware_host.runtime.config_mavlink import EndpointConfig as EndpointConfig  # re-exported
+from firmware_host.runtime.config_mavlink import MavlinkConfig
 
 log = logging.getLogger("fdi_bridge.router")
 
@@ -63,65 +69,16 @@ Clock = Callable[[], float]
 # Configuration
 
 
-@dataclass(frozen=True)
-class EndpointConfig:
-    """One link: ``url`` in the mavutil spelling (see :mod:`drivers.mavlink.links`)."""
-
-    url: str
-    baud: int = field(default=115200, metadata={"gt": 0, "doc": "serial links only"})
-    signing: bool = field(default=False, metadata={"doc": "require signed commands (GCS only)"})
-    name: str = ""
-
-
-@dataclass(frozen=True)
-class MavlinkConfig:
-    """The ``[mavlink]`` table of a vehicle's TOML file."""
-
-    autopilot: EndpointConfig = EndpointConfig("udpin:127.0.0.1:14555")
-    gcs: tuple[EndpointConfig, ...] = (EndpointConfig("udpin:127.0.0.1:14550"),)
-    system_id: int = field(default=1, metadata={"ge": 1, "le": 255})
-    component_id: int = field(default=191, metadata={"ge": 1, "le": 255})
-    pilot_system_id: int = field(
-        default=255, metadata={"ge": 1, "le": 255, "doc": "GCS id for MANUAL_CONTROL"}
-    )
-    heartbeat_hz: float = field(default=1.0, metadata={"gt": 0.0, "le": 50.0})
-    stats_hz: float = field(default=2.0, metadata={"ge": 0.0, "le": 50.0})
-    statustext_per_s: float = field(default=5.0, metadata={"gt": 0.0, "le": 50.0})
-    queue_packets: int = field(default=2000, metadata={"ge": 16})
-    read_burst: int = field(default=64, metadata={"ge": 1})
-    tlog_dir: str = ""
-    tlog_max_bytes: int = field(default=64 * 1024 * 1024, metadata={"ge": 4096})
-    param_file: str = ""
-    signing_key_file: str = ""
-    reconnect_max_s: float = field(
-        default=5.0, metadata={"gt": 0.0, "doc": "serial links: longest wait between reopens"}
-    )
-
-    def __post_init__(self) -> None:
-        if any(g.signing for g in self.gcs) and not self.signing_key_file:
-            raise ValueError("signing is on for a GCS link but signing_key_file is empty")
-
-
 def load_mavlink_config(path: str | Path) -> MavlinkConfig:
-    """The ``[mavlink]`` table of the TOML file at ``path`` (defaults when absent)."""
-    table = read_toml(path).get("mavlink", {})
-    if not isinstance(table, dict):
-        raise ConfigError(str(path), "mavlink", "a table", type(table).__name__)
-    return load_dataclass(MavlinkConfig, table, str(path), "mavlink")
+    """The ``[mavlink]`` table of a file or preset (its defaults when absent)."""
+    return mavlink_config(load_bridge_file(path))
 
 
-def load_vehicle_config(path: str | Path) -> Any:
-    """The rest of the file at ``path`` as a :class:`~firmware_host.runtime.config.BridgeConfig`
-    when it
-    has a ``[rover]`` table (the one-process mode), else None. ``[mavlink]`` is left out: it is
-    :func:`load_mavlink_config`'s."""
-    from firmware_host.runtime.config import BridgeConfig
-
-    table = read_toml(path)
-    if "rover" not in table:
-        return None
-    rest = {k: v for k, v in table.items() if k != "mavlink"}
-    return load_dataclass(BridgeConfig, rest, str(path))
+def load_vehicle_config(path: str | Path) -> BridgeConfig | None:
+    """The rover's view of the file at ``path`` when it has a ``[rover]`` table (the
+    one-process mode), else None."""
+    bf = load_bridge_file(path)
+    return bridge_config(bf) if bf.rover is not None else None
 
 
 def load_signing_key(path: str | Path) -> bytes:
@@ -709,95 +666,3 @@ def _param_name(raw: Any) -> str:
     if isinstance(raw, bytes | bytearray):
         raw = raw.split(b"\0", 1)[0].decode("ascii", errors="replace")
     return str(raw).split("\0", 1)[0]
-
-
-# ---------------------------------------------------------------------------------------------
-# CLI
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", help="vehicle TOML file with a [mavlink] table")
-    parser.add_argument("--autopilot", help="override [mavlink].autopilot.url")
-    parser.add_argument("--baud", type=int, help="override the autopilot's baud rate")
-    parser.add_argument("--gcs", action="append", help="GCS endpoint URL (repeatable)")
-    parser.add_argument("--tlog-dir", help="record a .tlog here")
-    parser.add_argument("--seconds", type=float, default=0.0, help="stop after this long")
-    parser.add_argument(
-        "--bench", action="store_true", help="measure forwarding latency at 1 000 and 10 000 pkt/s"
-    )
-    parser.add_argument("--bench-rate", type=int, action="append", help="packets/s (repeatable)")
-    parser.add_argument("--bench-seconds", type=float, default=5.0, help="seconds per run")
-    parser.add_argument("--bench-runs", type=int, default=1, help="runs per rate")
-
-
-def run(args: argparse.Namespace) -> int:
-    import dataclasses
-    import json
-
-    if args.bench:
-        from firmware_host.devtools.router_bench import bench_forwarding
-
-        for rate in args.bench_rate or (1000, 10000):
-            for _ in range(max(1, args.bench_runs)):
-                print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
-        return 0
-    cfg = load_mavlink_config(args.config) if args.config else MavlinkConfig()
-    changes: dict[str, Any] = {}
-    if args.autopilot or args.baud:
-        changes["autopilot"] = dataclasses.replace(
-            cfg.autopilot,
-            url=args.autopilot or cfg.autopilot.url,
-            baud=args.baud or cfg.autopilot.baud,
-        )
-    if args.gcs:
-        changes["gcs"] = tuple(EndpointConfig(u) for u in args.gcs)
-    if args.tlog_dir:
-        changes["tlog_dir"] = args.tlog_dir
-    cfg = dataclasses.replace(cfg, **changes)
-    params = ParamStore(cfg.param_file or None)
-    router = Router(cfg, params=params)
-    log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
-    rover = _start_rover(args.config, router) if args.config else None
-    deadline = time.monotonic() + args.seconds if args.seconds > 0 else None
-    summary: dict[str, Any] = {}
-    try:
-        while deadline is None or time.monotonic() < deadline:
-            router.poll(0.05)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if rover is not None:
-            summary["rover"] = rover()
-        router.close()
-        summary["router"] = router.summary()
-        print(json.dumps(summary))
-    return 0
-
-
-def _start_rover(path: str, router: Router) -> Callable[[], dict[str, Any]] | None:
-    """With a ``[rover]`` table in the config, run the rover pipeline on its receiver port.
-
-    Returns a function that stops it and gives its summary; None without a ``[rover]`` table.
-    """
-    from firmware_host.mavlink.rover import attach_rover, run_rover_reader
-    from firmware_host.rover.pipeline import RoverPipeline
-
-    bridge = load_vehicle_config(path)
-    if bridge is None:
-        return None
-    pipeline = RoverPipeline(bridge.rover)
-    attach_rover(pipeline, router)
-    stop = threading.Event()
-    thread = threading.Thread(
-        target=run_rover_reader, args=(pipeline, stop), name="rover", daemon=True
-    )
-    thread.start()
-    log.info("rover pipeline on %s, corrected fixes to the autopilot", bridge.rover.port.url)
-
-    def finish() -> dict[str, Any]:
-        stop.set()
-        thread.join(timeout=2.0)
-        pipeline.finish()
-        return pipeline.summary()
-
-    return finish

@@ -23,7 +23,7 @@ from drivers.outland.framecodec import load_protocol
 from drivers.outland.link import OutlandLink, Telemetry
 from drivers.transport import SerialSettings, open_port
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
-from firmware_host.devtools.rov_sim import parse_fault
+from firmware_host.devtools.rov_sim import RovPlant, parse_fault
 from firmware_host.rov.config import RovConfig, load_rov_config, protocol_path
 from firmware_host.rov.control import RovController, epoch_record
 from firmware_host.runtime.loop import FixedRateLoop
@@ -134,7 +134,6 @@ def run_rov(
 
 def bench_rov_step(n: int) -> dict[str, float]:
     """p50/p99 (ms) of one ROV step (detector + substitution + PID), on simulated data."""
-    from firmware_host.devtools.rov_sim import RovPlant
 
     cfg = RovConfig()
     plant = RovPlant(cfg.sim, [parse_fault("drift:30@70")])

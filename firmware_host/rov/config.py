@@ -1,66 +1,19 @@
-"""Typed configuration of the ROV heading hold (``config/rov.toml``, ``config/rov-paper.toml``).
+"""Typed configuration of the ROV heading hold: the ``[rov]`` table of ``config/rov.toml``.
 
-Built-in defaults are the dataclass defaults (= ``config/rov.toml``); a preset states only what it
-changes. Loading and validation are :mod:`drivers.configload`'s.
+The schema is :mod:`firmware_host.runtime.config_rov` (re-exported here) and the one loader
+:func:`firmware_host.runtime.config.load_bridge_file`; :func:`load_rov_config` is the ROV's view
+of a file.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
 
-from drivers.configload import load_file
-from drivers.transport import SerialSettings
-from fdi.heading_ft import FtConfig
-from fdi.lms_fir import DetectorConfig
-from fdi.pid import PidConfig
-from firmware_host.runtime.recorder import RecorderConfig
-
-Wiring = Literal["rs232", "rs485"]
-
-
-@dataclass(frozen=True)
-class LinkConfig:
-    """The vehicle link: port, wiring, protocol description (path relative to the config file)."""
-
-    port: SerialSettings = field(default_factory=lambda: SerialSettings(baudrate=115200))
-    wiring: Wiring = "rs232"
-    protocol: str = "protocols/outland1000.toml"
-    address: int = field(default=1, metadata={"ge": 0, "le": 255})
-    reply_timeout_s: float = field(default=0.05, metadata={"gt": 0.0, "lt": 1.0})
-    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1})  # reopen backoff cap
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    """The simulated vehicle: first-order Nomoto yaw model, current, compass noise."""
-
-    seed: int = 1
-    nomoto_T_s: float = field(default=1.5, metadata={"gt": 0.0})
-    nomoto_K: float = field(default=0.2, metadata={"gt": 0.0, "doc": "deg/s per % thrust"})
-    current_max_pct: float = field(default=4.0, metadata={"ge": 0.0})
-    current_amp_pct: float = field(default=1.0, metadata={"ge": 0.0})
-    current_period_s: float = field(default=900.0, metadata={"gt": 0.0})
-    compass_noise_deg: float = field(default=0.5, metadata={"ge": 0.0})
-    initial_heading_deg: float = 110.0
-    depth_m: float = 10.0
-
-
-@dataclass(frozen=True)
-class RovConfig:
-    """Everything the ROV loop needs (top level of ``config/rov.toml``)."""
-
-    period_s: float = field(default=0.2, metadata={"gt": 0.0})
-    setpoint_deg: float = field(default=150.0, metadata={"ge": 0.0, "lt": 360.0})
-    surge_pct: float = field(default=0.0, metadata={"ge": -100.0, "le": 100.0})
-    dropout_hold_s: float = field(default=1.0, metadata={"ge": 0.0})
-    detector: DetectorConfig = field(default_factory=DetectorConfig)
-    ft: FtConfig = field(default_factory=FtConfig)
-    pid: PidConfig = field(default_factory=PidConfig)
-    link: LinkConfig = field(default_factory=LinkConfig)
-    sim: SimConfig = field(default_factory=SimConfig)
-    recorder: RecorderConfig = field(default_factory=RecorderConfig)
+from firmware_host.runtime.config import load_bridge_file, resolve_protocol, rov_config
+from firmware_host.runtime.config_rov import LinkConfig as LinkConfig
+from firmware_host.runtime.config_rov import RovConfig as RovConfig
+from firmware_host.runtime.config_rov import SimConfig as SimConfig
+from firmware_host.runtime.config_rov import Wiring as Wiring
 
 
 def project_root() -> Path:
@@ -68,13 +21,12 @@ def project_root() -> Path:
 
 
 def load_rov_config(path: str | Path | None) -> tuple[RovConfig, Path]:
-    """Load a preset; returns the config and the directory protocol paths are relative to."""
-    if path is None:
-        return RovConfig(), project_root() / "config"
-    p = Path(path)
-    return load_file(RovConfig, p), p.resolve().parent
+    """Load a file or preset (``None``: the built-in defaults); returns the ROV's config and the
+    directory protocol paths are relative to (the loader has already made ``link.protocol``
+    absolute: beside the file, else the packaged one)."""
+    return rov_config(load_bridge_file(path))
 
 
 def protocol_path(cfg: RovConfig, base: Path) -> Path:
-    p = Path(cfg.link.protocol)
-    return p if p.is_absolute() else base / p
+    """The protocol file of ``cfg``: beside ``base``, else among the packaged ones."""
+    return resolve_protocol(cfg.link.protocol, base)

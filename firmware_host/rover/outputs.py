@@ -22,6 +22,7 @@ from collections.abc import Callable
 from typing import Any
 
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
+from drivers.mavlink.io import GpsInputFix, MavEndpoint
 from drivers.ptypair import PtyPair
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
@@ -202,8 +203,6 @@ class MavlinkGpsSink:
     """GPS_INPUT per epoch; STATUSTEXT and HOLD on alarm; heartbeat at 1 Hz of fix time."""
 
     def __init__(self, cfg: RoverConfig, endpoint: Any | None = None) -> None:
-        from drivers.mavlink.io import GpsInputFix, MavEndpoint
-
         self._fix_cls = GpsInputFix
         o = cfg.output
         self.cfg = cfg

@@ -21,6 +21,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from drivers.mavlink.io import GpsInputFix
+from firmware_host.rover.outputs import gps_week_ms, unix_time
 from firmware_host.rover.pipeline import EpochOutcome
 from firmware_host.runtime.config import RoverConfig
 
@@ -91,8 +93,6 @@ class RoverFailsafe:
         if not e.valid:
             return
         if e.date is not None and e.utc_s is not None:
-            from firmware_host.rover.outputs import unix_time
-
             self._last_unix = unix_time(e.date, e.utc_s)
         self._last_valid_t = self.clock()
         if self.watchdog.valid() == "back":
@@ -127,8 +127,6 @@ class RoverFailsafe:
     def _send_no_fix(self, now: float) -> None:
         if self.endpoint is None:
             return
-        from drivers.mavlink.io import GpsInputFix
-        from firmware_host.rover.outputs import gps_week_ms
 
         week = ms = 0
         time_usec = 0

@@ -1,0 +1,65 @@
+"""Schema of the ROV heading hold: the ``[rov]`` table (``config/rov.toml``, ``rov-paper.toml``).
+
+Built-in defaults are the dataclass defaults (= ``config/rov.toml``); a preset states only what it
+changes. Loading and validation: :func:`firmware_host.runtime.config.load_bridge_file`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from drivers.transport import SerialSettings
+from fdi.heading_ft import FtConfig
+from fdi.lms_fir import DetectorConfig
+from fdi.pid import PidConfig
+from firmware_host.runtime.recorder import RecorderConfig
+
+Wiring = Literal["rs232", "rs485"]
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    """The vehicle link: port, wiring, protocol description (a path relative to the config file,
+    else one of the packaged ``protocols/``; the loader makes it absolute)."""
+
+    port: SerialSettings = field(default_factory=lambda: SerialSettings(baudrate=115200))
+    wiring: Wiring = "rs232"
+    protocol: str = "protocols/outland1000.toml"
+    address: int = field(default=1, metadata={"ge": 0, "le": 255})
+    reply_timeout_s: float = field(default=0.05, metadata={"gt": 0.0, "lt": 1.0})
+    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1})  # reopen backoff cap
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """The simulated vehicle: first-order Nomoto yaw model, current, compass noise."""
+
+    seed: int = 1
+    nomoto_T_s: float = field(default=1.5, metadata={"gt": 0.0})
+    nomoto_K: float = field(default=0.2, metadata={"gt": 0.0, "doc": "deg/s per % thrust"})
+    current_max_pct: float = field(default=4.0, metadata={"ge": 0.0})
+    current_amp_pct: float = field(default=1.0, metadata={"ge": 0.0})
+    current_period_s: float = field(default=900.0, metadata={"gt": 0.0})
+    compass_noise_deg: float = field(default=0.5, metadata={"ge": 0.0})
+    initial_heading_deg: float = 110.0
+    depth_m: float = 10.0
+
+
+@dataclass(frozen=True)
+class RovConfig:
+    """Everything the ROV loop needs (the ``[rov]`` table of ``config/rov.toml``).
+
+    ``recorder`` is the file's top-level ``[recorder]`` (one per file), filled in by the loader.
+    """
+
+    period_s: float = field(default=0.2, metadata={"gt": 0.0})
+    setpoint_deg: float = field(default=150.0, metadata={"ge": 0.0, "lt": 360.0})
+    surge_pct: float = field(default=0.0, metadata={"ge": -100.0, "le": 100.0})
+    dropout_hold_s: float = field(default=1.0, metadata={"ge": 0.0})
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    ft: FtConfig = field(default_factory=FtConfig)
+    pid: PidConfig = field(default_factory=PidConfig)
+    link: LinkConfig = field(default_factory=LinkConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    recorder: RecorderConfig = field(default_factory=RecorderConfig, metadata={"toml": False})
