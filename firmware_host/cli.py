@@ -70,6 +70,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "firmware_host.devtools.soak",
         "rover + ROV together, accelerated, faults and port drops",
     ),
+    "fleet": (
+        "firmware_host.devtools.fleet",
+        "evaluate (and sweep) a configuration over a whole directory of logs, on Dask",
+    ),
     "mavlink": (
         "firmware_host.commands.mavlink",
         "MAVLink passthrough between autopilot and ground stations",
