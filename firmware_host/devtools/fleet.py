@@ -40,14 +40,19 @@ from pathlib import Path
 from typing import Any, Literal
 
 from drivers.capture import is_capture
-from drivers.configload import load_dataclass, read_toml
+from drivers.configload import read_toml
 from fdi.errors import ConfigError, FdiBridgeError
 from firmware_host.commands.replay import load_input
 from firmware_host.devtools.eval import run_ours
 from firmware_host.devtools.score import score_rover
 from firmware_host.rov.config import RovConfig, load_rov_config
 from firmware_host.rov.tlog import load_dive, replay
-from firmware_host.runtime.config import CONFIG_DIR, BridgeConfig
+from firmware_host.runtime.config import (
+    BridgeConfig,
+    bridge_config,
+    parse_bridge_file,
+    resolve_config_path,
+)
 
 LogKind = Literal["capture", "nmea", "tlog"]
 
@@ -190,22 +195,10 @@ def _set_key(table: dict[str, Any], key: str, value: Any) -> None:
     node[parts[-1]] = value
 
 
-def _config_path(name: str | None) -> Path | None:
-    if name is None:
-        return None
-    p = Path(name)
-    if p.is_file():
-        return p
-    preset = CONFIG_DIR / f"{name}.toml"
-    if not p.suffix and preset.is_file():
-        return preset
-    raise ConfigError(name, "(file)", "a config file or preset name", "no such file or preset")
-
-
 def point_configs(config: str | None, points: Sequence[SweepPoint]) -> dict[str, BridgeConfig]:
     """Each point's configuration, validated by the one loader (a bad point fails here)."""
-    path = _config_path(config)
-    base = read_toml(path) if path is not None else {}
+    path = resolve_config_path(config) if config is not None else None
+    base = read_toml(path) if path is not None else {"rover": {}}
     out: dict[str, BridgeConfig] = {}
     for pt in points:
         table = json.loads(json.dumps(base))  # a deep copy of plain TOML data
@@ -214,7 +207,7 @@ def point_configs(config: str | None, points: Sequence[SweepPoint]) -> dict[str,
         where = str(path) if path is not None else "(built-in defaults)"
         if pt.overrides:
             where += f" [sweep {pt.label}]"
-        out[pt.label] = load_dataclass(BridgeConfig, table, where)
+        out[pt.label] = bridge_config(parse_bridge_file(table, where, path))
     return out
 
 
@@ -539,7 +532,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise FdiBridgeError(f"fleet: --out {args.out} exists and is not a directory")
     configs = point_configs(args.config, parse_sweeps(args.sweep))
-    rov, _ = load_rov_config(_config_path(args.rov_config))
+    rov, _ = load_rov_config(resolve_config_path(args.rov_config))
     logs = discover(args.logs, args.truth_dir)
     if not logs:
         raise FdiBridgeError("fleet: no logs found (captures, .nmea/.log/.txt, .tlog)")
