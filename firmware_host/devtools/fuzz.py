@@ -26,19 +26,45 @@ import argparse
 import itertools
 import json
 import logging
+import math
 import time
 import traceback
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
+from drivers.capture import (
+    HEADER_CHANNEL,
+    RECORD_SYNC,
+    CaptureReader,
+    Channel,
+    Record,
+    encode_header,
+    encode_record,
+)
+from drivers.gps.nmea import (
+    Gga,
+    Gll,
+    Ignored,
+    NmeaFramer,
+    Rejected,
+    Rmc,
+    parse_sentence,
+    with_checksum,
+)
+from drivers.gps.stream import NmeaStream
+from drivers.mavlink.framer import MAX_FRAME, MavFramer, x25crc
+from drivers.mavlink.io import GpsInputFix, MavPacker, crc_extra_table, decode_packet
+from drivers.outland.framecodec import Framer, checksum, decode, load_protocol
+from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, encode_telemetry
 from drivers.ratelog import RateLimitedLog
-from fdi.errors import DecodeError
+from fdi.errors import CaptureFormatError, DecodeError
+from firmware_host.devtools.rover_sim import RoverScenario, generate
 
-CODECS = ("nmea", "outland", "mavlink")
+CODECS = ("nmea", "outland", "mavlink", "capture")
 _quiet_logger = logging.getLogger("fdi_bridge.fuzz.rejects")
 _quiet_logger.addHandler(logging.NullHandler())
 _quiet_logger.propagate = False  # a million bad sentences are counted, not logged
@@ -64,9 +90,6 @@ def _chunks(data: bytes, cuts: list[int]) -> list[bytes]:
 
 
 def nmea_corpus() -> list[bytes]:
-    from drivers.gps.nmea import with_checksum
-    from firmware_host.devtools.rover_sim import RoverScenario, generate
-
     sc = RoverScenario(rate_hz=5.0, duration_s=4.0, seed=1, gst=True, zda=True)
     lines: list[bytes] = []
     for _, data, _ in generate(sc):
@@ -88,14 +111,10 @@ def nmea_corpus() -> list[bytes]:
 
 
 def outland_protocol() -> Any:
-    from drivers.outland.framecodec import load_protocol
-
     return load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
 
 
 def outland_corpus(proto: Any) -> list[bytes]:
-    from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, encode_telemetry
-
     out = []
     for h in (0.0, 123.45, 359.99):
         out.append(encode_telemetry(proto, Telemetry(h, 12.3, -5.0, 3.0, 1), node=1))
@@ -106,8 +125,6 @@ def outland_corpus(proto: Any) -> list[bytes]:
 
 
 def mavlink_corpus() -> list[bytes]:
-    from drivers.mavlink.io import GpsInputFix, MavPacker
-
     p = MavPacker(1, 191)
     fix = GpsInputFix(1_600_000_000_000_000, 2100, 123456, 3, 32.02, 118.85, 12.0, 0.9, None,
                       1.0, 0.5, None, 0.1, 0.5, 1.0, 9)
@@ -119,8 +136,6 @@ def mavlink_corpus() -> list[bytes]:
     out.append(s.send_heartbeat())
     out.append(s.send_gps_input(fix))
     # MAVLink 1 (0xFE): a HEARTBEAT packed by hand (CRC_EXTRA 50).
-    from drivers.mavlink.framer import x25crc
-
     body = bytes([9, 0, 1, 1, 0]) + bytes([0, 0, 0, 0, 18, 8, 0, 0, 3])
     crc = x25crc(body + bytes([50]))
     out.append(bytes([0xFE]) + body + crc.to_bytes(2, "little"))
@@ -180,11 +195,6 @@ def mutate(rng: np.random.Generator, corpus: list[bytes], sync: bytes, len_offse
 def check_nmea(data: bytes, cuts: list[int], max_line: int = 120) -> Counter[str]:
     """Framer + parser + stream on ``data`` fed in the pieces ``cuts`` gives; raises on a
     broken invariant; returns the rejections by reason."""
-    import math
-
-    from drivers.gps.nmea import Gga, Gll, Ignored, NmeaFramer, Rejected, Rmc, parse_sentence
-    from drivers.gps.stream import NmeaStream
-
     framer = NmeaFramer(max_line)
     items: list[bytes | Rejected] = []
     for chunk in _chunks(data, cuts):
@@ -243,8 +253,6 @@ def check_nmea(data: bytes, cuts: list[int], max_line: int = 120) -> Counter[str
 
 
 def check_outland(data: bytes, cuts: list[int], proto: Any) -> Counter[str]:
-    from drivers.outland.framecodec import Framer, checksum, decode
-
     framer = Framer(proto)
     frames = []
     for chunk in _chunks(data, cuts):
@@ -271,9 +279,6 @@ def check_outland(data: bytes, cuts: list[int], proto: Any) -> Counter[str]:
 
 
 def check_mavlink(data: bytes, cuts: list[int]) -> Counter[str]:
-    from drivers.mavlink.framer import MAX_FRAME, MavFramer, x25crc
-    from drivers.mavlink.io import crc_extra_table, decode_packet
-
     extras = crc_extra_table()
     framer = MavFramer(extras)
     frames = []
@@ -300,6 +305,120 @@ def check_mavlink(data: bytes, cuts: list[int]) -> Counter[str]:
     return Counter(st.by_reason)
 
 
+# --------------------------------------------------------------------------- the capture reader
+
+CAPTURE_OPS = ("bit_flip", "overwrite", "insert", "delete", "truncate", "header", "header_copy")
+
+
+class CaptureCase:
+    """A generated capture damaged by seeded operations that know which records they hit.
+
+    The capture's records are kept as separate byte strings while they are damaged, so every
+    operation knows the records it touches (an insertion between two records touches none; a
+    deletion touches every record it overlaps); the invariant is that exactly the untouched
+    records are replayed, in order, and that the bytes add up (records start + intact records
+    + skipped bytes = file length). A header damaged together with its copy must give a
+    :class:`CaptureFormatError`, never a crash.
+    """
+
+    CHANNELS: ClassVar[list[Channel]] = [
+        Channel("gps rx", "/dev/ttyUSB0"),
+        Channel("mavlink tx", "udpout:127.0.0.1:14550", 57600, direction="tx"),
+    ]
+
+    def __init__(self) -> None:
+        self.expected: list[Record] = []
+        self.header_lost = False
+        self.ops: Counter[str] = Counter()
+
+    def make(self, rng: np.random.Generator) -> bytes:
+        n = int(rng.integers(1, 40))
+        records = []
+        for k in range(n):
+            data = rng.integers(0, 256, int(rng.integers(0, 200)), dtype=np.uint8).tobytes()
+            if rng.random() < 0.2:  # data that holds the sync marker: resync must not trust it
+                cut = int(rng.integers(len(data) + 1))
+                data = data[:cut] + RECORD_SYNC + data[cut:]
+            records.append(Record(1_700_000_000_000_000 + 1000 * k, int(rng.integers(2)), data))
+        head = encode_header(self.CHANNELS, "fuzz", "2026-12-01T00:00:00Z")
+        copy_len = len(encode_record(0, HEADER_CHANNEL, b"")) + int.from_bytes(head[8:12], "big")
+        primary = bytearray(head[: len(head) - copy_len])
+        copy = bytearray(head[len(head) - copy_len :])
+        orig = [encode_record(r.t_us, r.channel, r.data) for r in records]
+        parts = [bytearray(b) for b in orig]
+        before = [b""] * n  # junk inserted between records (damages none)
+        primary_hit = copy_hit = False
+        tail_cut = n  # records from this index on are cut off
+        for _ in range(int(rng.integers(1, 4))):
+            op = CAPTURE_OPS[int(rng.integers(len(CAPTURE_OPS)))]
+            self.ops[op] += 1
+            i = int(rng.integers(n))
+            part = parts[i]
+            if op in ("bit_flip", "overwrite") and part:
+                j = int(rng.integers(len(part)))
+                part[j] = part[j] ^ (1 << int(rng.integers(8))) if op == "bit_flip" else int(
+                    rng.integers(256))
+            elif op == "insert":
+                junk = rng.integers(0, 256, int(rng.integers(1, 40)), dtype=np.uint8).tobytes()
+                if rng.random() < 0.5:
+                    before[i] += junk
+                else:
+                    j = int(rng.integers(1, max(2, len(part))))
+                    part[j:j] = junk
+            elif op == "delete":
+                span = int(rng.integers(1, 60))
+                j = int(rng.integers(len(part))) if part else 0
+                k = i
+                while span > 0 and k < n:  # the deletion runs on into the next records
+                    cut = len(parts[k][j : j + span])
+                    del parts[k][j : j + span]
+                    span -= cut
+                    j = 0
+                    k += 1
+            elif op == "truncate":
+                del part[int(rng.integers(len(part) + 1)) :]
+                tail_cut = min(tail_cut, i + 1)
+            elif op == "header":
+                primary[int(rng.integers(len(primary)))] ^= 1 << int(rng.integers(8))
+                primary_hit = True
+            else:
+                copy[int(rng.integers(len(copy)))] ^= 1 << int(rng.integers(8))
+                copy_hit = True
+        body = b"".join(before[k] + parts[k] for k in range(tail_cut))
+        # Intact: untouched, or touched so that its bytes are all there again (a deleted last
+        # byte followed by an equal one); exactly these must be replayed, in order.
+        self.expected = [r for k, r in enumerate(records[:tail_cut])
+                         if parts[k] == orig[k] or orig[k] in body]
+        copy_hit = copy_hit and bytes(copy) != head[len(primary) :]
+        primary_hit = primary_hit and bytes(primary) != head[: len(primary)]
+        self.header_lost = primary_hit and copy_hit
+        return bytes(primary + copy) + body
+
+
+def check_capture(data: bytes, cuts: list[int], case: CaptureCase) -> Counter[str]:
+    """Read ``data`` (block size chosen by ``cuts``); exactly the undamaged records come out."""
+    block = 16 + (cuts[0] % 4096 if cuts else 1 << 20)  # small blocks: markers straddle them
+    try:
+        reader = CaptureReader("fuzz.cap", data=data, block=block)
+    except CaptureFormatError as err:
+        _require(case.header_lost or "bad magic" in str(err), f"header not recovered: {err}")
+        return Counter({"header_lost": 1})
+    got = list(reader)
+    _require(reader.channels == case.CHANNELS, "channels differ")
+    _require(got == case.expected,
+             f"replayed {len(got)} records, expected the {len(case.expected)} undamaged ones")
+    _require(reader.records_start + reader.good_bytes + reader.skipped_bytes == len(data),
+             f"bytes: {reader.records_start} + {reader.good_bytes} good + "
+             f"{reader.skipped_bytes} skipped != {len(data)}")
+    out: Counter[str] = Counter({"records_replayed": len(got),
+                                 "skipped_bytes": reader.skipped_bytes,
+                                 "damaged_regions": reader.damaged_regions,
+                                 "truncated": int(reader.truncated)})
+    if reader.notes:
+        out["header_recovered"] += 1
+    return out
+
+
 # --------------------------------------------------------------------------- the runner
 
 
@@ -319,6 +438,9 @@ def make_case(codec: str) -> tuple[Callable[[np.random.Generator], bytes],
     if codec == "mavlink":
         corpus = mavlink_corpus()
         return (lambda rng: mutate(rng, corpus, b"\xfd", [1]), check_mavlink)
+    if codec == "capture":
+        case = CaptureCase()  # the generator tells the checker what it damaged
+        return (case.make, lambda d, c: check_capture(d, c, case))
     raise ValueError(f"unknown codec {codec!r} (known: {', '.join(CODECS)})")
 
 
