@@ -23,6 +23,7 @@ A failure is an input that breaks one of these; the first few are kept (hex) in 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import json
 import logging
@@ -268,7 +269,9 @@ def check_outland(data: bytes, cuts: list[int], proto: Any) -> Counter[str]:
     for f in frames:
         _require(len(f.payload) <= proto.max_payload, "payload over the cap")
         _require(f.raw[: len(proto.sync)] == bytes(proto.sync), "frame without sync")
-        _require(checksum(proto.payload_checksum, f.payload) == f.raw[-1:], "payload checksum")
+        pcs = proto.payload_cs_len
+        _require(checksum(proto.payload_checksum, f.payload) == f.raw[len(f.raw) - pcs :],
+                 "payload checksum")
         try:
             _, values = decode(proto, f)
         except DecodeError as err:
@@ -419,6 +422,84 @@ def check_capture(data: bytes, cuts: list[int], case: CaptureCase) -> Counter[st
     return out
 
 
+# --------------------------------------------------------------------------- checksum strength
+
+ERROR_MODELS = ("bit2_random", "bit2_same_bit", "byte_swap", "mutation")
+
+
+def _corrupt(rng: np.random.Generator, frame: bytes, model: str, corpus: list[bytes]) -> bytes:
+    data = bytearray(frame)
+    n = len(data)
+    if model == "bit2_random":  # two different bits anywhere
+        i, j = rng.choice(n * 8, 2, replace=False)
+        data[i // 8] ^= 1 << (i % 8)
+        data[j // 8] ^= 1 << (j % 8)
+    elif model == "bit2_same_bit":  # the same bit in two bytes (a stuck line, a baud glitch)
+        i, j = rng.choice(n, 2, replace=False)
+        b = 1 << int(rng.integers(8))
+        data[i] ^= b
+        data[j] ^= b
+    elif model == "byte_swap":  # two adjacent different bytes exchanged
+        pairs = [k for k in range(n - 1) if data[k] != data[k + 1]]
+        k = pairs[int(rng.integers(len(pairs)))]
+        data[k], data[k + 1] = data[k + 1], data[k]
+    else:
+        return mutate(rng, corpus, frame[:2], [4])
+    return bytes(data)
+
+
+def checksum_strength(kinds: tuple[str, ...] = ("xor8", "sum8", "crc16_ccitt_false",
+                                                "crc16_modbus", "crc32"),
+                      inputs: int = 200_000, seed: int = 0) -> dict[str, Any]:
+    """Undetected corrupt Outland frames per checksum and error model.
+
+    For each checksum (header and payload alike, in the protocol file's layout otherwise), valid
+    telemetry and thruster frames with random values are corrupted by one error model and fed
+    to a fresh framer; a frame it accepts whose bytes are not one of the originals is an
+    undetected corrupt frame; ``after_ranges`` counts those that also pass the fields' ranges
+    (what reaches the detector)."""
+    base = outland_protocol()
+    out: dict[str, Any] = {"inputs_per_model": inputs, "seed": seed, "kinds": {}}
+    for kind in kinds:
+        proto = dataclasses.replace(base, header_checksum=kind, payload_checksum=kind)
+        rng = np.random.default_rng(seed)
+        frames = []
+        for _ in range(256):
+            tel = Telemetry(float(rng.uniform(0, 359.99)), float(rng.uniform(0, 300)),
+                            float(rng.uniform(-30, 30)), float(rng.uniform(-30, 30)),
+                            int(rng.integers(256)))
+            frames.append(encode_telemetry(proto, tel, node=1))
+            cmd = ThrusterCommand(*(float(x) for x in rng.integers(-100, 101, 4)))
+            frames.append(encode_command(proto, cmd, node=1, flags=0x80))
+        originals = set(frames)
+        res: dict[str, Any] = {}
+        for model in ERROR_MODELS:
+            undetected = passed_ranges = 0
+            worst_heading = 0.0
+            for _ in range(inputs):
+                good = frames[int(rng.integers(len(frames)))]
+                bad = _corrupt(rng, good, model, frames)
+                for f in Framer(proto).feed(bad):
+                    if f.raw in originals:
+                        continue
+                    undetected += 1
+                    try:
+                        name, values = decode(proto, f)
+                    except DecodeError:
+                        continue
+                    passed_ranges += 1
+                    if name == "telemetry" and good[4] == 0x10:
+                        (g,) = Framer(proto).feed(good)
+                        h0 = decode(proto, g)[1]["heading_deg"]
+                        err = abs((values["heading_deg"] - h0 + 180.0) % 360.0 - 180.0)
+                        worst_heading = max(worst_heading, err)
+            res[model] = {"undetected": undetected, "after_ranges": passed_ranges,
+                          "rate": undetected / inputs, "worst_heading_error_deg":
+                          round(worst_heading, 2)}
+        out["kinds"][kind] = res
+    return out
+
+
 # --------------------------------------------------------------------------- the runner
 
 
@@ -493,9 +574,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="codec to fuzz (repeatable; default: all three)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=None, help="write the report as JSON")
+    parser.add_argument("--checksums", action="store_true",
+                        help="measure undetected corrupt Outland frames per checksum instead "
+                             "(--inputs per error model, default 200 000)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.checksums:
+        rep = checksum_strength(inputs=args.inputs or 200_000, seed=args.seed)
+        n = rep["inputs_per_model"]
+        print(f"undetected corrupt frames per {n} corrupted frames (after the fields' ranges)")
+        print("| checksum | " + " | ".join(ERROR_MODELS) + " |")
+        print("|---" * (len(ERROR_MODELS) + 1) + "|")
+        for kind, res in rep["kinds"].items():
+            cells = [f"{r['undetected']} ({r['after_ranges']})" for r in res.values()]
+            print(f"| {kind} | " + " | ".join(cells) + " |")
+        if args.out is not None:
+            args.out.write_text(json.dumps(rep, indent=2) + "\n")
+        return 0
     reports = []
     for codec in args.codec or CODECS:
         rep = run_fuzz(codec, seconds=None if args.inputs else args.seconds,
