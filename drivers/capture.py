@@ -409,14 +409,15 @@ class CaptureReader:
             self._start = pos + hlen + _CRC.size
             return
         # The header is damaged: use its copy, the first intact record on HEADER_CHANNEL.
-        for rec, end in self._scan(pos):  # the first good record must be the copy
-            copy = self._parse_v2(rec.data) if rec.channel == HEADER_CHANNEL else None
+        with contextlib.closing(self._scan(pos)) as scan:
+            first = next(scan, None)  # the first good record must be the copy
+        if first is not None and first[0].channel == HEADER_CHANNEL:
+            copy = self._parse_v2(first[0].data)
             if copy is not None:
                 self.header, self.channels = copy
-                self._start = end
+                self._start = first[1]
                 self.notes.append("header damaged; read from its copy")
                 return
-            break
         raise CaptureFormatError(f"{self.path}: damaged header (checksum mismatch) and no "
                                  "intact copy of it")
 

@@ -21,6 +21,7 @@ import drivers.capture as capture
 from drivers.capture import CaptureReader, CaptureWriter, Channel
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings
+from firmware_host.commands.doctor import Report, check_recorder
 from firmware_host.commands.replay import run_replay
 from firmware_host.commands.run import RoverBridge
 from firmware_host.devtools.rover_sim import RoverScenario, generate
@@ -223,3 +224,16 @@ def test_read_only_disk_at_start_then_writable(tmp_path: Path) -> None:
         assert rec.recording and rec.lost_records > 0 and rec.files_opened == 1
         ks = _check_session(rec.recordings(), sent, rec.lost_records)
         assert set(range(111, 200)) <= set(ks)  # from the first flush after the remount
+
+
+def test_doctor_shows_a_full_and_a_read_only_recorder_disk(tmp_path: Path) -> None:
+    with small_tmpfs(tmp_path / "disk", size_kb=256) as disk:
+        (disk / "rec").mkdir()
+        fill(disk)
+        rep = Report()
+        check_recorder(rep, str(disk / "rec"), dir_max_mb=4096.0, file_max_mb=64.0)
+        assert any("0 MB free" in w for w in rep.warnings), rep.warnings
+        remount(disk, read_only=True)
+        rep = Report()
+        check_recorder(rep, str(disk / "rec"), dir_max_mb=4096.0, file_max_mb=64.0)
+        assert any("not writable" in p for p in rep.problems), rep.problems
