@@ -30,7 +30,7 @@ import os
 import struct
 import time
 import zlib
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import asdict, dataclass, fields
 from io import BytesIO
 from pathlib import Path
@@ -464,7 +464,7 @@ class CaptureReader:
                 pos += total
                 self.good_bytes += total
 
-    def _scan(self, start: int) -> Iterator[tuple[Record, int]]:
+    def _scan(self, start: int) -> Generator[tuple[Record, int], None, None]:
         """Good version-2 records from ``start`` with their end offsets; damage is skipped."""
         head, crc_s = _HEAD.size, _CRC.size
         block = self._block

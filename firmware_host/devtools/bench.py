@@ -18,7 +18,11 @@ Speed is measured here, never asserted in tests. Figures (goals from issue 6 in 
 by the
   router over a direct UDP path.
 
-With the defaults it runs in about two and a half minutes (the two 60 s loops dominate).
+* replay's peak memory (max RSS of a child ``fdi-bridge replay``) on a 24 h and a 1 min log at
+  1 Hz, plain NMEA and capture (:func:`bench_replay_memory`; alone: ``--only replay-memory``).
+
+With the defaults it runs in about four minutes (the two 60 s loops and the 24 h replays
+dominate).
 """
 
 from __future__ import annotations
@@ -41,7 +45,12 @@ from typing import Any
 
 import numpy as np
 
-from firmware_host.commands.replay import load_input, replay_direct, replay_through_pty
+from firmware_host.commands.replay import (
+    ReplayInput,
+    load_input,
+    replay_direct,
+    replay_through_pty,
+)
 from firmware_host.devtools.rover_sim import RoverScenario, generate, write_run
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig
@@ -69,7 +78,7 @@ def bench_rover(duration_s: float = 600.0, rate_hz: float = 10.0) -> dict[str, A
     """Per-epoch time per strategy and replay throughput, on a generated run."""
     tmp = Path(tempfile.mkdtemp(prefix="fdi-bench-"))
     write_run(RoverScenario(rate_hz=rate_hz, duration_s=duration_s, seed=7), tmp)
-    inp = load_input(tmp / "rover.nmea")
+    inp = ReplayInput(list(load_input(tmp / "rover.nmea").chunks))  # in memory: pipeline alone
     out: dict[str, Any] = {"epochs": int(duration_s * rate_hz), "rate_hz": rate_hz}
     per: dict[str, Any] = {}
     for strat in STRATEGIES:

@@ -1,4 +1,8 @@
-"""``fdi-bridge fuzz --seconds N [--codec nmea|outland|mavlink]``: a seeded mutation fuzzer.
+"""``fdi-bridge fuzz --seconds N [--codec nmea|outland|mavlink|capture]``: a seeded mutation fuzzer.
+
+``--codec capture`` damages generated capture files instead (see :class:`CaptureCase`), and
+``fdi-bridge fuzz --checksums`` measures undetected corrupt Outland frames per checksum
+(:func:`checksum_strength`).
 
 For each codec, inputs are built from a corpus of valid frames (NMEA sentences from the rover
 generator plus every supported type, Outland telemetry and thruster frames from the protocol
@@ -571,7 +575,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=60.0, help="time per codec")
     parser.add_argument("--inputs", type=int, default=None, help="stop after this many inputs")
     parser.add_argument("--codec", choices=CODECS, action="append", default=None,
-                        help="codec to fuzz (repeatable; default: all three)")
+                        help="codec to fuzz (repeatable; default: all four)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=None, help="write the report as JSON")
     parser.add_argument("--checksums", action="store_true",
