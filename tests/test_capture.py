@@ -22,7 +22,9 @@ from drivers.capture import (
     is_capture,
 )
 from fdi.errors import CaptureFormatError
+from firmware_host import cli
 from firmware_host.devtools.fuzz import run_fuzz
+from firmware_host.devtools.rover_sim import RoverScenario, write_run
 
 CHANNELS = [
     Channel("gps", url="/dev/ttyUSB0", baudrate=9600),
@@ -253,3 +255,25 @@ def test_records_longer_than_65535_bytes_are_split(tmp_path: Path) -> None:
     with CaptureWriter(path, CHANNELS[:1]) as w:
         w.write(0, data[:MAX_RECORD], t_us=1)
     assert [len(r.data) for r in CaptureReader(path)] == [MAX_RECORD]
+
+
+def test_replay_of_damaged_captures_from_the_cli(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """One flipped bit costs one record (one epoch), not the rest; a header damaged with its
+    copy is a one-line error and exit 1, not a traceback."""
+    write_run(RoverScenario(rate_hz=5.0, duration_s=60.0, seed=3), tmp_path / "run")
+    raw = bytearray((tmp_path / "run" / "rover.cap").read_bytes())
+    raw[len(raw) // 3] ^= 0x04
+    (tmp_path / "flip.cap").write_bytes(bytes(raw))
+    assert cli.main(["replay", str(tmp_path / "flip.cap"), "--out", str(tmp_path / "o"),
+                     "--no-pty"]) == 0
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["epochs"] == 299  # of 300
+    assert "damaged bytes in 1 place(s) skipped" in summary["input"]["notes"][0]
+    both = bytes(raw).replace(b'"baudrate"', b'"baudratf"')  # the header and its copy
+    (tmp_path / "hdr.cap").write_bytes(both)
+    capsys.readouterr()
+    assert cli.main(["replay", str(tmp_path / "hdr.cap"), "--out", str(tmp_path / "o2")]) == 1
+    err = capsys.readouterr().err
+    assert "damaged header (checksum mismatch) and no intact copy" in err
+    assert "Traceback" not in err
