@@ -14,12 +14,21 @@ URL) and looks like a port to the drivers (``read``, ``write``, ``in_waiting``, 
   the injected clock after ``backoff_min_s``, doubling up to ``backoff_max_s``; the return is
   logged once (``... back after N s``).
 
+* a device path that is **re-pointed** while the old device stays open (a udev symlink such as
+  ``/dev/gps0`` now naming another adapter, a pty link moved to a new pty) is noticed: every
+  ``repoint_check_s`` of the injected clock the path's device and inode (``stat``) are compared
+  with the open descriptor's (``fstat``); when they differ the port is reopened at once on the
+  new device, logged once (``... now names another device; reopening``) and counted
+  (``repoints``). A path that is missing is left to the reads (they fail when the device goes).
+
 Every byte read and written goes to the ``on_rx``/``on_tx`` taps (the flight recorder).
 """
 
 from __future__ import annotations
 
 import logging
+import os
+import stat
 import time
 from collections.abc import Callable
 from typing import Any
@@ -48,6 +57,7 @@ class ResilientPort:
         on_rx: Tap | None = None,
         on_tx: Tap | None = None,
         logger: logging.Logger = log,
+        repoint_check_s: float = 1.0,
     ) -> None:
         if backoff_min_s <= 0 or backoff_max_s < backoff_min_s:
             raise ValueError("need 0 < backoff_min_s <= backoff_max_s")
@@ -60,6 +70,10 @@ class ResilientPort:
         self.on_rx = on_rx
         self.on_tx = on_tx
         self.log = logger
+        self.repoint_check_s = repoint_check_s
+        self._path = _device_path(settings.url)
+        self._identity: tuple[int, int] | None = None  # (st_dev, st_ino) of what is open
+        self._next_check = clock()
         self._port: Any = None
         self._backoff = backoff_min_s
         self._next_attempt = clock()
@@ -71,6 +85,7 @@ class ResilientPort:
         self.tx_dropped = 0
         self.losses = 0
         self.reopens = 0
+        self.repoints = 0
         self.open_attempts = 0
         self.open_failures = 0
         self.service()
@@ -114,6 +129,8 @@ class ResilientPort:
             self._next_attempt = now + self._backoff
             self._backoff = min(2.0 * self._backoff, self.backoff_max_s)
             return False
+        self._identity = self._open_identity()
+        self._next_check = now + self.repoint_check_s
         if self._down_since is not None and (self.losses or self.open_failures):
             self.reopens += 1
             self.log.warning("%s: %s is back after %.1f s (%d attempts)", self.name,
@@ -121,6 +138,48 @@ class ResilientPort:
         self._down_since = None
         self._backoff = self.backoff_min_s
         return True
+
+    def _open_identity(self) -> tuple[int, int] | None:
+        """(st_dev, st_ino) of the open descriptor, when the URL is a device path."""
+        if self._path is None:
+            return None
+        try:
+            st = os.fstat(int(self._port.fileno()))
+        except (AttributeError, OSError, TypeError, ValueError):
+            try:
+                st = os.stat(self._path)
+            except OSError:
+                return None
+        return (st.st_dev, st.st_ino)
+
+    def _check_repoint(self) -> None:
+        """Reopen when the path now names another device than the open one (see the module
+        docstring); cheap: one ``stat`` every ``repoint_check_s``."""
+        if self._identity is None or self._port is None:
+            return
+        now = self.clock()
+        if now < self._next_check:
+            return
+        self._next_check = now + self.repoint_check_s
+        try:
+            st = os.stat(self._path)  # type: ignore[arg-type]
+        except OSError:
+            return  # gone: the reads will report it if the device went with it
+        if not stat.S_ISCHR(st.st_mode) or (st.st_dev, st.st_ino) == self._identity:
+            return
+        self.repoints += 1
+        self.log.warning("%s: %s now names another device; reopening it", self.name,
+                         self.settings.url)
+        port, self._port = self._port, None
+        try:
+            port.close()
+        except Exception:
+            self.log.debug("%s: close of the old device failed", self.name, exc_info=True)
+        self._down_since = now
+        self.open_attempts = 0
+        self._next_attempt = now
+        self._backoff = self.backoff_min_s
+        self.service()
 
     def _lost(self, err: Exception) -> None:
         self.losses += 1
@@ -150,6 +209,7 @@ class ResilientPort:
             return 0
 
     def read(self, size: int = 1) -> bytes:
+        self._check_repoint()
         if self._port is None and not self.service():
             return b""
         try:
@@ -165,12 +225,14 @@ class ResilientPort:
 
     def read_some(self, size: int = 65536) -> bytes:
         """What is waiting (see :func:`drivers.transport.read_some`); ``b""`` while down."""
+        self._check_repoint()
         if self._port is None and not self.service():
             return b""
         return read_some(self, size)
 
     def write(self, data: bytes, /) -> int | None:
         """Bytes written: all of them, or what a non-blocking port took (``write_timeout=0``)."""
+        self._check_repoint()
         if self._port is None and not self.service():
             self.tx_dropped += len(data)
             return 0
@@ -219,8 +281,17 @@ class ResilientPort:
             "tx_dropped": self.tx_dropped,
             "losses": self.losses,
             "reopens": self.reopens,
+            "repoints": self.repoints,
             "open_failures": self.open_failures,
         }
+
+
+def _device_path(url: str) -> str | None:
+    """The filesystem path of a URL that names a device (``/dev/ttyUSB0``, a pty link), else
+    None (``loop://``, ``socket://host:port``, ``rfc2217://`` ...)."""
+    if "://" in url or not url:
+        return None
+    return url
 
 
 def _is_port(p: ResilientPort) -> Port:  # mypy: a ResilientPort is a drivers.transport.Port

@@ -2,15 +2,35 @@
 
 from __future__ import annotations
 
+import binascii
+import struct
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from drivers.outland.framecodec import Frame, Framer, decode, encode, load_protocol
+from drivers.checksums import (
+    checksum_bytes,
+    crc16_ccitt_false,
+    crc16_modbus,
+    crc32,
+)
+from drivers.outland.framecodec import (
+    Frame,
+    Framer,
+    Protocol,
+    checksum,
+    decode,
+    encode,
+    load_protocol,
+)
 from fdi.errors import ConfigError, DecodeError
 
 ROOT = Path(__file__).resolve().parent.parent
-PROTO = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
+DEFAULT = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
+# The literal frames below use the earlier xor8 layout (still offered as data).
+PROTO = replace(DEFAULT, header_checksum="xor8", payload_checksum="xor8")
 
 # telemetry: heading 150.25 deg, depth 10 m, pitch -1.5, roll 0.2, status 3, node 1
 TEL = bytes.fromhex("f55f01001009b2b13ae8036aff140003e2")
@@ -99,3 +119,104 @@ def test_bad_protocol_file_names_key(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as ei:
         load_protocol(p)
     assert "byte_order" in str(ei.value)
+
+
+# --------------------------------------------------------------------------- checksums, ranges
+
+CHECK = b"123456789"
+
+
+@pytest.mark.parametrize(("kind", "value"), [
+    ("xor8", b"\x31"),
+    ("sum8", b"\xdd"),  # 477 mod 256
+    ("crc16_ccitt_false", b"\x29\xb1"),  # CRC RevEng catalogue check values
+    ("crc16_modbus", b"\x37\x4b"),  # 0x4B37, sent low byte first
+    ("crc32", b"\xcb\xf4\x39\x26"),
+    ("none", b""),
+])
+def test_published_check_values(kind: str, value: bytes) -> None:
+    assert checksum_bytes(kind, CHECK) == value  # type: ignore[arg-type]
+    assert checksum(kind, CHECK) == value  # type: ignore[arg-type]
+
+
+def test_crc_values_against_independent_references() -> None:
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        data = rng.integers(0, 256, int(rng.integers(0, 40)), dtype=np.uint8).tobytes()
+        assert crc32(data) == binascii.crc32(data)
+        assert crc16_ccitt_false(data) == binascii.crc_hqx(data, 0xFFFF)  # same polynomial
+        # MODBUS, bit by bit from its definition (reflected 0x8005, init 0xFFFF)
+        crc = 0xFFFF
+        for b in data:
+            crc ^= b
+            for _ in range(8):
+                crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+        assert crc16_modbus(data) == crc
+
+
+@pytest.mark.parametrize("kind", ["crc16_ccitt_false", "crc16_modbus", "crc32"])
+def test_crc_layouts_catch_every_bit_flip_pair_and_swap(kind: str) -> None:
+    """Exhaustive on one telemetry frame: every 1- and 2-bit error and every swap of two
+    adjacent different bytes is rejected (xor8 misses 35 % of same-bit pairs, 91 % of swaps)."""
+    proto = replace(DEFAULT, header_checksum=kind, payload_checksum=kind)  # type: ignore[arg-type]
+    good = encode(proto, "telemetry", {"heading_deg": 150.25, "depth_m": 10.0, "pitch_deg": -1.5,
+                                       "roll_deg": 0.2, "status": 3}, node=1)
+    bits = len(good) * 8
+
+    def accepted(frame: bytes) -> bool:
+        return any(f.raw == frame for f in Framer(proto).feed(frame))
+
+    assert accepted(good)
+    for i in range(bits):
+        one = bytearray(good)
+        one[i // 8] ^= 1 << (i % 8)
+        assert not accepted(bytes(one)), i
+        for j in range(i + 1, bits, 3):  # every third second bit: 2-bit errors at all spacings
+            two = bytearray(one)
+            two[j // 8] ^= 1 << (j % 8)
+            assert not accepted(bytes(two)), (i, j)
+    for i in range(len(good) - 1):
+        if good[i] != good[i + 1]:
+            sw = bytearray(good)
+            sw[i], sw[i + 1] = sw[i + 1], sw[i]
+            assert not accepted(bytes(sw)), i
+
+
+def test_default_layout_uses_a_crc_and_every_field_has_a_range() -> None:
+    assert DEFAULT.header_checksum == DEFAULT.payload_checksum == "crc16_ccitt_false"
+    for msg in DEFAULT.messages:
+        for f in msg.fields:
+            assert f.min is not None and f.max is not None, (msg.name, f.name)
+
+
+def _raw_telemetry(proto: Protocol, heading_raw: int, depth_raw: int = 1000) -> bytes:
+    payload = struct.pack("<HHhhB", heading_raw, depth_raw, 0, 0, 0)
+    head = bytes(proto.sync) + bytes((1, 0, 0x10, len(payload)))
+    head += checksum(proto.header_checksum, head)
+    return head + payload + checksum(proto.payload_checksum, payload)
+
+
+@pytest.mark.parametrize("raw", [36000, 36001, 40000, 65535])
+def test_out_of_range_heading_is_a_rejected_frame_not_a_wrapped_value(raw: int) -> None:
+    """Issue 18: 867 raw headings above 360 deg were wrapped by `% 360`."""
+    (frame,) = Framer(DEFAULT).feed(_raw_telemetry(DEFAULT, raw))  # the checksums are right
+    with pytest.raises(DecodeError) as ei:
+        decode(DEFAULT, frame)
+    assert ei.value.reason == "out_of_range" and "heading_deg" in ei.value.detail
+    _, ok = decode(DEFAULT, Framer(DEFAULT).feed(_raw_telemetry(DEFAULT, 35999))[0])
+    assert ok["heading_deg"] == pytest.approx(359.99)
+    with pytest.raises(ValueError, match="outside"):
+        encode(DEFAULT, "telemetry", {"heading_deg": 360.5, "depth_m": 1.0, "pitch_deg": 0.0,
+                                      "roll_deg": 0.0, "status": 0}, node=1)
+
+
+def test_range_keys_are_validated_at_load(tmp_path: Path) -> None:
+    p = tmp_path / "p.toml"
+    p.write_text('name = "x"\n[[messages]]\nname = "m"\nid = 1\n'
+                 'fields = [{ name = "a", type = "u8", min = 5, max = 1 }]\n')
+    with pytest.raises(ConfigError, match="min > max"):
+        load_protocol(p)
+    p.write_text('name = "x"\n[[messages]]\nname = "m"\nid = 1\n'
+                 'fields = [{ name = "a", type = "u8", min = "low" }]\n')
+    with pytest.raises(ConfigError, match=r"messages\[0\]\.fields\[0\]\.min"):
+        load_protocol(p)

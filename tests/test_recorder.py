@@ -138,6 +138,7 @@ def test_truncated_last_record_is_skipped(tmp_path: Path) -> None:
     records = list(reader)
     assert len(records) == 9 and reader.truncated and not reader.corrupt
     inp = load_input(path)
+    assert inp.total_bytes == sum(len(r.data) for r in records)  # streamed to the end
     assert inp.truncated and "truncated" in inp.notes[0]
 
 

@@ -15,12 +15,15 @@ import logging
 from collections import Counter
 from collections.abc import Iterator
 
+from drivers.counters import TopCounter
 from drivers.gps.epochs import EpochAssembler, GpsEpoch
 from drivers.gps.nmea import MAX_LINE, Ignored, NmeaFramer, Rejected, parse_sentence
 from drivers.ratelog import RateLimitedLog
 from fdi.errors import DecodeError
 
 log = logging.getLogger("fdi_bridge.gps")
+
+IGNORED_KEYS = 32  # sentence types kept by name in ``ignored``; the rest are counted as "other"
 
 
 class NmeaStream:
@@ -32,7 +35,8 @@ class NmeaStream:
         self.bytes_in = 0
         self.sentences = 0
         self.rejected: Counter[str] = Counter()
-        self.ignored: Counter[str] = Counter()
+        # Keyed by the sentence address the input chooses: bounded (top N plus "other").
+        self.ignored: Counter[str] = TopCounter(IGNORED_KEYS)
         self.ratelog = ratelog or RateLimitedLog(log)
 
     def feed(self, data: bytes) -> Iterator[GpsEpoch]:

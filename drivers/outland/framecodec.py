@@ -11,26 +11,31 @@ Frame layout (modelled on VideoRay PRO4's RS-485 register protocol)::
     sync[0..n) | node | flags | msg_id | length | header_cs | payload[length] | payload_cs
 
 ``header_cs`` covers the sync bytes through ``length``; ``payload_cs`` covers the payload. Each is
-one byte (``xor8``, ``sum8``) or absent (``none``). Field types: u8 i8 u16 i16 u32 i32 f32; the
-physical value is ``raw * scale + offset`` in ``unit``.
+one of :data:`drivers.checksums.KINDS` (``xor8``, ``sum8``: 1 byte; ``crc16_ccitt_false``,
+``crc16_modbus``: 2 bytes; ``crc32``: 4 bytes) or absent (``none``). Field types: u8 i8 u16 i16
+u32 i32 f32; the physical value is ``raw * scale + offset`` in ``unit``, and must lie in the
+field's ``[min, max]`` (in physical units): a value outside is a rejected frame
+(``out_of_range``), never clamped or wrapped. ``max_rate`` (units per second) is the most the
+value can change between samples on the real vehicle; the link flags a faster change as suspect.
 """
 
 from __future__ import annotations
 
+import math
 import struct
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from drivers.checksums import ChecksumKind, checksum_bytes, width
 from drivers.configload import load_dataclass, read_toml
 from fdi.errors import ConfigError, DecodeError
 
 FieldType = Literal["u8", "i8", "u16", "i16", "u32", "i32", "f32"]
-ChecksumKind = Literal["xor8", "sum8", "none"]
 _STRUCT = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I", "i32": "i", "f32": "f"}
 REJECT_REASONS = ("garbage", "bad_header_checksum", "bad_checksum", "too_long", "short",
-                  "unknown_id")
+                  "unknown_id", "out_of_range")
 
 
 @dataclass(frozen=True)
@@ -40,6 +45,21 @@ class FieldSpec:
     scale: float = field(default=1.0, metadata={"ne": 0.0})  # value = raw * scale + offset
     offset: float = 0.0
     unit: str = ""
+    min: float | None = None  # the valid range, physical units (None: what the type holds)
+    max: float | None = None
+    max_rate: float | None = None  # units/s the vehicle can change it at (plausibility)
+
+    def __post_init__(self) -> None:
+        if self.scale == 0:
+            raise ValueError(f"{self.name}: scale must not be 0")
+        if self.min is not None and self.max is not None and self.min > self.max:
+            raise ValueError(f"{self.name}: min > max")
+        if self.max_rate is not None and self.max_rate <= 0:
+            raise ValueError(f"{self.name}: max_rate must be > 0")
+
+    def valid(self, value: float) -> bool:
+        return (math.isfinite(value) and (self.min is None or value >= self.min)
+                and (self.max is None or value <= self.max))
 
 
 @dataclass(frozen=True)
@@ -77,7 +97,11 @@ class Protocol:
 
     @property
     def header_len(self) -> int:
-        return len(self.sync) + 4 + (self.header_checksum != "none")
+        return len(self.sync) + 4 + width(self.header_checksum)
+
+    @property
+    def payload_cs_len(self) -> int:
+        return width(self.payload_checksum)
 
 
 def load_protocol(path: str | Path) -> Protocol:
@@ -98,14 +122,8 @@ def _struct_for(proto: Protocol, msg: MessageSpec) -> struct.Struct:
 
 
 def checksum(kind: ChecksumKind, data: bytes) -> bytes:
-    if kind == "none":
-        return b""
-    if kind == "xor8":
-        c = 0
-        for b in data:
-            c ^= b
-        return bytes((c,))
-    return bytes((sum(data) & 0xFF,))
+    """The checksum bytes as sent (see :mod:`drivers.checksums`)."""
+    return checksum_bytes(kind, data)
 
 
 @dataclass(frozen=True)
@@ -124,6 +142,8 @@ def encode(
     msg = proto.message(name)
     raws: list[int | float] = []
     for f in msg.fields:
+        if not f.valid(values[f.name]):
+            raise ValueError(f"{name}.{f.name} = {values[f.name]} outside [{f.min}, {f.max}]")
         v = (values[f.name] - f.offset) / f.scale
         if f.type == "f32":
             raws.append(v)
@@ -142,7 +162,10 @@ def encode(
 
 
 def decode(proto: Protocol, frame: Frame) -> tuple[str, dict[str, float]]:
-    """A frame's message name and physical field values; DecodeError(unknown_id / short)."""
+    """A frame's message name and physical field values.
+
+    DecodeError ``unknown_id``, ``short``, ``too_long``, or ``out_of_range`` (a field outside
+    its ``[min, max]``: the whole frame is rejected, no value is clamped or wrapped)."""
     for msg in proto.messages:
         if msg.id == frame.msg_id:
             st = _struct_for(proto, msg)
@@ -150,8 +173,14 @@ def decode(proto: Protocol, frame: Frame) -> tuple[str, dict[str, float]]:
                 raise DecodeError("short" if len(frame.payload) < st.size else "too_long",
                                   f"{msg.name}: {len(frame.payload)} bytes, expected {st.size}")
             raw = st.unpack(frame.payload)
-            return msg.name, {f.name: r * f.scale + f.offset
-                              for f, r in zip(msg.fields, raw, strict=True)}
+            values = {}
+            for f, r in zip(msg.fields, raw, strict=True):
+                v = r * f.scale + f.offset
+                if not f.valid(v):
+                    raise DecodeError("out_of_range",
+                                      f"{msg.name}.{f.name} = {v:g} outside [{f.min}, {f.max}]")
+                values[f.name] = v
+            return msg.name, values
     raise DecodeError("unknown_id", f"message id 0x{frame.msg_id:02x}")
 
 
@@ -170,7 +199,8 @@ class Framer:
         p = self.proto
         sync = bytes(p.sync)
         hl = p.header_len
-        pcs = 1 if p.payload_checksum != "none" else 0
+        hcs = width(p.header_checksum)
+        pcs = p.payload_cs_len
         while True:
             i = self.buf.find(sync)
             if i < 0:
@@ -188,7 +218,7 @@ class Framer:
             head = bytes(self.buf[:hl])
             n = len(sync)
             length = head[n + 3]
-            if p.header_checksum != "none" and checksum(p.header_checksum, head[:-1]) != head[-1:]:
+            if hcs and checksum(p.header_checksum, head[:-hcs]) != head[-hcs:]:
                 self.rejects["bad_header_checksum"] += 1
                 del self.buf[:1]  # resync after the first sync byte
                 continue
@@ -200,7 +230,8 @@ class Framer:
             if len(self.buf) < total:
                 return out
             payload = bytes(self.buf[hl : hl + length])
-            if pcs and checksum(p.payload_checksum, payload) != bytes(self.buf[total - 1 : total]):
+            given = bytes(self.buf[total - pcs : total])
+            if pcs and checksum(p.payload_checksum, payload) != given:
                 self.rejects["bad_checksum"] += 1
                 del self.buf[:1]
                 continue

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
-from drivers.outland.framecodec import Framer, Protocol, decode, encode
+from drivers.outland.framecodec import FieldSpec, Framer, Protocol, decode, encode
 from drivers.transport import Port, read_some, write_all
 from fdi.errors import DecodeError
 
@@ -37,6 +37,9 @@ class Telemetry:
     pitch_deg: float = 0.0
     roll_deg: float = 0.0
     status: int = 0
+    # The heading changed faster than the vehicle can turn (the protocol's max_rate): passed
+    # on, flagged for the detector, counted in the link's ``heading_suspect``; never hidden.
+    heading_suspect: bool = False
 
 
 @dataclass(frozen=True)
@@ -72,8 +75,10 @@ def encode_command(proto: Protocol, cmd: ThrusterCommand, node: int, flags: int 
 
 
 def encode_telemetry(proto: Protocol, tel: Telemetry, node: int) -> bytes:
+    spec = next(f for f in proto.message("telemetry").fields if f.name == "heading_deg")
+    steps = round(360.0 / spec.scale)  # 359.996 -> 0.00, not 360.00 (outside [0, 359.99])
     values = {
-        "heading_deg": tel.heading_deg % 360.0,
+        "heading_deg": round((tel.heading_deg % 360.0) / spec.scale) % steps * spec.scale,
         "depth_m": tel.depth_m,
         "pitch_deg": tel.pitch_deg,
         "roll_deg": tel.roll_deg,
@@ -82,13 +87,15 @@ def encode_telemetry(proto: Protocol, tel: Telemetry, node: int) -> bytes:
     return encode(proto, "telemetry", values, node=node)
 
 
-def to_telemetry(values: dict[str, float]) -> Telemetry:
+def to_telemetry(values: dict[str, float], heading_suspect: bool = False) -> Telemetry:
+    """Decoded values (already checked against the protocol's ranges: never wrapped here)."""
     return Telemetry(
-        heading_deg=values["heading_deg"] % 360.0,
+        heading_deg=values["heading_deg"],
         depth_m=values.get("depth_m", float("nan")),
         pitch_deg=values.get("pitch_deg", 0.0),
         roll_deg=values.get("roll_deg", 0.0),
         status=int(values.get("status", 0)),
+        heading_suspect=heading_suspect,
     )
 
 
@@ -108,6 +115,7 @@ class OutlandLink:
         node: int = 1,
         reply_timeout_s: float = 0.05,
         clock: Callable[[], float] = time.monotonic,
+        sample_period_s: float = 0.2,
     ) -> None:
         self.port = port
         self.proto = proto
@@ -117,14 +125,42 @@ class OutlandLink:
         self.clock = clock
         self.framer = Framer(proto)
         self.counts: Counter[str] = Counter()
+        # Heading plausibility: the largest turn rate (deg/s) from the protocol file.
+        self.sample_period_s = sample_period_s
+        self.max_heading_rate = next((f.max_rate for f in self._telemetry_fields()
+                                      if f.name == "heading_deg"), None)
+        self._last_heading: tuple[float, float] | None = None  # (time, deg) last plausible
+
+    def _telemetry_fields(self) -> tuple[FieldSpec, ...]:
+        try:
+            return self.proto.message("telemetry").fields
+        except KeyError:
+            return ()
 
     @property
     def rejects(self) -> Counter[str]:
         """Rejected input by reason (framer rejects plus decode rejects)."""
         return self.framer.rejects + Counter(
             {k: v for k, v in self.counts.items() if k in ("unknown_id", "short", "too_long",
-                                                            "wrong_node")}
+                                                            "wrong_node", "out_of_range")}
         )
+
+    def _suspect(self, heading: float) -> bool:
+        """A heading that moved more than ``max_rate`` allows since the last plausible one.
+
+        The allowance grows with the time since that sample (at least one sample period), so
+        a real step is accepted again once the vehicle could have turned that far."""
+        if self.max_heading_rate is None:
+            return False
+        now = self.clock()
+        last = self._last_heading
+        if last is not None:
+            jump = abs((heading - last[1] + 180.0) % 360.0 - 180.0)
+            if jump > self.max_heading_rate * max(now - last[0], self.sample_period_s):
+                self.counts["heading_suspect"] += 1
+                return True
+        self._last_heading = (now, heading)
+        return False
 
     def send_command(self, cmd: ThrusterCommand, request: bool = False) -> None:
         flags = self.proto.request_flag if request else 0
@@ -143,7 +179,7 @@ class OutlandLink:
                 self.counts[err.reason] += 1
                 continue
             if name == "telemetry":
-                out.append(to_telemetry(values))
+                out.append(to_telemetry(values, self._suspect(values["heading_deg"])))
                 self.counts["telemetry"] += 1
         return out
 

@@ -3,6 +3,8 @@
 The port is any pyserial URL. Every read is one record (t_us = wall-clock microseconds at the
 read). The line settings go in the capture's header, so a replay sets up its pty the same way.
 A port that goes away is reported once and reopened with capped backoff until it is back.
+A full disk pauses the recording (logged once, the lost records counted and printed at the end)
+without ending it; the file never holds a partial record in its middle.
 """
 
 from __future__ import annotations
@@ -74,7 +76,10 @@ def record(
                 last_flush = clock()
         if port is not None:
             port.close()
-        return {"bytes": cap.bytes_written, "records": cap.records, "reopen_attempts": reopen}
+        cap.flush()
+        return {"bytes": cap.bytes_written, "records": cap.records, "reopen_attempts": reopen,
+                "lost_records": cap.lost_records, "lost_bytes": cap.lost_bytes,
+                "write_errors": cap.write_errors}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -93,4 +98,7 @@ def run(args: argparse.Namespace) -> int:
         print("stopped")
         return 0
     print(f"recorded {counts['bytes']} bytes in {counts['records']} records to {args.out}")
+    if counts["lost_records"]:
+        print(f"lost {counts['lost_records']} records ({counts['lost_bytes']} bytes) to disk "
+              f"errors; the file holds whole records only")
     return 0

@@ -19,7 +19,7 @@ import json
 import re
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -36,23 +36,51 @@ from firmware_host.runtime.config import BridgeConfig, load_config
 _TIME_RE = re.compile(rb"^\$..(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
 
 
+Chunks = Iterable[tuple[float, bytes]]
+_LINE_MAX = 1 << 20  # a plain log is read a line at a time, at most this many bytes at once
+
+
 @dataclass
 class ReplayInput:
-    """Chunks of bytes with their times (seconds, from the first), and line settings."""
+    """Chunks of bytes with their times (seconds, from the first), and line settings.
 
-    chunks: list[tuple[float, bytes]]
+    ``chunks`` streams from the file each time it is iterated (memory does not grow with the
+    log's length); ``total_bytes``, ``truncated`` and the capture's ``notes`` are known once
+    it has been iterated to the end (``total_bytes`` reads the file once more if asked for
+    before). A list of chunks may be given instead of a file (tests, benchmarks).
+    """
+
+    source: Callable[[ReplayInput], Iterator[tuple[float, bytes]]] | Chunks
     baudrate: int = 9600
     kind: str = "nmea"
     truncated: bool = False
     notes: list[str] = field(default_factory=list)
+    _total: int | None = None
+
+    @property
+    def chunks(self) -> Iterator[tuple[float, bytes]]:
+        src = self.source
+        total = 0
+        for t, data in src(self) if callable(src) else src:
+            total += len(data)
+            yield t, data
+        self._total = total
 
     @property
     def total_bytes(self) -> int:
-        return sum(len(c) for _, c in self.chunks)
+        if self._total is None:
+            for _ in self.chunks:
+                pass
+        assert self._total is not None
+        return self._total
 
 
 def load_input(path: str | Path, channel: str | None = None) -> ReplayInput:
-    """Read a capture (its first ``rx`` channel, or the one named) or a plain NMEA log."""
+    """Open a capture (its first ``rx`` channel, or the one named) or a plain NMEA log.
+
+    Nothing but the capture's header is read here: the bytes stream when ``chunks`` is
+    iterated. Errors in the header (or a missing file) raise CaptureFormatError at once.
+    """
     p = Path(path)
     if not p.exists():
         raise CaptureFormatError(f"{p}: no such file")
@@ -63,39 +91,55 @@ def load_input(path: str | Path, channel: str | None = None) -> ReplayInput:
             if (channel is None and ch.direction == "rx") or ch.name == channel:
                 idx = i
                 break
-        records = [r for r in reader if r.channel == idx]
-        t0 = records[0].t_us if records else 0
-        chunks = [((r.t_us - t0) / 1e6, r.data) for r in records]
         baud = reader.channels[idx].baudrate if reader.channels else 9600
-        inp = ReplayInput(chunks, baud, "capture", reader.truncated)
-        if reader.truncated:
-            inp.notes.append("last record truncated (skipped)")
-        if reader.corrupt:
-            inp.notes.append("a record failed its CRC; the rest was not replayed")
-        return inp
-    return ReplayInput(_nmea_chunks(p.read_bytes()), 9600, "nmea")
+        return ReplayInput(lambda inp: _capture_chunks(reader, idx, inp), baud, "capture")
+    return ReplayInput(lambda inp: _nmea_chunks(p), 9600, "nmea")
 
 
-def _nmea_chunks(raw: bytes) -> list[tuple[float, bytes]]:
-    """Plain log -> (time, line) with times from the fix times (for pacing only)."""
-    chunks: list[tuple[float, bytes]] = []
+def _capture_chunks(reader: CaptureReader, idx: int, inp: ReplayInput
+                    ) -> Iterator[tuple[float, bytes]]:
+    t0: int | None = None
+    for r in reader:
+        if r.channel != idx:
+            continue
+        if t0 is None:
+            t0 = r.t_us
+        yield (r.t_us - t0) / 1e6, r.data
+    inp.truncated = reader.truncated
+    inp.notes = list(reader.notes)
+    if reader.truncated:
+        inp.notes.append("last record truncated (skipped)")
+    if reader.corrupt:
+        inp.notes.append(f"{reader.skipped_bytes} damaged bytes in {reader.damaged_regions} "
+                         "place(s) skipped; the records around them were replayed"
+                         if reader.version >= 2 else
+                         "a record failed its CRC; the rest was not replayed (capture format "
+                         "version 1)")
+
+
+def _nmea_chunks(path: Path) -> Iterator[tuple[float, bytes]]:
+    """Plain log -> (time, line) with times from the fix times (for pacing only).
+
+    The lines are exactly ``raw.splitlines(keepends=True)`` of the whole file (a line is cut
+    after ``\n``, ``\r\n`` or a lone ``\r``), read a line at a time."""
     t = 0.0
     first: float | None = None
     last_fix: float | None = None
-    for line in raw.splitlines(keepends=True):
-        if line.lstrip().startswith(b"#"):
-            continue
-        m = _TIME_RE.match(line)
-        if m:
-            s = m.group(1)
-            fix = int(s[0:2]) * 3600 + int(s[2:4]) * 60 + float(s[4:])
-            if first is None:
-                first = fix
-            if last_fix is not None and 0 < fix - last_fix < 60:
-                t += fix - last_fix
-            last_fix = fix
-        chunks.append((t, line))
-    return chunks
+    with open(path, "rb") as f:
+        for piece in iter(lambda: f.readline(_LINE_MAX), b""):
+            for line in piece.splitlines(keepends=True):
+                if line.lstrip().startswith(b"#"):
+                    continue
+                m = _TIME_RE.match(line)
+                if m:
+                    s = m.group(1)
+                    fix = int(s[0:2]) * 3600 + int(s[2:4]) * 60 + float(s[4:])
+                    if first is None:
+                        first = fix
+                    if last_fix is not None and 0 < fix - last_fix < 60:
+                        t += fix - last_fix
+                    last_fix = fix
+                yield t, line
 
 
 class PtyFeeder(threading.Thread):
@@ -104,7 +148,7 @@ class PtyFeeder(threading.Thread):
     def __init__(
         self,
         pty: PtyPair,
-        chunks: list[tuple[float, bytes]],
+        chunks: Chunks,
         speed: float = 0.0,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
@@ -153,7 +197,6 @@ def replay_through_pty(
     clock: Callable[[], float] = time.monotonic,
 ) -> dict[str, Any]:
     """Run ``pipeline`` on ``inp`` through a real pty; return transport facts for the summary."""
-    total = inp.total_bytes
     with PtyPair(baudrate=inp.baudrate) as pty:
         port = open_port(SerialSettings(url=pty.url, baudrate=inp.baudrate, timeout_s=0.05))
         feeder = PtyFeeder(pty, inp.chunks, speed)
@@ -177,7 +220,7 @@ def replay_through_pty(
         if feeder.error is not None:
             raise FdiBridgeError(f"pty writer failed: {feeder.error}") from feeder.error
     pipeline.finish()
-    return {"bytes_total": total, "bytes_written": feeder.bytes_written, "pty": True}
+    return {"bytes_total": inp.total_bytes, "bytes_written": feeder.bytes_written, "pty": True}
 
 
 def replay_direct(inp: ReplayInput, pipeline: RoverPipeline) -> dict[str, Any]:

@@ -18,7 +18,11 @@ Speed is measured here, never asserted in tests. Figures (goals from issue 6 in 
 by the
   router over a direct UDP path.
 
-With the defaults it runs in about two and a half minutes (the two 60 s loops dominate).
+* replay's peak memory (max RSS of a child ``fdi-bridge replay``) on a 24 h and a 1 min log at
+  1 Hz, plain NMEA and capture (:func:`bench_replay_memory`; alone: ``--only replay-memory``).
+
+With the defaults it runs in about four minutes (the two 60 s loops and the 24 h replays
+dominate).
 """
 
 from __future__ import annotations
@@ -29,6 +33,9 @@ import io
 import json
 import os
 import platform
+import shutil
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -41,7 +48,12 @@ import numpy as np
 from drivers.mavlink.io import MavEndpoint
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port, read_some
-from firmware_host.commands.replay import load_input, replay_direct, replay_through_pty
+from firmware_host.commands.replay import (
+    ReplayInput,
+    load_input,
+    replay_direct,
+    replay_through_pty,
+)
 from firmware_host.devtools.insgnss_sim import bench_insgnss_step
 from firmware_host.devtools.rover_sim import RoverScenario, generate, write_run
 from firmware_host.rov.app import bench_rov_step
@@ -73,7 +85,7 @@ def bench_rover(duration_s: float = 600.0, rate_hz: float = 10.0) -> dict[str, A
     """Per-epoch time per strategy and replay throughput, on a generated run."""
     tmp = Path(tempfile.mkdtemp(prefix="fdi-bench-"))
     write_run(RoverScenario(rate_hz=rate_hz, duration_s=duration_s, seed=7), tmp)
-    inp = load_input(tmp / "rover.nmea")
+    inp = ReplayInput(list(load_input(tmp / "rover.nmea").chunks))  # in memory: pipeline alone
     out: dict[str, Any] = {"epochs": int(duration_s * rate_hz), "rate_hz": rate_hz}
     per: dict[str, Any] = {}
     for strat in STRATEGIES:
@@ -283,6 +295,36 @@ def bench_forwarding_figures(rate_pps: int = 200, seconds: float = 5.0) -> dict[
     return dict(json.loads(proc.stdout.strip().splitlines()[-1]))
 
 
+def bench_replay_memory(long_s: float = 86400.0, short_s: float = 60.0, rate_hz: float = 1.0,
+                        kinds: tuple[str, ...] = ("rover.nmea", "rover.cap")) -> dict[str, Any]:
+    """Peak memory (max RSS, MiB) of ``fdi-bridge replay`` on a 24 h and on a 1 min log.
+
+    Each replay runs in its own child process (through a pty, JSON Lines written, as a user
+    runs it); its peak RSS comes from ``wait4``. Replay streams its input, so the long log's
+    peak should be within 10 % of the short one's (issue 18: 118 MiB when it held every line).
+    """
+    tmp = Path(tempfile.mkdtemp(prefix="fdi-bench-mem-"))
+    out: dict[str, Any] = {"rate_hz": rate_hz, "long_s": long_s, "short_s": short_s}
+    for name, dur in (("short", short_s), ("long", long_s)):
+        write_run(RoverScenario(rate_hz=rate_hz, duration_s=dur, seed=7), tmp / name)
+    for kind in kinds:
+        peaks = {}
+        for name in ("short", "long"):
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "firmware_host.cli", "replay", str(tmp / name / kind),
+                 "--out", str(tmp / f"out-{name}")],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            _, status, usage = os.wait4(proc.pid, 0)
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            if proc.returncode != 0:
+                raise RuntimeError(f"replay of {kind} ({name}) exited {proc.returncode}")
+            peaks[name] = usage.ru_maxrss / 1024.0  # KiB on Linux
+        out[kind] = {"short_mib": round(peaks["short"], 1), "long_mib": round(peaks["long"], 1),
+                     "ratio": round(peaks["long"] / peaks["short"], 3)}
+    shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
 def _machine() -> dict[str, Any]:
     model = ""
     try:
@@ -305,6 +347,7 @@ def run_bench(duration_s: float = 60.0, replay_s: float = 600.0, e2e_epochs: int
     res["end_to_end"] = bench_end_to_end(e2e_epochs)
     res["loop"] = {f"{r:g}hz": bench_loop(r, duration_s) for r in (5.0, 10.0)}
     res["mavlink_forwarding"] = bench_forwarding_figures(fwd_rate, fwd_seconds)
+    res["replay_memory"] = bench_replay_memory()
     res["seconds"] = round(time.perf_counter() - t0, 1)
     return res
 
@@ -347,7 +390,18 @@ def table(res: dict[str, Any]) -> str:
     rows.append(f"| no pty, JSON Lines written | {r['throughput_eps_no_pty_jsonl']:.0f} | |")
     rows.append(f"| through a pty | {r['throughput_eps_pty']:.0f} | |")
     rows.append(f"| through a pty, JSON Lines written | {r['throughput_eps_pty_jsonl']:.0f} | |")
+    rows += replay_memory_rows(res["replay_memory"])
     return "\n".join(rows)
+
+
+def replay_memory_rows(mem: dict[str, Any]) -> list[str]:
+    rows = ["", f"| replay peak RSS (MiB), {mem['rate_hz']:g} Hz | {mem['short_s'] / 60:g} min log "
+            f"| {mem['long_s'] / 3600:g} h log | ratio | goal |", "|---|---|---|---|---|"]
+    for kind, v in mem.items():
+        if isinstance(v, dict):
+            rows.append(f"| {kind} | {v['short_mib']:.1f} | {v['long_mib']:.1f} "
+                        f"| {v['ratio']:.3f} | <= 1.10 |")
+    return rows
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -358,12 +412,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--e2e-epochs", type=int, default=200,
                         help="epochs for the end-to-end latency (default 200, at 10 Hz)")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    parser.add_argument("--only", choices=("replay-memory",), default=None,
+                        help="measure just this figure (replay-memory: about a minute)")
 
 
 def run(args: argparse.Namespace) -> int:
     import logging
 
     logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)  # gate-health notes etc.
+    if args.only == "replay-memory":
+        mem = bench_replay_memory()
+        print("\n".join(replay_memory_rows(mem)[1:]))
+        if args.json is not None:
+            args.json.write_text(json.dumps({"replay_memory": mem}, indent=2) + "\n")
+        return 0
     res = run_bench(args.duration, args.replay_duration, args.e2e_epochs)
     m = res["machine"]
     print(f"machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}, {m['system']}")

@@ -1,4 +1,8 @@
-"""``fdi-bridge fuzz --seconds N [--codec nmea|outland|mavlink]``: a seeded mutation fuzzer.
+"""``fdi-bridge fuzz --seconds N [--codec nmea|outland|mavlink|capture]``: a seeded mutation fuzzer.
+
+``--codec capture`` damages generated capture files instead (see :class:`CaptureCase`), and
+``fdi-bridge fuzz --checksums`` measures undetected corrupt Outland frames per checksum
+(:func:`checksum_strength`).
 
 For each codec, inputs are built from a corpus of valid frames (NMEA sentences from the rover
 generator plus every supported type, Outland telemetry and thruster frames from the protocol
@@ -23,18 +27,29 @@ A failure is an input that breaks one of these; the first few are kept (hex) in 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import json
 import logging
+import math
 import time
 import traceback
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
+from drivers.capture import (
+    HEADER_CHANNEL,
+    RECORD_SYNC,
+    CaptureReader,
+    Channel,
+    Record,
+    encode_header,
+    encode_record,
+)
 from drivers.gps.nmea import (
     Gga,
     Gll,
@@ -51,11 +66,11 @@ from drivers.mavlink.io import GpsInputFix, MavPacker, crc_extra_table, decode_p
 from drivers.outland.framecodec import Framer, checksum, decode, load_protocol
 from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, encode_telemetry
 from drivers.ratelog import RateLimitedLog
-from fdi.errors import DecodeError
+from fdi.errors import CaptureFormatError, DecodeError
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.runtime.config import resolve_protocol
 
-CODECS = ("nmea", "outland", "mavlink")
+CODECS = ("nmea", "outland", "mavlink", "capture")
 _quiet_logger = logging.getLogger("fdi_bridge.fuzz.rejects")
 _quiet_logger.addHandler(logging.NullHandler())
 _quiet_logger.propagate = False  # a million bad sentences are counted, not logged
@@ -185,8 +200,6 @@ def mutate(rng: np.random.Generator, corpus: list[bytes], sync: bytes, len_offse
 def check_nmea(data: bytes, cuts: list[int], max_line: int = 120) -> Counter[str]:
     """Framer + parser + stream on ``data`` fed in the pieces ``cuts`` gives; raises on a
     broken invariant; returns the rejections by reason."""
-    import math
-
     framer = NmeaFramer(max_line)
     items: list[bytes | Rejected] = []
     for chunk in _chunks(data, cuts):
@@ -260,7 +273,9 @@ def check_outland(data: bytes, cuts: list[int], proto: Any) -> Counter[str]:
     for f in frames:
         _require(len(f.payload) <= proto.max_payload, "payload over the cap")
         _require(f.raw[: len(proto.sync)] == bytes(proto.sync), "frame without sync")
-        _require(checksum(proto.payload_checksum, f.payload) == f.raw[-1:], "payload checksum")
+        pcs = proto.payload_cs_len
+        _require(checksum(proto.payload_checksum, f.payload) == f.raw[len(f.raw) - pcs :],
+                 "payload checksum")
         try:
             _, values = decode(proto, f)
         except DecodeError as err:
@@ -297,6 +312,198 @@ def check_mavlink(data: bytes, cuts: list[int]) -> Counter[str]:
     return Counter(st.by_reason)
 
 
+# --------------------------------------------------------------------------- the capture reader
+
+CAPTURE_OPS = ("bit_flip", "overwrite", "insert", "delete", "truncate", "header", "header_copy")
+
+
+class CaptureCase:
+    """A generated capture damaged by seeded operations that know which records they hit.
+
+    The capture's records are kept as separate byte strings while they are damaged, so every
+    operation knows the records it touches (an insertion between two records touches none; a
+    deletion touches every record it overlaps); the invariant is that exactly the untouched
+    records are replayed, in order, and that the bytes add up (records start + intact records
+    + skipped bytes = file length). A header damaged together with its copy must give a
+    :class:`CaptureFormatError`, never a crash.
+    """
+
+    CHANNELS: ClassVar[list[Channel]] = [
+        Channel("gps rx", "/dev/ttyUSB0"),
+        Channel("mavlink tx", "udpout:127.0.0.1:14550", 57600, direction="tx"),
+    ]
+
+    def __init__(self) -> None:
+        self.expected: list[Record] = []
+        self.header_lost = False
+        self.ops: Counter[str] = Counter()
+
+    def make(self, rng: np.random.Generator) -> bytes:
+        n = int(rng.integers(1, 40))
+        records = []
+        for k in range(n):
+            data = rng.integers(0, 256, int(rng.integers(0, 200)), dtype=np.uint8).tobytes()
+            if rng.random() < 0.2:  # data that holds the sync marker: resync must not trust it
+                cut = int(rng.integers(len(data) + 1))
+                data = data[:cut] + RECORD_SYNC + data[cut:]
+            records.append(Record(1_700_000_000_000_000 + 1000 * k, int(rng.integers(2)), data))
+        head = encode_header(self.CHANNELS, "fuzz", "2026-12-01T00:00:00Z")
+        copy_len = len(encode_record(0, HEADER_CHANNEL, b"")) + int.from_bytes(head[8:12], "big")
+        primary = bytearray(head[: len(head) - copy_len])
+        copy = bytearray(head[len(head) - copy_len :])
+        orig = [encode_record(r.t_us, r.channel, r.data) for r in records]
+        parts = [bytearray(b) for b in orig]
+        before = [b""] * n  # junk inserted between records (damages none)
+        primary_hit = copy_hit = False
+        tail_cut = n  # records from this index on are cut off
+        for _ in range(int(rng.integers(1, 4))):
+            op = CAPTURE_OPS[int(rng.integers(len(CAPTURE_OPS)))]
+            self.ops[op] += 1
+            i = int(rng.integers(n))
+            part = parts[i]
+            if op in ("bit_flip", "overwrite") and part:
+                j = int(rng.integers(len(part)))
+                part[j] = part[j] ^ (1 << int(rng.integers(8))) if op == "bit_flip" else int(
+                    rng.integers(256))
+            elif op == "insert":
+                junk = rng.integers(0, 256, int(rng.integers(1, 40)), dtype=np.uint8).tobytes()
+                if rng.random() < 0.5:
+                    before[i] += junk
+                else:
+                    j = int(rng.integers(1, max(2, len(part))))
+                    part[j:j] = junk
+            elif op == "delete":
+                span = int(rng.integers(1, 60))
+                j = int(rng.integers(len(part))) if part else 0
+                k = i
+                while span > 0 and k < n:  # the deletion runs on into the next records
+                    cut = len(parts[k][j : j + span])
+                    del parts[k][j : j + span]
+                    span -= cut
+                    j = 0
+                    k += 1
+            elif op == "truncate":
+                del part[int(rng.integers(len(part) + 1)) :]
+                tail_cut = min(tail_cut, i + 1)
+            elif op == "header":
+                primary[int(rng.integers(len(primary)))] ^= 1 << int(rng.integers(8))
+                primary_hit = True
+            else:
+                copy[int(rng.integers(len(copy)))] ^= 1 << int(rng.integers(8))
+                copy_hit = True
+        body = b"".join(before[k] + parts[k] for k in range(tail_cut))
+        # Intact: untouched, or touched so that its bytes are all there again (a deleted last
+        # byte followed by an equal one); exactly these must be replayed, in order.
+        self.expected = [r for k, r in enumerate(records[:tail_cut])
+                         if parts[k] == orig[k] or orig[k] in body]
+        copy_hit = copy_hit and bytes(copy) != head[len(primary) :]
+        primary_hit = primary_hit and bytes(primary) != head[: len(primary)]
+        self.header_lost = primary_hit and copy_hit
+        return bytes(primary + copy) + body
+
+
+def check_capture(data: bytes, cuts: list[int], case: CaptureCase) -> Counter[str]:
+    """Read ``data`` (block size chosen by ``cuts``); exactly the undamaged records come out."""
+    block = 16 + (cuts[0] % 4096 if cuts else 1 << 20)  # small blocks: markers straddle them
+    try:
+        reader = CaptureReader("fuzz.cap", data=data, block=block)
+    except CaptureFormatError as err:
+        _require(case.header_lost or "bad magic" in str(err), f"header not recovered: {err}")
+        return Counter({"header_lost": 1})
+    got = list(reader)
+    _require(reader.channels == case.CHANNELS, "channels differ")
+    _require(got == case.expected,
+             f"replayed {len(got)} records, expected the {len(case.expected)} undamaged ones")
+    _require(reader.records_start + reader.good_bytes + reader.skipped_bytes == len(data),
+             f"bytes: {reader.records_start} + {reader.good_bytes} good + "
+             f"{reader.skipped_bytes} skipped != {len(data)}")
+    out: Counter[str] = Counter({"records_replayed": len(got),
+                                 "skipped_bytes": reader.skipped_bytes,
+                                 "damaged_regions": reader.damaged_regions,
+                                 "truncated": int(reader.truncated)})
+    if reader.notes:
+        out["header_recovered"] += 1
+    return out
+
+
+# --------------------------------------------------------------------------- checksum strength
+
+ERROR_MODELS = ("bit2_random", "bit2_same_bit", "byte_swap", "mutation")
+
+
+def _corrupt(rng: np.random.Generator, frame: bytes, model: str, corpus: list[bytes]) -> bytes:
+    data = bytearray(frame)
+    n = len(data)
+    if model == "bit2_random":  # two different bits anywhere
+        i, j = rng.choice(n * 8, 2, replace=False)
+        data[i // 8] ^= 1 << (i % 8)
+        data[j // 8] ^= 1 << (j % 8)
+    elif model == "bit2_same_bit":  # the same bit in two bytes (a stuck line, a baud glitch)
+        i, j = rng.choice(n, 2, replace=False)
+        b = 1 << int(rng.integers(8))
+        data[i] ^= b
+        data[j] ^= b
+    elif model == "byte_swap":  # two adjacent different bytes exchanged
+        pairs = [k for k in range(n - 1) if data[k] != data[k + 1]]
+        k = pairs[int(rng.integers(len(pairs)))]
+        data[k], data[k + 1] = data[k + 1], data[k]
+    else:
+        return mutate(rng, corpus, frame[:2], [4])
+    return bytes(data)
+
+
+def checksum_strength(kinds: tuple[str, ...] = ("xor8", "sum8", "crc16_ccitt_false",
+                                                "crc16_modbus", "crc32"),
+                      inputs: int = 200_000, seed: int = 0) -> dict[str, Any]:
+    """Undetected corrupt Outland frames per checksum and error model.
+
+    For each checksum (header and payload alike, in the protocol file's layout otherwise), valid
+    telemetry and thruster frames with random values are corrupted by one error model and fed
+    to a fresh framer; a frame it accepts whose bytes are not one of the originals is an
+    undetected corrupt frame; ``after_ranges`` counts those that also pass the fields' ranges
+    (what reaches the detector)."""
+    base = outland_protocol()
+    out: dict[str, Any] = {"inputs_per_model": inputs, "seed": seed, "kinds": {}}
+    for kind in kinds:
+        proto = dataclasses.replace(base, header_checksum=kind, payload_checksum=kind)
+        rng = np.random.default_rng(seed)
+        frames = []
+        for _ in range(256):
+            tel = Telemetry(float(rng.uniform(0, 359.99)), float(rng.uniform(0, 300)),
+                            float(rng.uniform(-30, 30)), float(rng.uniform(-30, 30)),
+                            int(rng.integers(256)))
+            frames.append(encode_telemetry(proto, tel, node=1))
+            cmd = ThrusterCommand(*(float(x) for x in rng.integers(-100, 101, 4)))
+            frames.append(encode_command(proto, cmd, node=1, flags=0x80))
+        originals = set(frames)
+        res: dict[str, Any] = {}
+        for model in ERROR_MODELS:
+            undetected = passed_ranges = 0
+            worst_heading = 0.0
+            for _ in range(inputs):
+                good = frames[int(rng.integers(len(frames)))]
+                bad = _corrupt(rng, good, model, frames)
+                for f in Framer(proto).feed(bad):
+                    if f.raw in originals:
+                        continue
+                    undetected += 1
+                    try:
+                        name, values = decode(proto, f)
+                    except DecodeError:
+                        continue
+                    passed_ranges += 1
+                    if name == "telemetry" and good[4] == 0x10:
+                        (g,) = Framer(proto).feed(good)
+                        h0 = decode(proto, g)[1]["heading_deg"]
+                        err = abs((values["heading_deg"] - h0 + 180.0) % 360.0 - 180.0)
+                        worst_heading = max(worst_heading, err)
+            res[model] = {"undetected": undetected, "after_ranges": passed_ranges,
+                          "rate": undetected / inputs, "worst_heading_error_deg":
+                          round(worst_heading, 2)}
+        out["kinds"][kind] = res
+    return out
+
+
 # --------------------------------------------------------------------------- the runner
 
 
@@ -316,6 +523,9 @@ def make_case(codec: str) -> tuple[Callable[[np.random.Generator], bytes],
     if codec == "mavlink":
         corpus = mavlink_corpus()
         return (lambda rng: mutate(rng, corpus, b"\xfd", [1]), check_mavlink)
+    if codec == "capture":
+        case = CaptureCase()  # the generator tells the checker what it damaged
+        return (case.make, lambda d, c: check_capture(d, c, case))
     raise ValueError(f"unknown codec {codec!r} (known: {', '.join(CODECS)})")
 
 
@@ -365,12 +575,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=float, default=60.0, help="time per codec")
     parser.add_argument("--inputs", type=int, default=None, help="stop after this many inputs")
     parser.add_argument("--codec", choices=CODECS, action="append", default=None,
-                        help="codec to fuzz (repeatable; default: all three)")
+                        help="codec to fuzz (repeatable; default: all four)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=None, help="write the report as JSON")
+    parser.add_argument("--checksums", action="store_true",
+                        help="measure undetected corrupt Outland frames per checksum instead "
+                             "(--inputs per error model, default 200 000)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.checksums:
+        rep = checksum_strength(inputs=args.inputs or 200_000, seed=args.seed)
+        n = rep["inputs_per_model"]
+        print(f"undetected corrupt frames per {n} corrupted frames (after the fields' ranges)")
+        print("| checksum | " + " | ".join(ERROR_MODELS) + " |")
+        print("|---" * (len(ERROR_MODELS) + 1) + "|")
+        for kind, res in rep["kinds"].items():
+            cells = [f"{r['undetected']} ({r['after_ranges']})" for r in res.values()]
+            print(f"| {kind} | " + " | ".join(cells) + " |")
+        if args.out is not None:
+            args.out.write_text(json.dumps(rep, indent=2) + "\n")
+        return 0
     reports = []
     for codec in args.codec or CODECS:
         rep = run_fuzz(codec, seconds=None if args.inputs else args.seconds,

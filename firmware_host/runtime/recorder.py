@@ -25,25 +25,28 @@ schedule runs on the monotonic ``clock`` (injected), so tests drive both.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
-import struct
 import threading
 import time
-import zlib
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from drivers.capture import MAGIC, CaptureReader, Channel, Record
+from drivers.capture import (
+    MAX_RECORD,
+    AppendFile,
+    CaptureReader,
+    Channel,
+    Record,
+    count_records,
+    encode_header,
+    encode_record,
+)
 from fdi.errors import FdiBridgeError
 
 log = logging.getLogger("fdi_bridge.recorder")
 
-_HEAD = struct.Struct(">QBH")  # the capture format's record head: t_us, channel, length
-_CRC = struct.Struct(">I")
-MAX_RECORD = 0xFFFF
 SUFFIX = ".cap"
 
 
@@ -59,33 +62,19 @@ class RecorderConfig:
     prefix: str = "fdi"
 
 
-def encode_record(t_us: int, channel: int, data: bytes) -> bytes:
-    """One or more capture records for ``data`` (split at 65 535 bytes, same time)."""
-    out = bytearray()
-    for i in range(0, len(data), MAX_RECORD) if data else [0]:
-        chunk = data[i : i + MAX_RECORD]
-        head = _HEAD.pack(t_us, channel, len(chunk))
-        out += head + chunk + _CRC.pack(zlib.crc32(head + chunk))
-    return bytes(out)
-
-
-def encode_header(channels: list[Channel], note: str, created_utc: str) -> bytes:
-    header = {
-        "version": 1,
-        "created_utc": created_utc,
-        "note": note,
-        "channels": [dict(id=i, **asdict(c)) for i, c in enumerate(channels)],
-    }
-    blob = json.dumps(header).encode("utf-8")
-    return MAGIC + struct.pack(">I", len(blob)) + blob
-
-
 class RecorderError(FdiBridgeError):
     """The recorder's directory cannot be written."""
 
 
 class FlightRecorder:
-    """See the module docstring. Add channels first, then ``write``; ``poll`` every loop."""
+    """See the module docstring. Add channels first, then ``write``; ``poll`` every loop.
+
+    A full or read-only disk never raises out of :meth:`write`, :meth:`poll` or :meth:`flush`:
+    the recorder stops recording (logged once, ``lost_records``/``lost_bytes`` counted), the
+    caller's loop goes on, and at each flush interval it tries again; when the disk takes the
+    bytes again it says so once and records on. No file keeps a partial record in its middle
+    (:class:`drivers.capture.AppendFile` cuts a failed write back to the last whole record).
+    """
 
     def __init__(
         self,
@@ -99,10 +88,6 @@ class FlightRecorder:
     ) -> None:
         self.cfg = cfg or RecorderConfig()
         self.dir = Path(directory)
-        try:
-            self.dir.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise RecorderError(f"recorder directory {self.dir}: {err.strerror}") from err
         self.note = note
         self.clock = clock
         self.wall_us = wall_us
@@ -111,8 +96,7 @@ class FlightRecorder:
         self.dir_max = int(self.cfg.dir_max_mb * 1e6)
         self.buffer_max = self.cfg.buffer_max_kb * 1024
         self._buf = bytearray()
-        self._fd: int | None = None
-        self._file_size = 0
+        self._file: AppendFile | None = None
         self._seq = 0
         self._last_sync = clock()
         self.path: Path | None = None
@@ -122,9 +106,15 @@ class FlightRecorder:
         self.files_opened = 0
         self.files_deleted = 0
         self.syncs = 0
-        self.write_errors = 0
+        self.write_errors = 0  # failed attempts (write, create, fsync)
+        self.lost_records = 0  # records handed to write() that never reached a file
+        self.lost_bytes = 0
+        self.outages = 0  # times recording stopped for a disk error
         self.max_buffered = 0
         self.max_flush_s = 0.0  # the longest flush() the loop waited for (perf counter)
+        self._failing_since: float | None = None  # the current outage began (clock)
+        self._lost_in_outage = 0
+        self.last_error = ""
         # fsync in a helper thread: the loop hands the bytes to the kernel (all a SIGKILL
         # needs) and never waits for the disk; the thread makes them durable (power loss).
         self._sync_lock = threading.Lock()
@@ -132,6 +122,10 @@ class FlightRecorder:
         self._sync_fds: list[int] = []  # rotated-out files: fsync then close
         self._stopping = False
         self._syncer: threading.Thread | None = None
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:  # a read-only or full disk: detection goes on without us
+            self._failed(f"recorder directory {self.dir}: {err.strerror}")
         if background_sync:
             self._syncer = threading.Thread(target=self._sync_loop, name="recorder-fsync",
                                             daemon=True)
@@ -143,13 +137,18 @@ class FlightRecorder:
         """Register a port direction; returns its channel id (a new file if one is open)."""
         self.channels.append(channel)
         self.bytes_by_channel.append(0)
-        if self._fd is not None:
+        if self._file is not None:
             self._rotate()
         return len(self.channels) - 1
 
     def tap(self, channel: int) -> Callable[[bytes], None]:
         """A callable that records its bytes on ``channel`` (for ResilientPort's taps)."""
         return lambda data: self.write(channel, data)
+
+    @property
+    def recording(self) -> bool:
+        """False while a disk error keeps the recorder from writing."""
+        return self._failing_since is None
 
     # ------------------------------------------------------------------ writing
 
@@ -174,14 +173,14 @@ class FlightRecorder:
         """Write the buffer, fsync the file (or have the helper thread do it), rotate."""
         t0 = time.perf_counter()
         self._last_sync = self.clock()
-        if self._fd is None:
+        if self._file is None:
             self._open()  # the file exists from the first flush on, data or not
         self._drain()
         if self._syncer is not None:
             self._sync_wake.set()
-        elif self._fd is not None:
-            self._fsync(self._fd)
-        if self._file_size >= self.file_max:
+        elif self._file is not None:
+            self._fsync(self._file.fd)
+        if self._file is not None and (self._file.size >= self.file_max or self._file.broken):
             self._rotate()
         self.max_flush_s = max(self.max_flush_s, time.perf_counter() - t0)
 
@@ -191,7 +190,7 @@ class FlightRecorder:
             self.syncs += 1
         except OSError as err:
             self.write_errors += 1
-            log.warning("recorder: fsync %s failed: %s", self.path, err.strerror)
+            log.debug("recorder: fsync %s failed: %s", self.path, err.strerror)
 
     def _sync_loop(self) -> None:
         while True:
@@ -199,7 +198,7 @@ class FlightRecorder:
             self._sync_wake.clear()
             with self._sync_lock:
                 fds, self._sync_fds = self._sync_fds, []
-                current = self._fd
+                current = self._file.fd if self._file is not None else None
                 stopping = self._stopping
             for fd in fds:
                 self._fsync(fd)
@@ -216,38 +215,68 @@ class FlightRecorder:
     def _drain(self) -> None:
         if not self._buf:
             return
-        if self._fd is None:
+        if self._file is None:
             self._open()
-        assert self._fd is not None
-        view = memoryview(self._buf)
-        try:
-            while view:
-                n = os.write(self._fd, view)
-                view = view[n:]
-                self._file_size += n
-        except OSError as err:  # disk full, removed: count, keep running, drop the buffer
-            self.write_errors += 1
-            log.warning("recorder: write to %s failed: %s", self.path, err.strerror)
-        finally:
-            view.release()
+        if self._file is None:  # no file could be created (the failure is logged and counted)
+            self._hold("")
+            return
+        kept, err = self._file.append(self._buf)
+        if err is None:
             self._buf.clear()
+            self._recovered()
+            return
+        del self._buf[:kept]  # what the disk took is in the file, whole records only
+        self._hold(f"recorder: write to {self.path} failed: {err.strerror}")
+
+    def _hold(self, why: str) -> None:
+        """Keep what the disk refused for the next try, up to the buffer's bound; past it,
+        drop it (counted): memory stays bounded during a long outage."""
+        if why:
+            self._failed(why)
+        if len(self._buf) >= self.buffer_max:
+            self._lose(bytes(self._buf))
+            self._buf.clear()
+
+    def _lose(self, blob: bytes) -> None:
+        n = count_records(blob)
+        self.lost_records += n
+        self.lost_bytes += len(blob)
+        self._lost_in_outage += n
+
+    def _failed(self, why: str) -> None:
+        self.write_errors += 1
+        self.last_error = why
+        if self._failing_since is None:
+            self._failing_since = self.clock()
+            self.outages += 1
+            log.warning("%s; recording stopped (detection and outputs go on), retrying every "
+                        "%.1f s", why, self.cfg.flush_interval_s)
+
+    def _recovered(self) -> None:
+        if self._failing_since is None:
+            return
+        log.warning("recorder: writing again to %s after %.1f s (%d records lost)", self.path,
+                    self.clock() - self._failing_since, self._lost_in_outage)
+        self._failing_since = None
+        self._lost_in_outage = 0
 
     # ------------------------------------------------------------------ files
 
     def _open(self) -> None:
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(self.wall_us() / 1e6))
         self._seq += 1
-        self.path = self.dir / f"{self.cfg.prefix}-{stamp}-{self._seq:05d}{SUFFIX}"
+        path = self.dir / f"{self.cfg.prefix}-{stamp}-{self._seq:05d}{SUFFIX}"
         created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(self.wall_us() / 1e6))
         header = encode_header(self.channels, self.note, created)
         try:
-            self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND,
-                               0o644)
-            os.write(self._fd, header)
+            self.dir.mkdir(parents=True, exist_ok=True)
+            self._file = AppendFile.create(path, header)
         except OSError as err:
-            raise RecorderError(f"could not create {self.path}: {err.strerror}") from err
-        self._file_size = len(header)
+            self._failed(f"recorder: could not create {path}: {err.strerror}")
+            return
+        self.path = path
         self.files_opened += 1
+        self._recovered()
         self._enforce_cap()
 
     def _rotate(self) -> None:
@@ -256,16 +285,16 @@ class FlightRecorder:
 
     def _close_file(self) -> None:
         self._drain()
-        if self._fd is None:
+        if self._file is None:
             return
-        fd, self._fd = self._fd, None
+        f, self._file = self._file, None
         if self._syncer is not None:
             with self._sync_lock:
-                self._sync_fds.append(fd)
+                self._sync_fds.append(f.fd)
             self._sync_wake.set()
             return
-        self._fsync(fd)
-        os.close(fd)
+        self._fsync(f.fd)
+        f.close()
 
     def recordings(self) -> list[Path]:
         """This recorder's files in the directory, oldest first."""
@@ -297,6 +326,9 @@ class FlightRecorder:
 
     def close(self) -> None:
         self._close_file()
+        if self._buf:  # the disk refused it to the end: lost, counted
+            self._lose(bytes(self._buf))
+            self._buf.clear()
         if self._syncer is not None:
             with self._sync_lock:
                 self._stopping = True
@@ -312,6 +344,12 @@ class FlightRecorder:
             "files_deleted": self.files_deleted,
             "syncs": self.syncs,
             "write_errors": self.write_errors,
+            "lost_records": self.lost_records,
+            "lost_bytes": self.lost_bytes,
+            "outages": self.outages,
+            "recording": self.recording,
+            "last_error": self.last_error,
+            "buffered_bytes": len(self._buf),
             "max_buffered_bytes": self.max_buffered,
             "max_flush_ms": round(self.max_flush_s * 1e3, 3),
         }
