@@ -210,10 +210,10 @@ def test_a_level_inside_its_bounds_whose_threshold_is_not_finite(
 
 def test_a_protocol_scale_of_zero_is_refused_at_load(tmp_path: Path) -> None:
     proto = (CONFIG_DIR / "protocols" / "outland1000.toml").read_text()
-    assert 'scale = 0.01, unit = "deg" }' in proto
+    assert 'scale = 0.01, unit = "deg",' in proto
     (tmp_path / "protocols").mkdir()
     (tmp_path / "protocols" / "outland1000.toml").write_text(
-        proto.replace('scale = 0.01, unit = "deg" }', 'scale = 0, unit = "deg" }', 1))
+        proto.replace('scale = 0.01, unit = "deg",', 'scale = 0, unit = "deg",', 1))
     cfg = write(tmp_path, "[rov]\nperiod_s = 0.2\n")
     with pytest.raises(ConfigError) as info:
         load_bridge_file(cfg)
