@@ -210,7 +210,9 @@ def replay_through_pty(
                     break
                 if data:
                     pipeline.feed(data)
-                elif feeder.done.is_set() and pipeline.stream.bytes_in >= feeder.bytes_written:
+                # The end of the input is the end of the replay: once the writer is done and
+                # every byte it wrote has been read, no read timeout is waited out.
+                if feeder.done.is_set() and pipeline.stream.bytes_in >= feeder.bytes_written:
                     break
                 if clock() - started > timeout_s:
                     raise FdiBridgeError(f"replay did not finish within {timeout_s:.0f} s")
