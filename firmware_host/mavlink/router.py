@@ -730,17 +730,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bench-runs", type=int, default=1, help="runs per rate")
 
 
-def run(args: argparse.Namespace) -> int:
+def config_from_args(args: argparse.Namespace) -> MavlinkConfig:
+    """``[mavlink]`` of ``--config`` (defaults without one) with the command line's overrides."""
     import dataclasses
-    import json
 
-    if args.bench:
-        from firmware_host.devtools.router_bench import bench_forwarding
-
-        for rate in args.bench_rate or (1000, 10000):
-            for _ in range(max(1, args.bench_runs)):
-                print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
-        return 0
     cfg = load_mavlink_config(args.config) if args.config else MavlinkConfig()
     changes: dict[str, Any] = {}
     if args.autopilot or args.baud:
@@ -753,11 +746,24 @@ def run(args: argparse.Namespace) -> int:
         changes["gcs"] = tuple(EndpointConfig(u) for u in args.gcs)
     if args.tlog_dir:
         changes["tlog_dir"] = args.tlog_dir
-    cfg = dataclasses.replace(cfg, **changes)
+    return dataclasses.replace(cfg, **changes)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The router alone (a file with a vehicle runs on the runtime: ``commands.mavlink``)."""
+    import json
+
+    if args.bench:
+        from firmware_host.devtools.router_bench import bench_forwarding
+
+        for rate in args.bench_rate or (1000, 10000):
+            for _ in range(max(1, args.bench_runs)):
+                print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
+        return 0
+    cfg = config_from_args(args)
     params = ParamStore(cfg.param_file or None)
     router = Router(cfg, params=params)
     log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
-    rover = _start_rover(args.config, router) if args.config else None
     deadline = time.monotonic() + args.seconds if args.seconds > 0 else None
     summary: dict[str, Any] = {}
     try:
@@ -766,38 +772,7 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        if rover is not None:
-            summary["rover"] = rover()
         router.close()
         summary["router"] = router.summary()
         print(json.dumps(summary))
     return 0
-
-
-def _start_rover(path: str, router: Router) -> Callable[[], dict[str, Any]] | None:
-    """With a ``[rover]`` table in the config, run the rover pipeline on its receiver port.
-
-    Returns a function that stops it and gives its summary; None without a ``[rover]`` table.
-    """
-    from firmware_host.mavlink.rover import attach_rover, run_rover_reader
-    from firmware_host.rover.pipeline import RoverPipeline
-
-    bridge = load_vehicle_config(path)
-    if bridge is None:
-        return None
-    pipeline = RoverPipeline(bridge.rover)
-    attach_rover(pipeline, router)
-    stop = threading.Event()
-    thread = threading.Thread(
-        target=run_rover_reader, args=(pipeline, stop), name="rover", daemon=True
-    )
-    thread.start()
-    log.info("rover pipeline on %s, corrected fixes to the autopilot", bridge.rover.port.url)
-
-    def finish() -> dict[str, Any]:
-        stop.set()
-        thread.join(timeout=2.0)
-        pipeline.finish()
-        return pipeline.summary()
-
-    return finish

@@ -22,11 +22,18 @@ from collections.abc import Callable
 from typing import Any
 
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
+from drivers.mavlink.io import GpsInputFix
 from drivers.ptypair import PtyPair
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
 from firmware_host.rover.pipeline import EpochOutcome
 from firmware_host.runtime.config import RoverConfig
+from firmware_host.runtime.mavout import (
+    SEVERITY_CRITICAL,
+    SEVERITY_NOTICE,
+    MavlinkOutput,
+    open_mavlink_output,
+)
 
 KNOT_MPS = 1852.0 / 3600.0
 GPS_EPOCH_UNIX = 315964800  # 1980-01-06T00:00:00Z
@@ -201,15 +208,13 @@ _FIX_TYPE = {1: 3, 2: 4, 3: 3, 4: 6, 5: 5, 6: 3, 7: 3, 8: 3, 9: 4}
 class MavlinkGpsSink:
     """GPS_INPUT per epoch; STATUSTEXT and HOLD on alarm; heartbeat at 1 Hz of fix time."""
 
-    def __init__(self, cfg: RoverConfig, endpoint: Any | None = None) -> None:
-        from drivers.mavlink.io import GpsInputFix, MavEndpoint
-
+    def __init__(self, cfg: RoverConfig, endpoint: MavlinkOutput | None = None) -> None:
         self._fix_cls = GpsInputFix
         o = cfg.output
         self.cfg = cfg
-        self.endpoint = endpoint or MavEndpoint(
-            o.mavlink_url, source_system=o.mavlink_system, source_component=o.mavlink_component
-        )
+        self.endpoint: MavlinkOutput = endpoint or open_mavlink_output(
+            o.mavlink_url, source_system=o.mavlink_system, source_component=o.mavlink_component,
+            baudrate=o.mavlink_baudrate, backoff_max_s=cfg.reconnect_max_s)
         self.sent = 0
         self.no_date = 0
         self._next_heartbeat: float | None = None
@@ -224,12 +229,14 @@ class MavlinkGpsSink:
             self._next_heartbeat = math.floor(out.t_s) + 1.0
         if d.alarm_raised:
             self.endpoint.send_statustext(
-                2, f"FDI GPS: {self.cfg.detector.max_consecutive}+ faults in a row, auto-nav stop"
+                SEVERITY_CRITICAL,
+                f"FDI GPS: {self.cfg.detector.max_consecutive}+ faults in a row, auto-nav stop",
             )
             if o.hold_on_alarm:
                 self.endpoint.request_mode(o.target_system, "HOLD", o.vehicle)
         elif self._was_alarm and not d.alarm:
-            self.endpoint.send_statustext(5, "FDI GPS: fixes consistent again, alarm cleared")
+            self.endpoint.send_statustext(SEVERITY_NOTICE,
+                                          "FDI GPS: fixes consistent again, alarm cleared")
         self._was_alarm = d.alarm
         if e.date is None or e.utc_s is None:
             self.no_date += 1
