@@ -81,7 +81,7 @@ class RoverVehicle:
             attach_rover(pipeline, ctx.router)  # GPS_INPUT, statistics, live parameters
         elif ctx.mavlink is not None:
             rover = replace(rc, output=replace(out, mavlink_url=self.mavlink_url or "output"))
-            sinks.append(MavlinkGpsSink(rover, endpoint=ctx.mavlink))
+            pipeline.sinks.append(MavlinkGpsSink(rover, endpoint=ctx.mavlink))
         self.failsafe = RoverFailsafe(rc, ctx.mavlink, clock=ctx.clock)
         pipeline.sinks.append(self.failsafe)
 
