@@ -62,7 +62,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "rover + ROV together, accelerated, faults and port drops",
     ),
     "mavlink": (
-        "firmware_host.mavlink.router",
+        "firmware_host.commands.mavlink",
         "MAVLink passthrough between autopilot and ground stations",
     ),
 }

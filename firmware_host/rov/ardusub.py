@@ -112,6 +112,8 @@ class RovOperatorSink:
             kind = rec.get("fault_kind") or ""
             out.send_statustext(severity, f"{text} ({kind})" if kind else text)
         action = str(rec.get("action", ""))
+        if self._action == "init" and action == "hold":
+            return  # the first periods before the first telemetry: nothing was lost yet
         if action != self._action and action in ACTION_TEXT:
             out.send_statustext(*ACTION_TEXT[action])
         elif self._action in ACTION_TEXT and action not in ACTION_TEXT:
