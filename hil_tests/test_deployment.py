@@ -10,6 +10,7 @@ that pymavlink reads, a flight recording that ``fdi-bridge replay`` turns into t
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import signal
@@ -249,7 +250,7 @@ def test_rov_with_operator_link(tmp_path: Path) -> None:
     summary = json.loads((tmp_path / "live" / "summary.json").read_text())
     assert summary["vehicle"] == "rov" and summary["runtime"]["stopped_by"] == "SIGTERM"
     assert summary["failsafe"] == {"episodes": 1, "neutral": 1}
-    assert summary["counts"]["telemetry"] >= 30 and summary["port"]["losses"] == 0
+    assert summary["counts"]["telemetry"] >= 15 and summary["port"]["losses"] == 0
     lines = (tmp_path / "live" / "epochs.jsonl").read_text().splitlines()
     assert len(lines) == summary["steps"] - 1 or len(lines) == summary["steps"]
     rec = summary["recorder"]["bytes_by_channel"]
@@ -288,7 +289,7 @@ def test_nothing_stale_is_sent_at_shutdown(tmp_path: Path, n_epochs: int) -> Non
     assert rc == 0, err
     sent = [m for _, m in ap.of("GPS_INPUT")]
     timed = [gps_time_s(m) for m in sent if m.time_week > 0]
-    assert all(b >= a for a, b in zip(timed, timed[1:], strict=False)), timed
+    assert all(b >= a for a, b in itertools.pairwise(timed)), timed
     assert sent[-1].fix_type <= 1  # the last word to the autopilot is the no-fix
     texts = [m.text for _, m in ap.of("STATUSTEXT")]
     assert any("no valid data" in t for t in texts)

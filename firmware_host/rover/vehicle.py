@@ -18,6 +18,8 @@ sent since (a no-fix), and it would say "data back" for a fix that did not come 
 from __future__ import annotations
 
 import logging
+import time
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any, Literal
 
@@ -51,6 +53,8 @@ class RoverVehicle:
         self.failsafe: RoverFailsafe | None = None
         self.nmea: NmeaSink | None = None
         self.pending_not_sent = 0  # epochs completed at shutdown and kept out of the outputs
+        self.clock: Callable[[], float] = time.monotonic
+        self._idle_s = 0.0
 
     # ------------------------------------------------------------------ what it needs
 
@@ -69,6 +73,7 @@ class RoverVehicle:
         rc = self.cfg.rover
         out = rc.output
         self.port = ctx.ports["gps"]
+        self.clock = ctx.clock
         sinks: list[EpochSink] = []
         if self.nmea_url:
             tap = ctx.tap("nmea tx", self.nmea_url, out.nmea_baudrate, "tx")
@@ -89,16 +94,26 @@ class RoverVehicle:
 
     def step(self, t: float) -> int:
         assert self.port is not None and self.pipeline is not None
+        t0 = self.clock()
         data = self.port.read_some(65536)
-        return self.pipeline.feed(data) if data else 0
+        if data:
+            self._idle_s = 0.0
+            return self.pipeline.feed(data)
+        # Nothing came: the read should have waited the port's timeout. If it returned at once
+        # (timeout_s = 0, a simulated device on a fake clock), the runner waits the rest.
+        wait = max(self.cfg.rover.port.timeout_s, 0.01)
+        self._idle_s = max(0.0, wait - (self.clock() - t0))
+        return 0
 
     def check(self, now: float) -> None:
         if self.failsafe is not None:
             self.failsafe.check()
 
     def idle_s(self) -> float:
-        if self.port is None or self.port.up:
-            return 0.0  # the read waits for the receiver itself
+        if self.port is None:
+            return 0.0
+        if self.port.up:
+            return self._idle_s  # 0 when the read waited for the receiver itself
         return max(self.port.wait_s(), 0.01)
 
     def finish(self) -> None:

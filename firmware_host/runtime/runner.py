@@ -200,7 +200,8 @@ class Runner:
                 output = open_mavlink_output(
                     mav.url, source_system=mav.source_system,
                     source_component=mav.source_component, baudrate=mav.baudrate,
-                    backoff_max_s=mav.backoff_max_s, clock=self.clock, tap=tap)
+                    backoff_max_s=mav.backoff_max_s, clock=self.clock, tap=tap,
+                    **({"opener": self.opener} if self.opener is not None else {}))
                 self._own_output = True
         self.mavlink_output = output
         ctx = Context(clock=self.clock, ports=self.ports, epochs=self.epochs, mavlink=output,
