@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import logging
 import threading
 import time
@@ -153,7 +154,20 @@ def run_file(
                     mavlink_url)
     runner = Runner(vehicle, out_dir=out, recorder=recorder, mavlink=mavlink,
                     duration_s=duration_s)
-    return runner.run()
+    summary = runner.run()
+    log.info("summary %s", json.dumps(_brief(summary), separators=(",", ":")))
+    return summary
+
+
+def _brief(summary: dict[str, Any]) -> dict[str, Any]:
+    """The journal's line at shutdown: what stopped it and the main counters."""
+    keys = ("vehicle", "runtime", "epochs", "faults", "alarms", "steps", "overruns",
+            "failsafe", "port", "shutdown")
+    out = {k: summary[k] for k in keys if k in summary}
+    rec = summary.get("recorder")
+    if isinstance(rec, dict):
+        out["recorder"] = {k: rec.get(k) for k in ("files_opened", "write_errors")}
+    return out
 
 
 # --------------------------------------------------------------------------- embedding
