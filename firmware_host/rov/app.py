@@ -21,7 +21,7 @@ import numpy as np
 
 from drivers.resilient import Opener
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
-from firmware_host.devtools.rov_sim import parse_fault
+from firmware_host.devtools.rov_sim import RovPlant, parse_fault
 from firmware_host.rov.config import RovConfig, load_rov_config
 from firmware_host.rov.control import RovController
 from firmware_host.rov.vehicle import OutlandRovVehicle
@@ -92,8 +92,6 @@ def run_rov(
 
 def bench_rov_step(n: int) -> dict[str, float]:
     """p50/p99 (ms) of one ROV step (detector + substitution + PID), on simulated data."""
-    from firmware_host.devtools.rov_sim import RovPlant
-
     cfg = RovConfig()
     plant = RovPlant(cfg.sim, [parse_fault("drift:30@70")])
     ctl = RovController(cfg)

@@ -278,8 +278,9 @@ class MavlinkGpsSink:
         self.endpoint.send_gps_input(fix)
         self.sent += 1
 
-    def stats(self) -> dict[str, int]:
-        return {"gps_input_sent": self.sent, "no_date": self.no_date}
+    def stats(self) -> dict[str, Any]:
+        return {"gps_input_sent": self.sent, "no_date": self.no_date,
+                "endpoint": self.endpoint.counters()}
 
     def close(self) -> None:
         self.endpoint.close()
