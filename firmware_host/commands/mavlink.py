@@ -13,7 +13,7 @@ import argparse
 import json
 
 from fdi.errors import ConfigError
-from firmware_host.commands.run import resolve_config_path, run_file, vehicle_of
+from firmware_host.commands.launch import resolve_config_path, run_file, vehicle_of
 from firmware_host.mavlink import router
 
 
