@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from drivers.mavlink import io as mio
 from drivers.mavlink.io import GpsInputFix, MavEndpoint, MavPacker, PortEndpoint
@@ -31,7 +31,9 @@ from drivers.ratelog import RateLimitedLog
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
 from fdi.errors import FdiBridgeError
-from firmware_host.mavlink.router import Router
+
+if TYPE_CHECKING:  # the router is only handed in: a replay never imports it
+    from firmware_host.mavlink.router import Router
 
 log = logging.getLogger("fdi_bridge.mavout")
 
