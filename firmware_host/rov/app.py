@@ -1,9 +1,9 @@
-"""``fdi-bridge sim rov``: the ROV compass experiment; plus the real vehicle and a benchmark.
+"""``fdi-bridge sim rov``: the ROV compass experiment; plus the real-vehicle loop and a benchmark.
 
 ``fdi-bridge sim rov --config CONFIG --duration S --fault SPEC --out DIR [--no-ft]`` runs the
 simulated vehicle step-locked in-process and writes ``DIR/epochs.jsonl`` (one object per 200 ms
-step) and ``DIR/summary.json``. :func:`run_rov` runs the real vehicle (the same controller on
-the configured port) on the one runtime; :func:`bench_rov_step` times one step.
+step) and ``DIR/summary.json``. :func:`run_rov` is the real-vehicle loop (the same controller on
+the configured port, on the fixed-rate loop); :func:`bench_rov_step` times one step.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 
 from drivers.resilient import Opener
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
-from firmware_host.devtools.rov_sim import RovPlant, parse_fault
+from firmware_host.devtools.rov_sim import parse_fault
 from firmware_host.rov.config import RovConfig, load_rov_config
 from firmware_host.rov.control import RovController
 from firmware_host.rov.vehicle import OutlandRovVehicle
@@ -92,6 +92,8 @@ def run_rov(
 
 def bench_rov_step(n: int) -> dict[str, float]:
     """p50/p99 (ms) of one ROV step (detector + substitution + PID), on simulated data."""
+    from firmware_host.devtools.rov_sim import RovPlant
+
     cfg = RovConfig()
     plant = RovPlant(cfg.sim, [parse_fault("drift:30@70")])
     ctl = RovController(cfg)

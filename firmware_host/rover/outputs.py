@@ -28,12 +28,7 @@ from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
 from firmware_host.rover.pipeline import EpochOutcome
 from firmware_host.runtime.config import RoverConfig
-from firmware_host.runtime.mavout import (
-    SEVERITY_CRITICAL,
-    SEVERITY_NOTICE,
-    MavlinkOutput,
-    open_mavlink_output,
-)
+from firmware_host.runtime.mavout import MavlinkOutput, open_mavlink_output
 
 KNOT_MPS = 1852.0 / 3600.0
 GPS_EPOCH_UNIX = 315964800  # 1980-01-06T00:00:00Z
@@ -229,14 +224,12 @@ class MavlinkGpsSink:
             self._next_heartbeat = math.floor(out.t_s) + 1.0
         if d.alarm_raised:
             self.endpoint.send_statustext(
-                SEVERITY_CRITICAL,
-                f"FDI GPS: {self.cfg.detector.max_consecutive}+ faults in a row, auto-nav stop",
+                2, f"FDI GPS: {self.cfg.detector.max_consecutive}+ faults in a row, auto-nav stop"
             )
             if o.hold_on_alarm:
                 self.endpoint.request_mode(o.target_system, "HOLD", o.vehicle)
         elif self._was_alarm and not d.alarm:
-            self.endpoint.send_statustext(SEVERITY_NOTICE,
-                                          "FDI GPS: fixes consistent again, alarm cleared")
+            self.endpoint.send_statustext(5, "FDI GPS: fixes consistent again, alarm cleared")
         self._was_alarm = d.alarm
         if e.date is None or e.utc_s is None:
             self.no_date += 1
@@ -278,9 +271,8 @@ class MavlinkGpsSink:
         self.endpoint.send_gps_input(fix)
         self.sent += 1
 
-    def stats(self) -> dict[str, Any]:
-        return {"gps_input_sent": self.sent, "no_date": self.no_date,
-                "endpoint": self.endpoint.counters()}
+    def stats(self) -> dict[str, int]:
+        return {"gps_input_sent": self.sent, "no_date": self.no_date}
 
     def close(self) -> None:
         self.endpoint.close()

@@ -129,6 +129,12 @@ class EncoderOutput:
     ) -> None:
         self._sent(lambda: self.encoder.send_manual_control(target_system, x, y, z, r, buttons))
 
+    @property
+    def command_stats(self) -> dict[str, int] | None:
+        """The encoder's command acknowledgement counters, when it keeps them."""
+        stats = getattr(self.encoder, "command_stats", None)
+        return stats if isinstance(stats, dict) else None
+
     def counters(self) -> dict[str, int]:
         out = {"packets": self.packets, "send_errors": self.send_errors}
         if self.port is not None:
