@@ -2,21 +2,22 @@
 
 from __future__ import annotations
 
-import argparse
 import grp
 import os
 import signal
 import socket
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from drivers.configload import read_toml
 from drivers.ptypair import PtyPair
 from firmware_host.cli import main
-from firmware_host.commands import mavlink as mavlink_cmd
+from firmware_host.commands import run as run_cmd
 from firmware_host.commands.doctor import Report, check_device, check_mavlink_url, diagnose
+from firmware_host.runtime.config import BridgeFile
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,13 +120,17 @@ def test_doctor_and_run_accept_the_same_files(
     doctor_accepts = not any(p.startswith("config:") for p in rep.problems)
     routed: list[list[str]] = []
 
-    def router_instead(args: argparse.Namespace) -> int:
-        # A [mavlink] file runs the router: not started here (mavlink-example sends to a
-        # radio-network address); run got as far as handing it the file.
-        routed.append([args.config])
-        return 0
+    real_run_file = run_cmd.run_file
 
-    monkeypatch.setattr(mavlink_cmd, "run", router_instead)
+    def router_instead(bf: BridgeFile, **kw: Any) -> dict[str, Any]:
+        # A [mavlink] file runs the vehicle with the router: not started here (mavlink-example
+        # sends to a radio-network address); run got as far as handing it the file.
+        if bf.mavlink is None:
+            return real_run_file(bf, **kw)
+        routed.append([str(bf.path)])
+        return {}
+
+    monkeypatch.setattr(run_cmd, "run_file", router_instead)
     status = main(["run", "--config", str(path), "--duration", "0.3",
                    "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err

@@ -64,6 +64,15 @@ class FakeEndpoint:
         self.calls.append((self.clock(), "mode", a))
         return b"m"
 
+    def send_named_value(self, name: str, value: float) -> None:
+        self.calls.append((self.clock(), "named_value", (name, value)))
+
+    def send_manual_control(self, *a: Any) -> None:
+        self.calls.append((self.clock(), "manual_control", a))
+
+    def counters(self) -> dict[str, int]:
+        return {"packets": len(self.calls)}
+
     def close(self) -> None:
         pass
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import threading
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -99,10 +98,9 @@ def test_run_rov_from_the_cli(tmp_path: Path) -> None:
     assert len(lines) >= 15
 
 
-def test_a_config_with_a_mavlink_table_runs_the_router(tmp_path: Path, capsys: Any) -> None:
-    """`fdi-bridge run` on a vehicle file with [mavlink] runs the one-process router."""
-    from firmware_host.cli import main
-
+def test_a_config_with_a_mavlink_table_runs_the_router(tmp_path: Path) -> None:
+    """`fdi-bridge run` on a vehicle file with [mavlink]: the vehicle on the runtime with the
+    router attached, one process; the summary has both."""
     cfg = tmp_path / "vehicle.toml"
     cfg.write_text(
         'name = "t"\n[mavlink]\ntlog_dir = ""\nparam_file = ""\n'
@@ -110,8 +108,30 @@ def test_a_config_with_a_mavlink_table_runs_the_router(tmp_path: Path, capsys: A
         '[[mavlink.gcs]]\nurl = "udpin:127.0.0.1:0"\n'
         f'[rover.port]\nurl = "{tmp_path / "no-such-gps"}"\n'
     )
-    assert main(["run", "--config", str(cfg), "--duration", "0.5"]) == 0
-    summary = json.loads(capsys.readouterr().out)
-    assert {"rover", "router"} <= summary.keys()
-    assert summary["rover"]["epochs"] == 0  # no receiver: nothing invented
+    out = tmp_path / "out"
+    assert main(["run", "--config", str(cfg), "--duration", "0.5", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["vehicle"] == "rover" and summary["runtime"]["stopped_by"] == "duration"
+    assert summary["epochs"] == 0  # no receiver: nothing invented
+    assert summary["port"]["open_failures"] >= 1  # the receiver's port is retried
     assert "autopilot" in summary["router"]
+
+
+def test_the_mavlink_command_runs_a_vehicle_file_on_the_runtime(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`fdi-bridge mavlink --config F` with [rover]: the same runtime as `run` (the rover's
+    reader loop of the router is gone); without a vehicle, the router alone."""
+    cfg = tmp_path / "vehicle.toml"
+    cfg.write_text(
+        '[mavlink]\n[mavlink.autopilot]\nurl = "udpin:127.0.0.1:0"\n'
+        '[[mavlink.gcs]]\nurl = "udpin:127.0.0.1:0"\n'
+        f'[rover]\nreconnect_max_s = 0.2\n[rover.port]\nurl = "{tmp_path / "no-gps"}"\n')
+    assert main(["mavlink", "--config", str(cfg), "--seconds", "1.0"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["vehicle"] == "rover" and "autopilot" in summary["router"]
+    assert summary["port"]["open_failures"] >= 5  # 0.1, 0.2, 0.2 ... s apart (5 s cap: 4)
+    alone = tmp_path / "router.toml"
+    alone.write_text(cfg.read_text().split("[rover]")[0])
+    assert main(["mavlink", "--config", str(alone), "--seconds", "0.3"]) == 0
+    assert set(json.loads(capsys.readouterr().out)) == {"router"}

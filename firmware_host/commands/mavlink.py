@@ -1,9 +1,14 @@
-"""``fdi-bridge mavlink``: the MAVLink router as a command, with the rover pipeline when the file
-has a ``[rover]`` table (:mod:`firmware_host.mavlink.rover`) and ``--bench``
-(:mod:`firmware_host.devtools.router_bench`).
+"""``fdi-bridge mavlink``: the MAVLink router as a command, with the file's vehicle if it has one,
+and ``--bench`` (:mod:`firmware_host.devtools.router_bench`).
+
+A file with only ``[mavlink]`` (or no file) runs the router alone. A file that also has a
+vehicle (``[rover]``, ``[rov]``) runs that vehicle on the one runtime with the router attached,
+exactly as ``fdi-bridge run --config FILE`` does (:func:`firmware_host.commands.launch.run_file`);
+``--autopilot``, ``--gcs`` and ``--tlog-dir`` override the ``[mavlink]`` table and ``--seconds``
+is the duration.
 
 The command lives here, above the router, so that :mod:`firmware_host.mavlink.router` imports
-neither the rover wiring nor the benchmark (both import the router).
+neither the vehicles nor the benchmark (both import the router).
 """
 
 from __future__ import annotations
@@ -12,18 +17,15 @@ import argparse
 import dataclasses
 import json
 import logging
-import threading
 import time
-from collections.abc import Callable
 from typing import Any
 
+from firmware_host.commands.launch import run_file
 from firmware_host.devtools.router_bench import bench_forwarding
 from firmware_host.mavlink.params import ParamStore
 from firmware_host.mavlink.router import Router
-from firmware_host.mavlink.rover import attach_rover, run_rover_reader
-from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeFile, load_bridge_file, mavlink_config
-from firmware_host.runtime.config_mavlink import EndpointConfig
+from firmware_host.runtime.config_mavlink import EndpointConfig, MavlinkConfig
 
 log = logging.getLogger("fdi_bridge.router")
 
@@ -43,15 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bench-runs", type=int, default=1, help="runs per rate")
 
 
-def run(args: argparse.Namespace) -> int:
-    if args.bench:
-        for rate in args.bench_rate or (1000, 10000):
-            for _ in range(max(1, args.bench_runs)):
-                print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
-        return 0
-    bf: BridgeFile | None = getattr(args, "bridge_file", None)  # already read by `run`
-    if bf is None:
-        bf = load_bridge_file(args.config) if args.config else BridgeFile()
+def config_from_args(args: argparse.Namespace, bf: BridgeFile) -> MavlinkConfig:
+    """The file's ``[mavlink]`` (defaults without one) with the command line's overrides."""
     cfg = mavlink_config(bf)
     changes: dict[str, Any] = {}
     if args.autopilot or args.baud:
@@ -64,47 +59,36 @@ def run(args: argparse.Namespace) -> int:
         changes["gcs"] = tuple(EndpointConfig(u) for u in args.gcs)
     if args.tlog_dir:
         changes["tlog_dir"] = args.tlog_dir
-    cfg = dataclasses.replace(cfg, **changes)
+    return dataclasses.replace(cfg, **changes)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.bench:
+        for rate in args.bench_rate or (1000, 10000):
+            for _ in range(max(1, args.bench_runs)):
+                print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
+        return 0
+    bf: BridgeFile | None = getattr(args, "bridge_file", None)  # already read by `run`
+    if bf is None:
+        bf = load_bridge_file(args.config) if args.config else BridgeFile()
+    cfg = config_from_args(args, bf)
+    if bf.rover is not None or bf.rov is not None:  # the vehicle, on the runtime
+        summary = run_file(bf, mavlink=cfg, duration_s=args.seconds if args.seconds > 0 else None,
+                           note=f"fdi-bridge mavlink --config {args.config}")
+        print(json.dumps(summary))
+        return 0
     params = ParamStore(cfg.param_file or None)
     router = Router(cfg, params=params)
     log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
-    rover = _start_rover(bf, router)
     deadline = time.monotonic() + args.seconds if args.seconds > 0 else None
-    summary: dict[str, Any] = {}
+    out: dict[str, Any] = {}
     try:
         while deadline is None or time.monotonic() < deadline:
             router.poll(0.05)
     except KeyboardInterrupt:
         pass
     finally:
-        if rover is not None:
-            summary["rover"] = rover()
         router.close()
-        summary["router"] = router.summary()
-        print(json.dumps(summary))
+        out["router"] = router.summary()
+        print(json.dumps(out))
     return 0
-
-
-def _start_rover(bf: BridgeFile, router: Router) -> Callable[[], dict[str, Any]] | None:
-    """With a ``[rover]`` table in the config, run the rover pipeline on its receiver port.
-
-    Returns a function that stops it and gives its summary; None without a ``[rover]`` table.
-    """
-    if bf.rover is None:
-        return None
-    pipeline = RoverPipeline(bf.rover)
-    attach_rover(pipeline, router)
-    stop = threading.Event()
-    thread = threading.Thread(
-        target=run_rover_reader, args=(pipeline, stop), name="rover", daemon=True
-    )
-    thread.start()
-    log.info("rover pipeline on %s, corrected fixes to the autopilot", bf.rover.port.url)
-
-    def finish() -> dict[str, Any]:
-        stop.set()
-        thread.join(timeout=2.0)
-        pipeline.finish()
-        return pipeline.summary()
-
-    return finish

@@ -3,12 +3,12 @@
 Everything runs in one process on one :class:`~firmware_host.runtime.loop.FakeClock`, so a simulated
 hour takes a minute or so of real time, and the result is the same on every run for a seed
 (wall-clock values: the processing times and the memory). What runs is the bridge's own code —
-:class:`~firmware_host.commands.run.RoverBridge` (resilient port, pipeline, NMEA/MAVLink outputs,
-failsafe), the ROV's :func:`~firmware_host.rov.app.link_step` with
-:class:`~firmware_host.rov.control.RovController` on an :class:`~drivers.outland.link.OutlandLink`
-over a :class:`~drivers.resilient.ResilientPort`, and the
-:class:`~firmware_host.runtime.recorder.FlightRecorder` on every port direction. Only the devices
-are
+the vehicles ``fdi-bridge run`` runs (:class:`~firmware_host.rover.vehicle.RoverVehicle`:
+pipeline, MAVLink output, failsafe; :class:`~firmware_host.rov.vehicle.OutlandRovVehicle`:
+:class:`~firmware_host.rov.control.RovController` on an :class:`~drivers.outland.link.OutlandLink`),
+each on the runtime's :class:`~firmware_host.runtime.runner.Runner` (resilient ports, the
+:class:`~firmware_host.runtime.recorder.FlightRecorder` on every port direction), stepped by
+hand on one fake clock. Only the devices are
 simulated (:class:`SimDevice`): the rover's receiver
 (:func:`firmware_host.devtools.rover_sim.generate`,
 GPS faults included) and the ROV (:class:`~firmware_host.devtools.rov_sim.RovSimServer`, compass
@@ -44,22 +44,19 @@ from typing import Any
 import numpy as np
 
 from drivers.capture import Channel
-from drivers.mavlink.io import MavPacker
 from drivers.outland.framecodec import load_protocol
-from drivers.outland.link import OutlandLink
-from drivers.resilient import ResilientPort
 from drivers.transport import SerialSettings
 from fdi.errors import PortError
-from firmware_host.commands.run import RoverBridge
 from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
-from firmware_host.rov.app import link_step
 from firmware_host.rov.config import load_rov_config, protocol_path
-from firmware_host.rov.control import RovController
+from firmware_host.rov.vehicle import OutlandRovVehicle
+from firmware_host.rover.vehicle import RoverVehicle
 from firmware_host.runtime.config import BridgeConfig, RoverConfig
-from firmware_host.runtime.failsafe import RovFailsafeMonitor
 from firmware_host.runtime.loop import FakeClock
+from firmware_host.runtime.mavout import packer_output
 from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
+from firmware_host.runtime.runner import Runner
 
 GPS_URL = "sim://gps"
 ROV_URL = "sim://rov"
@@ -286,27 +283,22 @@ def run_soak(
     recorder = FlightRecorder(record_dir, rec_cfg, note="fdi-bridge soak", clock=clock,
                               wall_us=wall_us, background_sync=background_sync)
 
-    # The rover bridge (the same class `fdi-bridge run` uses).
-
-    class Packer(MavPacker):  # the autopilot's link: packets encoded, recorded, not sent
-        def close(self) -> None:
-            pass
-
+    # The rover and the ROV: the vehicles `fdi-bridge run` runs, each on the runtime's Runner
+    # (resilient, recorded ports; the rover's failsafe; the MAVLink output encoded, recorded,
+    # sent nowhere), both driven step by step on the one fake clock.
+    mav_tap = recorder.tap(recorder.add_channel(Channel("mavlink tx", "packer", direction="tx")))
     rover_cfg = BridgeConfig(rover=replace(RoverConfig(), port=SerialSettings(url=GPS_URL),
                                            reconnect_max_s=2.0))
     devnull = open(os.devnull, "w", encoding="utf-8")  # noqa: SIM115 - closed below
-    rover = RoverBridge(rover_cfg, jsonl=devnull, clock=clock, recorder=recorder, opener=opener,
-                        endpoint=Packer())
-    # The ROV (the same step `run_rov` runs), on a resilient, recorded port.
-    rov_rx = recorder.tap(recorder.add_channel(Channel("rov link rx", ROV_URL, direction="rx")))
-    rov_tx = recorder.tap(recorder.add_channel(Channel("rov link tx", ROV_URL, direction="tx")))
-    rov_port = ResilientPort(SerialSettings(url=ROV_URL, timeout_s=0.0), name="rov link",
-                             backoff_max_s=2.0, clock=clock, opener=opener, on_rx=rov_rx,
-                             on_tx=rov_tx)
-    link = OutlandLink(rov_port, proto, "rs232", rcfg.link.address, clock=clock)
-    ctl = RovController(rcfg)
-    monitor = RovFailsafeMonitor(rcfg.period_s)
-    actions: Counter[str] = Counter()
+    rover_v = RoverVehicle(rover_cfg)
+    rover = Runner(rover_v, jsonl=devnull, recorder=recorder, own_recorder=False,
+                   mavlink_output=packer_output(tap=mav_tap, clock=clock), clock=clock,
+                   opener=opener, handle_signals=False)
+    rcfg = replace(rcfg, link=replace(rcfg.link, port=SerialSettings(url=ROV_URL, timeout_s=0.0),
+                                      wiring="rs232", reconnect_max_s=2.0))
+    rov_v = OutlandRovVehicle(rcfg, base)
+    rov_runner = Runner(rov_v, recorder=recorder, own_recorder=False, clock=clock,
+                        opener=opener, handle_signals=False)
 
     perf = time.perf_counter
     rover_period, rov_period = 0.1, rcfg.period_s
@@ -318,6 +310,8 @@ def run_soak(
     steps = round(duration / rover_period)
     rov_every = round(rov_period / rover_period)
     try:
+        rover.start()
+        rov_runner.start()
         while k < steps:
             clock.now = k * rover_period  # absolute deadlines: next = k * period
             gps.pump()  # the devices' own work (simulation) is not timed as the bridge's
@@ -329,10 +323,7 @@ def run_soak(
             rover_over += dt > rover_period
             if k % rov_every == 0:
                 t0 = perf()
-                _, rec = link_step(link, ctl, rov_period)
-                monitor.observe(rec)
-                actions[rec["action"]] += 1
-                recorder.poll()
+                rov_runner.step(clock())
                 dt = perf() - t0
                 rov_worst = max(rov_worst, dt)
                 rov_over += dt > rov_period
@@ -344,21 +335,21 @@ def run_soak(
         clock.now = steps * rover_period
         rover.step()
     finally:
-        rover.close()
-        rov_port.close()
+        summ = rover.close()
+        rov_summ = rov_runner.close()
         recorder.close()
         devnull.close()
+    gps_port, rov_port = rover.ports["gps"], rov_runner.ports["rov link"]
     rss_end = rss_bytes()
-    summ = rover.summary()
     by_ch = recorder.counters()["bytes_by_channel"]
     assert isinstance(by_ch, dict)
     gps_pending = len(gps.out)
     rov_pending = len(rov.out)
     checks = {
         "gps: generated = read + lost + pending":
-            gps.generated == rover.port.bytes_rx + gps.lost + gps_pending,
-        "gps: read = recorded": rover.port.bytes_rx == by_ch["gps rx"],
-        "gps: read = NMEA bytes_in": rover.port.bytes_rx == summ["input"]["bytes_in"],
+            gps.generated == gps_port.bytes_rx + gps.lost + gps_pending,
+        "gps: read = recorded": gps_port.bytes_rx == by_ch["gps rx"],
+        "gps: read = NMEA bytes_in": gps_port.bytes_rx == summ["input"]["bytes_in"],
         "rov: generated = read + lost + pending":
             rov.generated == rov_port.bytes_rx + rov.lost + rov_pending,
         "rov: read = recorded": rov_port.bytes_rx == by_ch["rov link rx"],
@@ -378,10 +369,10 @@ def run_soak(
             "bytes_generated": gps.generated, "bytes_lost_unplugged": gps.lost,
         },
         "rov": {
-            "steps": sum(actions.values()), "actions": dict(actions),
-            "link": dict(link.counts), "rejects": dict(link.rejects),
-            "port": rov_port.counters(), "failsafe_episodes": monitor.episodes,
-            "neutral_episodes": monitor.neutral_episodes, "overruns": rov_over,
+            "steps": sum(rov_summ["actions"].values()), "actions": rov_summ["actions"],
+            "link": rov_summ["counts"], "rejects": rov_summ["rejects"],
+            "port": rov_port.counters(), "failsafe_episodes": rov_summ["failsafe"]["episodes"],
+            "neutral_episodes": rov_summ["failsafe"]["neutral"], "overruns": rov_over,
             "worst_step_ms": round(rov_worst * 1e3, 3), "unplugged": rov.unplugged,
             "noise": dict(rov.noise_events), "bytes_generated": rov.generated,
             "bytes_lost_unplugged": rov.lost,

@@ -1,11 +1,14 @@
 """The rover pipeline behind the MAVLink router: one process for the passthrough and the detector.
 
-On a rover with an autopilot, ``fdi-bridge mavlink --config X`` runs the router and, when X
-has a ``[rover]`` table, the rover pipeline on the receiver's port (:func:`run_rover_reader`).
-:func:`attach_rover` wires a :class:`~firmware_host.rover.pipeline.RoverPipeline` to a
+On a rover with an autopilot, ``fdi-bridge run --config X`` (or ``fdi-bridge mavlink``) with
+``[rover]`` and ``[mavlink]`` tables runs the rover on the one runtime
+(:class:`~firmware_host.runtime.runner.Runner`), which starts the router and has the rover
+vehicle (:class:`~firmware_host.rover.vehicle.RoverVehicle`) call :func:`attach_rover`, which
+wires a :class:`~firmware_host.rover.pipeline.RoverPipeline` to a
 :class:`~firmware_host.mavlink.router.Router`:
 
-* :class:`RouterRoverSink` (an ``EpochSink``) sends what
+* :class:`RouterRoverSink` (an ``EpochSink``) sends, through a
+  :class:`~firmware_host.runtime.mavout.RouterOutput`, what
   :class:`~firmware_host.rover.outputs.MavlinkGpsSink` sends -- GPS_INPUT with the corrected fix
   (fix type, GPS week and ms, accuracies raised on replaced fixes), STATUSTEXT on alarm and
   recovery, the HOLD request -- through the router's non-blocking API, so the detector's thread
@@ -22,19 +25,14 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
 
-from drivers.mavlink.io import GpsInputFix
-from drivers.resilient import ResilientPort
-from drivers.transport import open_port
 from fdi.rover import Decision, FixInput, RoverDetectorParams, RoverIsolator
 from firmware_host.mavlink.params import ParamStore
 from firmware_host.mavlink.router import Router
 from firmware_host.rover.outputs import MavlinkGpsSink
 from firmware_host.rover.pipeline import EpochOutcome, RoverPipeline
 from firmware_host.runtime.config import RoverConfig
+from firmware_host.runtime.mavout import RouterOutput
 
 log = logging.getLogger("fdi_bridge.mavlink_rover")
 
@@ -49,28 +47,6 @@ STAT_NAMES = {
     "GPS_ALARM": "1 while the alarm (stop automatic navigation) is up",
 }
 """NAMED_VALUE_FLOAT names (at most 10 characters) and what they carry."""
-
-
-class RouterEndpoint:
-    """What :class:`MavlinkGpsSink` writes to, in ``MavEndpoint``'s spelling, handed to a router."""
-
-    def __init__(self, router: Router) -> None:
-        self.router = router
-
-    def send_heartbeat(self) -> None:
-        """Nothing: the router's component sends its heartbeat at ``heartbeat_hz``."""
-
-    def send_statustext(self, severity: int, text: str) -> None:
-        self.router.post_statustext(severity, text)
-
-    def request_mode(self, target_system: int, mode: str, vehicle: str = "rover") -> None:
-        self.router.request_mode(mode, vehicle, target_system=target_system)
-
-    def send_gps_input(self, fix: GpsInputFix) -> None:
-        self.router.send_gps_input(fix)
-
-    def close(self) -> None:
-        """Nothing: the router belongs to whoever made it."""
 
 
 def _ratio(value: float | None, limit: float | None) -> float | None:
@@ -96,8 +72,8 @@ class RouterRoverSink:
     """EpochSink: the rover's MAVLink output through the router (see the module docstring)."""
 
     def __init__(self, cfg: RoverConfig, router: Router) -> None:
-        self.router = router
-        self.gps = MavlinkGpsSink(cfg, endpoint=RouterEndpoint(router))
+        self.output = RouterOutput(router)
+        self.gps = MavlinkGpsSink(cfg, endpoint=self.output)
 
     @property
     def sent(self) -> int:
@@ -107,7 +83,7 @@ class RouterRoverSink:
     def emit(self, out: EpochOutcome) -> None:
         self.gps.emit(out)
         for name, value in decision_stats(out.decision).items():
-            self.router.set_named_value(name, value)
+            self.output.send_named_value(name, value)
 
     def close(self) -> None:
         self.gps.close()
@@ -145,42 +121,3 @@ def attach_rover(
     sink = RouterRoverSink(pipeline.cfg, router)
     pipeline.sinks.append(sink)
     return sink
-
-
-@dataclass
-class ReaderStats:
-    reads: int = 0
-    bytes_in: int = 0
-    port_errors: int = 0
-
-
-def run_rover_reader(
-    pipeline: RoverPipeline,
-    stop: threading.Event,
-    *,
-    opener: Callable[[Any], Any] = open_port,
-    backoff_max_s: float = 5.0,
-) -> ReaderStats:
-    """Feed ``pipeline`` from its configured receiver port until ``stop`` is set.
-
-    A port that fails to open or read is closed and reopened with a capped backoff; the
-    pipeline keeps its state. (``fdi-bridge run`` has the full set of failsafes; this is the
-    reader of the one-process MAVLink mode.)
-    """
-    stats = ReaderStats()
-    port = ResilientPort(pipeline.cfg.port, name="gps", backoff_max_s=backoff_max_s,
-                         opener=opener)
-    try:
-        while not stop.is_set():
-            if not port.up and not port.service():
-                stop.wait(max(port.wait_s(), 0.01))
-                continue
-            data = port.read_some(65536)
-            stats.reads += 1
-            if data:
-                stats.bytes_in += len(data)
-                pipeline.feed(data)
-    finally:
-        port.close()
-        stats.port_errors = port.losses + port.open_failures
-    return stats

@@ -19,14 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from drivers.outland.framecodec import load_protocol
-from drivers.outland.link import OutlandLink, Telemetry
-from drivers.transport import SerialSettings, open_port
+from drivers.resilient import Opener
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import RovPlant, parse_fault
-from firmware_host.rov.config import RovConfig, load_rov_config, protocol_path
-from firmware_host.rov.control import RovController, epoch_record
-from firmware_host.runtime.loop import FixedRateLoop
+from firmware_host.rov.config import RovConfig, load_rov_config
+from firmware_host.rov.control import RovController
+from firmware_host.rov.vehicle import OutlandRovVehicle
+from firmware_host.runtime.runner import Runner
 
 EpochSink = Callable[[dict[str, Any]], None]
 
@@ -65,23 +64,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def link_step(
-    link: OutlandLink, ctl: RovController, dt: float
-) -> tuple[Telemetry | None, dict[str, Any]]:
-    """One period on a live link: get the newest telemetry, run the controller, send."""
-    tel: Telemetry | None
-    if link.wiring == "rs485":
-        tel = link.poll(ctl.command)
-    else:
-        got = link.read_telemetry()
-        tel = got[-1] if got else None
-    meas = None if tel is None else tel.heading_deg
-    cmd, dec = ctl.step(meas, dt)
-    if link.wiring == "rs232":
-        link.send_command(cmd)
-    return tel, epoch_record(0.0, None, meas, ctl.setpoint_deg, cmd, dec, ctl.action)
-
-
 def run_rov(
     config: RovConfig,
     clock: Callable[[], float] = time.monotonic,
@@ -92,49 +74,24 @@ def run_rov(
     ft: bool = True,
     max_steps: int | None = None,
     on_epoch: EpochSink | None = None,
-    opener: Callable[[SerialSettings], Any] = open_port,
+    opener: Opener | None = None,
 ) -> dict[str, Any]:
     """Drive a real vehicle (or a pty) on ``config.link`` until ``stop_event`` is set.
 
-    Returns the loop's timing summary plus the link's counters. ``base_dir`` resolves a relative
-    protocol path (default: the project's ``config/``). ``opener`` opens the link's port
-    (``fdi-bridge run`` passes one that reopens a lost port: :mod:`drivers.resilient`).
+    The vehicle is :class:`~firmware_host.rov.vehicle.OutlandRovVehicle` on the runtime's
+    :class:`~firmware_host.runtime.runner.Runner` (the link a resilient port, reopened when
+    lost). Returns the summary: the loop's timing, the link's counters, the failsafe episodes.
+    ``base_dir`` resolves a relative protocol path (default: the project's ``config/``).
     """
     base = Path(base_dir) if base_dir is not None else load_rov_config(None)[1]
-    proto = load_protocol(protocol_path(config, base))
-    settings = config.link.port
-    if config.link.wiring == "rs485":  # reads must not block past the reply timeout
-        settings = replace(settings, timeout_s=min(settings.timeout_s,
-                                                   config.link.reply_timeout_s / 5))
-    else:
-        settings = replace(settings, timeout_s=0.0)
-    port = opener(settings)
-    link = OutlandLink(port, proto, config.link.wiring, config.link.address,
-                       config.link.reply_timeout_s, clock=clock)
-    ctl = RovController(config, ft=ft)
-    loop = FixedRateLoop(config.period_s, clock=clock, sleep=sleep)
-    t0 = clock()
-
-    def step(k: int, t: float) -> bool:
-        _, rec = link_step(link, ctl, config.period_s)
-        rec["t"] = round(t - t0, 3)
-        if on_epoch is not None:
-            on_epoch(rec)
-        return stop_event is None or not stop_event.is_set()
-
-    try:
-        stats = loop.run(step, max_steps=max_steps)
-    finally:
-        port.close()
-    out: dict[str, Any] = dict(stats.summary())
-    out["counts"] = dict(link.counts)
-    out["rejects"] = dict(link.rejects)
-    return out
+    vehicle = OutlandRovVehicle(config, base, ft=ft, on_epoch=on_epoch)
+    runner = Runner(vehicle, clock=clock, sleep=sleep, opener=opener, handle_signals=False)
+    return runner.run(max_steps=max_steps,
+                      until=stop_event.is_set if stop_event is not None else None)
 
 
 def bench_rov_step(n: int) -> dict[str, float]:
     """p50/p99 (ms) of one ROV step (detector + substitution + PID), on simulated data."""
-
     cfg = RovConfig()
     plant = RovPlant(cfg.sim, [parse_fault("drift:30@70")])
     ctl = RovController(cfg)

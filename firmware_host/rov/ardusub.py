@@ -7,9 +7,14 @@ PID) reads the vehicle's heading from the autopilot's ATTITUDE (``yaw``, via
 MANUAL_CONTROL with the ground station's system id (``pilot_system_id``) and the vehicle as
 target: ArduSub takes pilot input only from its ground station (``SYSID_MYGCS``).
 
-:class:`RovOperatorSink` is the ``on_epoch`` sink of an ROV loop (this module's
-:class:`RovAutopilotLoop`, or :func:`firmware_host.rov.app.run_rov` on the Outland link, whose
-``on_epoch`` takes it as it is): per epoch the corrected heading and the detector's statistics
+:class:`ArduSubRovVehicle` is this loop as a vehicle of the runtime
+(:class:`~firmware_host.runtime.runner.Runner`, period-paced, no port of its own: the router's
+autopilot link is its input and output).
+
+:class:`RovOperatorSink` is the per-epoch sink of an ROV vehicle (this module's, or
+:class:`~firmware_host.rov.vehicle.OutlandRovVehicle` on the Outland link when a ``[mavlink]``
+router is attached), writing to a :class:`~firmware_host.runtime.mavout.MavlinkOutput`: per
+epoch the corrected heading and the detector's statistics
 as NAMED_VALUE_FLOAT (:data:`STAT_NAMES`, sent at the router's ``stats_hz``), and STATUSTEXT for
 each detector event and for a telemetry dropout, with severities.
 
@@ -23,17 +28,21 @@ from __future__ import annotations
 
 import math
 import threading
-import time
+from collections import Counter
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
 from drivers.mavlink import io as mio
 from drivers.mavlink.framer import MavFrame
 from drivers.outland.link import ThrusterCommand
+from fdi.errors import ConfigError
 from firmware_host.mavlink.router import Router
 from firmware_host.rov.config import RovConfig
 from firmware_host.rov.control import RovController, epoch_record
-from firmware_host.runtime.loop import FixedRateLoop
+from firmware_host.runtime.failsafe import RovFailsafeMonitor
+from firmware_host.runtime.mavout import MavlinkOutput, RouterOutput
+from firmware_host.runtime.records import EpochLog
+from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
 STAT_NAMES = {
     "HDG": "heading used by the hold (corrected), deg",
@@ -79,12 +88,12 @@ def manual_control_axes(cmd: ThrusterCommand) -> tuple[int, int, int, int]:
 class RovOperatorSink:
     """``on_epoch`` sink: heading, statistics and events to the operator (module docstring)."""
 
-    def __init__(self, router: Router) -> None:
-        self.router = router
+    def __init__(self, output: MavlinkOutput) -> None:
+        self.output = output
         self._action = "init"
 
     def __call__(self, rec: dict[str, Any]) -> None:
-        r = self.router
+        out = self.output
         values = {
             "HDG": rec.get("heading_used"),
             "HDG_MEAS": rec.get("heading_meas"),
@@ -96,17 +105,19 @@ class RovOperatorSink:
         }
         for name, value in values.items():
             if value is not None and math.isfinite(float(value)):
-                r.set_named_value(name, float(value))
+                out.send_named_value(name, float(value))
         event = str(rec.get("event") or "")
         if event in EVENT_TEXT:
             severity, text = EVENT_TEXT[event]
             kind = rec.get("fault_kind") or ""
-            r.post_statustext(severity, f"{text} ({kind})" if kind else text)
+            out.send_statustext(severity, f"{text} ({kind})" if kind else text)
         action = str(rec.get("action", ""))
+        if self._action == "init" and action == "hold":
+            return  # the first periods before the first telemetry: nothing was lost yet
         if action != self._action and action in ACTION_TEXT:
-            r.post_statustext(*ACTION_TEXT[action])
+            out.send_statustext(*ACTION_TEXT[action])
         elif self._action in ACTION_TEXT and action not in ACTION_TEXT:
-            r.post_statustext(mio.MAV_SEVERITY_NOTICE, "FDI compass: telemetry back")
+            out.send_statustext(mio.MAV_SEVERITY_NOTICE, "FDI compass: telemetry back")
         self._action = action
 
 
@@ -154,7 +165,8 @@ class RovAutopilotLoop:
         self.vehicle = vehicle_system_id
         self.ctl = RovController(cfg, ft=ft)
         self.heading = AutopilotHeading(router, (vehicle_system_id, 1))
-        self.operator = RovOperatorSink(router)
+        self.output = RouterOutput(router)
+        self.operator = RovOperatorSink(self.output)
         self.on_epoch = on_epoch
         self.t = 0.0
 
@@ -162,7 +174,8 @@ class RovAutopilotLoop:
         """One period: newest heading in, controller, MANUAL_CONTROL out, operator telemetry."""
         meas = self.heading.take()
         cmd, dec = self.ctl.step(meas, self.cfg.period_s)
-        self.router.send_manual_control(*manual_control_axes(cmd), target_system=self.vehicle)
+        x, y, z, r = manual_control_axes(cmd)
+        self.output.send_manual_control(self.vehicle, x, y, z, r)
         rec = epoch_record(self.t, None, meas, self.ctl.setpoint_deg, cmd, dec, self.ctl.action)
         self.t += self.cfg.period_s
         self.operator(rec)
@@ -170,18 +183,64 @@ class RovAutopilotLoop:
             self.on_epoch(rec)
         return rec
 
-    def run(
-        self,
-        stop: threading.Event,
-        clock: Callable[[], float] = time.monotonic,
-        sleep: Callable[[float], None] = time.sleep,
-        max_steps: int | None = None,
-    ) -> dict[str, Any]:
-        """Step at ``period_s`` on absolute deadlines until ``stop`` is set; timing summary."""
-        loop = FixedRateLoop(self.cfg.period_s, clock=clock, sleep=sleep)
 
-        def step(k: int, t: float) -> bool:
-            self.step()
-            return not stop.is_set()
+class ArduSubRovVehicle:
+    """The ROV through an ArduSub autopilot as a vehicle of the runtime (module docstring).
 
-        return dict(loop.run(step, max_steps=max_steps).summary())
+    Needs the runner's router (a ``[mavlink]`` table): ATTITUDE in, MANUAL_CONTROL out.
+    """
+
+    name = "rov-ardusub"
+    pacing: Literal["period"] = "period"
+
+    def __init__(self, cfg: RovConfig, *, ft: bool = True, vehicle_system_id: int = 1,
+                 on_epoch: Callable[[dict[str, Any]], None] | None = None) -> None:
+        self.cfg = cfg
+        self.period_s = cfg.period_s
+        self.ft = ft
+        self.vehicle_system_id = vehicle_system_id
+        self.on_epoch = on_epoch
+        self.loop: RovAutopilotLoop | None = None
+        self.monitor = RovFailsafeMonitor(cfg.period_s)
+        self.epochs = EpochLog(None)
+        self.actions: Counter[str] = Counter()
+
+    def ports(self) -> list[PortSpec]:
+        return []  # the router's autopilot link is the vehicle's
+
+    def mavlink(self) -> MavlinkSpec | None:
+        return None
+
+    def start(self, ctx: Context) -> None:
+        if ctx.router is None:
+            raise ConfigError("(config)", "mavlink", "a [mavlink] table: the ArduSub ROV's "
+                              "heading comes from the autopilot", "none")
+        self.loop = RovAutopilotLoop(self.cfg, ctx.router, ft=self.ft,
+                                     vehicle_system_id=self.vehicle_system_id,
+                                     on_epoch=self.on_epoch)  # before the router starts
+        self.epochs = ctx.epochs
+
+    def step(self, t: float) -> int:
+        assert self.loop is not None
+        rec = self.loop.step()
+        self.monitor.observe(rec)
+        self.actions[rec["action"]] += 1
+        self.epochs.write(rec)
+        return 1
+
+    def check(self, now: float) -> None:
+        """Nothing beyond the step: the dropout rule runs in the controller every period."""
+
+    def idle_s(self) -> float:
+        return 0.0
+
+    def finish(self) -> None:
+        """Nothing pending: every period's record is written in its step."""
+
+    def summary(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"actions": dict(sorted(self.actions.items()))}
+        if self.loop is not None:
+            out["attitude_received"] = self.loop.heading.received
+        out["failsafe"] = {"episodes": self.monitor.episodes,
+                           "neutral": self.monitor.neutral_episodes}
+        return out

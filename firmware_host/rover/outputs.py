@@ -22,12 +22,13 @@ from collections.abc import Callable
 from typing import Any
 
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
-from drivers.mavlink.io import GpsInputFix, MavEndpoint
+from drivers.mavlink.io import GpsInputFix
 from drivers.ptypair import PtyPair
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
 from firmware_host.rover.pipeline import EpochOutcome
 from firmware_host.runtime.config import RoverConfig
+from firmware_host.runtime.mavout import MavlinkOutput, open_mavlink_output
 
 KNOT_MPS = 1852.0 / 3600.0
 GPS_EPOCH_UNIX = 315964800  # 1980-01-06T00:00:00Z
@@ -202,13 +203,13 @@ _FIX_TYPE = {1: 3, 2: 4, 3: 3, 4: 6, 5: 5, 6: 3, 7: 3, 8: 3, 9: 4}
 class MavlinkGpsSink:
     """GPS_INPUT per epoch; STATUSTEXT and HOLD on alarm; heartbeat at 1 Hz of fix time."""
 
-    def __init__(self, cfg: RoverConfig, endpoint: Any | None = None) -> None:
+    def __init__(self, cfg: RoverConfig, endpoint: MavlinkOutput | None = None) -> None:
         self._fix_cls = GpsInputFix
         o = cfg.output
         self.cfg = cfg
-        self.endpoint = endpoint or MavEndpoint(
-            o.mavlink_url, source_system=o.mavlink_system, source_component=o.mavlink_component
-        )
+        self.endpoint: MavlinkOutput = endpoint or open_mavlink_output(
+            o.mavlink_url, source_system=o.mavlink_system, source_component=o.mavlink_component,
+            baudrate=o.mavlink_baudrate, backoff_max_s=cfg.reconnect_max_s)
         self.sent = 0
         self.no_date = 0
         self._next_heartbeat: float | None = None

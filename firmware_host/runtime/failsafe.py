@@ -25,11 +25,9 @@ from drivers.mavlink.io import GpsInputFix
 from firmware_host.rover.outputs import gps_week_ms, unix_time
 from firmware_host.rover.pipeline import EpochOutcome
 from firmware_host.runtime.config import RoverConfig
+from firmware_host.runtime.mavout import SEVERITY_CRITICAL, SEVERITY_NOTICE, MavlinkOutput
 
 log = logging.getLogger("fdi_bridge.failsafe")
-
-SEVERITY_CRITICAL = 2
-SEVERITY_NOTICE = 5
 
 
 class SilenceWatchdog:
@@ -64,14 +62,14 @@ class SilenceWatchdog:
 class RoverFailsafe:
     """No-fix GPS_INPUT + STATUSTEXT after ``silence_s`` without a valid fix (see module doc).
 
-    ``endpoint`` has the :class:`drivers.mavlink.io.MavEndpoint` encoders (``send_gps_input``,
-    ``send_statustext``, ``send_heartbeat``); None logs only.
+    ``endpoint`` is the vehicle's :class:`~firmware_host.runtime.mavout.MavlinkOutput`; None
+    logs only.
     """
 
     def __init__(
         self,
         cfg: RoverConfig,
-        endpoint: Any | None = None,
+        endpoint: MavlinkOutput | None = None,
         *,
         clock: Callable[[], float] = time.monotonic,
         repeat_s: float = 1.0,
@@ -127,7 +125,6 @@ class RoverFailsafe:
     def _send_no_fix(self, now: float) -> None:
         if self.endpoint is None:
             return
-
         week = ms = 0
         time_usec = 0
         if self._last_unix is not None:
