@@ -1,0 +1,175 @@
+"""Slow-fault test for the rover: the fix against its own Doppler, over horizons in seconds.
+
+Beyond Zhou & Zhang (2010), whose tests (eq. 1-6 and 18) compare a fix with a prediction from
+the last few *epochs*: a drift of 0.1 m/s moves 1 cm an epoch at 10 Hz, well inside any
+epoch-to-epoch gate, and a gate learned from the fixes it accepts widens with the drift
+(shared/FINDINGS.md, "Measured on the first product"). Here the window is in seconds.
+
+Per epoch, the *Doppler-free value* of the fix is
+
+    b(t) = z(t) − D(t) − δ·v(t)                                    (D1)
+
+with z the horizontal fix (east, north, m), D the displacement integrated from the receiver's
+Doppler velocity v (m/s) and δ the receiver's lag of Doppler behind position (s). On clean data
+b is the slowly varying DGPS error. For each horizon H (s) the residual against the newest
+trusted reference at least H old,
+
+    r_H(t) = b(t) − b(t_ref),   t_ref ≤ t − H                     (D2)
+
+is zero-mean with a per-axis variance σ_H² calibrated once for the receiver (on a clean
+recording: :func:`calibrate`), plus the lag's uncertainty σ_δ times the change of velocity
+over the horizon (a turn):
+
+    s_H² = σ(t − t_ref)² + (σ_δ·|v(t) − v(t_ref)|)²                (D3)
+
+and a ramp of rate ρ that began A seconds ago gives E[r_H] = ρ·min(A, H). The statistic is the
+generalised likelihood ratio for a change of mean of unknown size and direction, maximised over
+the grid of change times {t − H}: for each H, Λ_H = |r_H|² / s_H² (χ² with 2 degrees of freedom
+without a fault), and
+
+    g(t) = max_H sqrt(Λ_H)                                         (D4)
+
+against a threshold in sigmas. The σ are *fixed*: nothing is learned from accepted fixes, so a
+fault that builds slowly cannot widen its own gate; references are only the epochs the caller
+commits as trusted, and the caller drops those a fault may have reached
+(:meth:`DriftTest.forget_after`).
+
+Units: metres, seconds; shapes: 2-tuples (east, north).
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from fdi.errors import ConfigError
+
+
+@dataclass(frozen=True, slots=True)
+class DriftResult:
+    """One epoch's test: the statistic (D4), the horizon that gave it, and its reference."""
+
+    g: float  # max over horizons of |r_H| / s_H
+    horizon_s: float  # the horizon of the maximum (0: no reference yet)
+    ref_t: float  # the reference epoch of the maximum
+    ref_b: tuple[float, float]  # its Doppler-free value
+
+
+NO_TEST = DriftResult(0.0, 0.0, math.nan, (math.nan, math.nan))
+
+
+def sigma_at(age_s: float, horizons: Sequence[float], sigmas: Sequence[float]) -> float:
+    """σ of (D3) at a reference age: linear between the calibrated horizons, the first
+    horizon's below it, growing as √age beyond the last (a random walk, pessimistic for a
+    stationary error)."""
+    if age_s <= horizons[0]:
+        return sigmas[0]
+    for i in range(1, len(horizons)):
+        if age_s <= horizons[i]:
+            h0, h1 = horizons[i - 1], horizons[i]
+            w = (age_s - h0) / (h1 - h0)
+            return sigmas[i - 1] + w * (sigmas[i] - sigmas[i - 1])
+    return sigmas[-1] * math.sqrt(age_s / horizons[-1])
+
+
+class DriftTest:
+    """The multi-horizon test (D1)-(D4) over trusted references kept for the longest horizon.
+
+    ``horizons_s`` ascending, ``sigma_m`` the per-axis σ of (D3) at each; ``lag_sd_s`` is σ_δ.
+    """
+
+    __slots__ = ("horizons", "sigmas", "lag_sd", "_t", "_ref", "_keep")
+
+    def __init__(self, horizons_s: Sequence[float], sigma_m: Sequence[float],
+                 lag_sd_s: float) -> None:
+        if len(horizons_s) != len(sigma_m) or not horizons_s:
+            raise ConfigError("drift_horizons_s and drift_sigma_m must have the same length")
+        if list(horizons_s) != sorted(horizons_s) or horizons_s[0] <= 0.0:
+            raise ConfigError("drift_horizons_s must be positive and ascending")
+        if min(sigma_m) <= 0.0:
+            raise ConfigError("drift_sigma_m must be positive")
+        self.horizons = tuple(float(h) for h in horizons_s)
+        self.sigmas = tuple(float(s) for s in sigma_m)
+        self.lag_sd = lag_sd_s
+        self._t: list[float] = []  # reference times, ascending
+        self._ref: list[tuple[float, float, float, float]] = []  # (b_e, b_n, v_e, v_n)
+        self._keep = 2.0 * self.horizons[-1]
+
+    def reset(self) -> None:
+        """Forget every reference (the Doppler chain broke, or a restart)."""
+        self._t.clear()
+        self._ref.clear()
+
+    def commit(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> None:
+        """Keep epoch ``t`` (trusted) as a reference for later epochs."""
+        self._t.append(t)
+        self._ref.append((b[0], b[1], v[0], v[1]))
+        if t - self._t[0] > self._keep + 5.0:
+            cut = bisect_right(self._t, t - self._keep)
+            del self._t[:cut]
+            del self._ref[:cut]
+
+    def forget_after(self, t: float) -> None:
+        """Drop the references newer than ``t`` (a fault may have been building since)."""
+        cut = bisect_right(self._t, t)
+        del self._t[cut:]
+        del self._ref[cut:]
+
+    @property
+    def newest(self) -> tuple[float, tuple[float, float]] | None:
+        """The newest trusted reference (time, Doppler-free value), if any."""
+        if not self._t:
+            return None
+        r = self._ref[-1]
+        return self._t[-1], (r[0], r[1])
+
+    def test(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> DriftResult:
+        """(D2)-(D4) for an epoch at ``t`` with Doppler-free value ``b`` and velocity ``v``."""
+        ts = self._t
+        if not ts:
+            return NO_TEST
+        best = NO_TEST
+        last_i = -1
+        for h in self.horizons:
+            i = bisect_right(ts, t - h) - 1
+            if i < 0:
+                break
+            if i == last_i:
+                continue  # the same reference as a shorter horizon (a gap in references)
+            last_i = i
+            be, bn, ve, vn = self._ref[i]
+            age = t - ts[i]
+            s = sigma_at(age, self.horizons, self.sigmas)
+            dv = self.lag_sd * math.hypot(v[0] - ve, v[1] - vn)
+            re, rn = b[0] - be, b[1] - bn
+            g = math.sqrt((re * re + rn * rn) / (s * s + dv * dv))
+            if g > best.g:
+                best = DriftResult(g, h, ts[i], (be, bn))
+        return best
+
+
+def calibrate(samples: Sequence[tuple[float, float, float]],
+              horizons_s: Sequence[float]) -> tuple[float, ...]:
+    """Per-axis σ of (D2) at each horizon from a clean recording, once per receiver.
+
+    ``samples``: (t, b_e, b_n) of consecutive clean epochs with an unbroken Doppler chain.
+    Robust: 1.4826 × the median absolute difference over both axes (a stray fault in the
+    recording does not widen it)."""
+    ts = [s[0] for s in samples]
+    out = []
+    for h in horizons_s:
+        diffs: list[float] = []
+        for j, (t, be, bn) in enumerate(samples):
+            i = bisect_right(ts, t - h) - 1
+            if i < 0 or t - ts[i] > h + 1.5:
+                continue
+            diffs.append(abs(be - samples[i][1]))
+            diffs.append(abs(bn - samples[i][2]))
+            del j
+        if not diffs:
+            raise ValueError(f"no pair of samples {h} s apart to calibrate on")
+        diffs.sort()
+        out.append(1.4826 * diffs[len(diffs) // 2])
+    return tuple(out)
