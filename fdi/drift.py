@@ -29,10 +29,18 @@ without a fault), and
 
     g(t) = max_H sqrt(Λ_H)                                         (D4)
 
-against a threshold in sigmas. The σ are *fixed*: nothing is learned from accepted fixes, so a
-fault that builds slowly cannot widen its own gate; references are only the epochs the caller
-commits as trusted, and the caller drops those a fault may have reached
-(:meth:`DriftTest.forget_after`).
+against a threshold in sigmas. The σ are *fixed* after calibration: nothing is learned from
+accepted fixes afterwards, so a fault that builds slowly cannot widen its own gate; references
+are only the epochs the caller commits as trusted, and the caller drops those a fault may have
+reached (:meth:`DriftTest.forget_after`).
+
+Calibration, once per receiver: either offline on a clean recording (:func:`calibrate`, into
+the configured σ) or, with ``calibrate_s > 0``, once at start: over the first ``calibrate_s``
+seconds of committed references the test runs with the configured σ (meant to be wide) and
+collects the references' differences at each horizon; then σ_H becomes 1.4826 × their median
+absolute value (robust: faults that slip into the calibration, up to a large minority of the
+time, barely move it, and only upwards), never below ``floor_frac`` of the configured σ, and
+is frozen for good.
 
 Units: metres, seconds; shapes: 2-tuples (east, north).
 """
@@ -52,12 +60,13 @@ class DriftResult:
     """One epoch's test: the statistic (D4), the horizon that gave it, and its reference."""
 
     g: float  # max over horizons of |r_H| / s_H
-    horizon_s: float  # the horizon of the maximum (0: no reference yet)
-    ref_t: float  # the reference epoch of the maximum
+    horizon_s: float  # the horizon of the reference below (0: no reference yet)
+    ref_t: float  # the oldest reference whose statistic is within 0.6 of the maximum
     ref_b: tuple[float, float]  # its Doppler-free value
+    ref_v: tuple[float, float]  # its Doppler velocity
 
 
-NO_TEST = DriftResult(0.0, 0.0, math.nan, (math.nan, math.nan))
+NO_TEST = DriftResult(0.0, 0.0, math.nan, (math.nan, math.nan), (math.nan, math.nan))
 
 
 def sigma_at(age_s: float, horizons: Sequence[float], sigmas: Sequence[float]) -> float:
@@ -80,22 +89,31 @@ class DriftTest:
     ``horizons_s`` ascending, ``sigma_m`` the per-axis σ of (D3) at each; ``lag_sd_s`` is σ_δ.
     """
 
-    __slots__ = ("horizons", "sigmas", "lag_sd", "_t", "_ref", "_keep")
+    __slots__ = ("_cal", "_cal_until", "_keep", "_ref", "_t", "calibrate_s", "calibrated",
+                 "floor_frac", "horizons", "lag_sd", "sigmas")
 
     def __init__(self, horizons_s: Sequence[float], sigma_m: Sequence[float],
-                 lag_sd_s: float) -> None:
+                 lag_sd_s: float, calibrate_s: float = 0.0, floor_frac: float = 0.2) -> None:
+        where = "[rover.detector]"
         if len(horizons_s) != len(sigma_m) or not horizons_s:
-            raise ConfigError("drift_horizons_s and drift_sigma_m must have the same length")
+            raise ConfigError(where, "drift_sigma_m", "one value per drift_horizons_s",
+                              f"{len(sigma_m)} for {len(horizons_s)}")
         if list(horizons_s) != sorted(horizons_s) or horizons_s[0] <= 0.0:
-            raise ConfigError("drift_horizons_s must be positive and ascending")
+            raise ConfigError(where, "drift_horizons_s", "positive, ascending",
+                              repr(list(horizons_s)))
         if min(sigma_m) <= 0.0:
-            raise ConfigError("drift_sigma_m must be positive")
+            raise ConfigError(where, "drift_sigma_m", "positive values", repr(list(sigma_m)))
         self.horizons = tuple(float(h) for h in horizons_s)
         self.sigmas = tuple(float(s) for s in sigma_m)
         self.lag_sd = lag_sd_s
         self._t: list[float] = []  # reference times, ascending
         self._ref: list[tuple[float, float, float, float]] = []  # (b_e, b_n, v_e, v_n)
-        self._keep = 2.0 * self.horizons[-1]
+        self._keep = 2.0 * self.horizons[-1]  # older references: fdi.level's "which side"
+        self.calibrate_s = calibrate_s
+        self.floor_frac = floor_frac
+        self.calibrated = calibrate_s <= 0.0
+        self._cal_until: float | None = None
+        self._cal: list[list[float]] = [[] for _ in self.horizons]
 
     def reset(self) -> None:
         """Forget every reference (the Doppler chain broke, or a restart)."""
@@ -104,6 +122,8 @@ class DriftTest:
 
     def commit(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> None:
         """Keep epoch ``t`` (trusted) as a reference for later epochs."""
+        if not self.calibrated:
+            self._calibrate_step(t, b)
         self._t.append(t)
         self._ref.append((b[0], b[1], v[0], v[1]))
         if t - self._t[0] > self._keep + 5.0:
@@ -111,26 +131,57 @@ class DriftTest:
             del self._t[:cut]
             del self._ref[:cut]
 
+    def _calibrate_step(self, t: float, b: tuple[float, float]) -> None:
+        if self._cal_until is None:
+            self._cal_until = t + self.calibrate_s
+        ts = self._t
+        for j, h in enumerate(self.horizons):
+            i = bisect_right(ts, t - h) - 1
+            if i >= 0 and t - ts[i] <= h + max(1.5, 0.2 * h):
+                r = self._ref[i]
+                self._cal[j].append(abs(b[0] - r[0]))
+                self._cal[j].append(abs(b[1] - r[1]))
+        if t >= self._cal_until:
+            out = []
+            for j, configured in enumerate(self.sigmas):
+                xs = sorted(self._cal[j])
+                if len(xs) < 20:
+                    out.append(configured)
+                    continue
+                est = 1.4826 * xs[len(xs) // 2]
+                out.append(max(est, self.floor_frac * configured))
+            self.sigmas = tuple(out)
+            self.calibrated = True
+            self._cal = []
+
     def forget_after(self, t: float) -> None:
         """Drop the references newer than ``t`` (a fault may have been building since)."""
         cut = bisect_right(self._t, t)
         del self._t[cut:]
         del self._ref[cut:]
 
-    @property
-    def newest(self) -> tuple[float, tuple[float, float]] | None:
-        """The newest trusted reference (time, Doppler-free value), if any."""
-        if not self._t:
+    def at_or_before(self, t: float) -> tuple[float, tuple[float, float], tuple[float, float]
+                                               ] | None:
+        """The newest trusted reference at or before ``t``: (time, b, v), if any."""
+        i = bisect_right(self._t, t) - 1
+        if i < 0:
             return None
-        r = self._ref[-1]
-        return self._t[-1], (r[0], r[1])
+        r = self._ref[i]
+        return self._t[i], (r[0], r[1]), (r[2], r[3])
+
+    def oldest(self, before: float) -> tuple[float, tuple[float, float]] | None:
+        """The oldest trusted reference, if it is at or before ``before``: (time, b)."""
+        if not self._t or self._t[0] > before:
+            return None
+        r = self._ref[0]
+        return self._t[0], (r[0], r[1])
 
     def test(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> DriftResult:
         """(D2)-(D4) for an epoch at ``t`` with Doppler-free value ``b`` and velocity ``v``."""
         ts = self._t
         if not ts:
             return NO_TEST
-        best = NO_TEST
+        found: list[DriftResult] = []
         last_i = -1
         for h in self.horizons:
             i = bisect_right(ts, t - h) - 1
@@ -145,9 +196,16 @@ class DriftTest:
             dv = self.lag_sd * math.hypot(v[0] - ve, v[1] - vn)
             re, rn = b[0] - be, b[1] - bn
             g = math.sqrt((re * re + rn * rn) / (s * s + dv * dv))
-            if g > best.g:
-                best = DriftResult(g, h, ts[i], (be, bn))
-        return best
+            found.append(DriftResult(g, h, ts[i], (be, bn), (ve, vn)))
+        if not found:
+            return NO_TEST
+        g_max = max(r.g for r in found)
+        # The statistic is the maximum (D4); the reference reported with it is the *oldest*
+        # one whose statistic is within 0.6 of it: a slow fault is seen about as strongly at
+        # every horizon longer than its age, and the oldest such reference is the one most
+        # likely from before it began (the isolator anchors its hold there).
+        ref = next(r for r in reversed(found) if r.g >= 0.6 * g_max)
+        return DriftResult(g_max, ref.horizon_s, ref.ref_t, ref.ref_b, ref.ref_v)
 
 
 def calibrate(samples: Sequence[tuple[float, float, float]],
@@ -161,13 +219,12 @@ def calibrate(samples: Sequence[tuple[float, float, float]],
     out = []
     for h in horizons_s:
         diffs: list[float] = []
-        for j, (t, be, bn) in enumerate(samples):
+        for t, be, bn in samples:
             i = bisect_right(ts, t - h) - 1
             if i < 0 or t - ts[i] > h + 1.5:
                 continue
             diffs.append(abs(be - samples[i][1]))
             diffs.append(abs(bn - samples[i][2]))
-            del j
         if not diffs:
             raise ValueError(f"no pair of samples {h} s apart to calibrate on")
         diffs.sort()

@@ -32,6 +32,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from fdi.drift import calibrate
 from fdi.geodesy import LocalFrame
 from firmware_host.devtools.rover_sim import ERROR_MODELS, RoverScenario, generate
 from firmware_host.rover.pipeline import RoverPipeline
@@ -283,7 +284,8 @@ def _kind(row: dict[str, Any], kind: str) -> str:
     d = row.get(kind)
     if d is None:
         return "–"
-    return f"{d['detected']}/{d['events']}, {d['caught']}/{d['faulty']} ep, ≤{_f(d['max_delay_s'], 1)} s"
+    delay = _f(d["max_delay_s"], 1)
+    return f"{d['detected']}/{d['events']}, {d['caught']}/{d['faulty']} ep, ≤{delay} s"
 
 
 def table(rows: Sequence[dict[str, Any]]) -> str:
@@ -353,3 +355,46 @@ def run(args: argparse.Namespace) -> int:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(_clean(doc), f, indent=1)
     return 0
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+def doppler_free(records: Sequence[dict[str, Any]], lag_s: float
+                 ) -> list[list[tuple[float, float, float]]]:
+    """(t, b_e, b_n) of (D1) in :mod:`fdi.drift` from a pipeline's records, split where the
+    Doppler chain breaks (no fix, no speed); the pipeline's own local metres."""
+    chains: list[list[tuple[float, float, float]]] = [[]]
+    de = dn = 0.0
+    last: tuple[float, float, float] | None = None  # t, ve, vn
+    for r in records:
+        sp, co = r.get("speed"), r.get("course")
+        if r.get("e") is None or sp is None or r.get("utc") is None:
+            chains.append([])
+            last = None
+            continue
+        c = math.radians(co) if co is not None else 0.0
+        ve, vn = (sp * math.sin(c), sp * math.cos(c)) if co is not None else (0.0, 0.0)
+        t = float(r["utc"])
+        if last is not None:
+            dt = t - last[0]
+            de += 0.5 * (ve + last[1]) * dt
+            dn += 0.5 * (vn + last[2]) * dt
+        last = (t, ve, vn)
+        chains[-1].append((t, r["e"] - de - lag_s * ve, r["n"] - dn - lag_s * vn))
+    return [c for c in chains if len(c) > 10]
+
+
+def calibrate_receiver(cfg: BridgeConfig, runs: Sequence[RoverScenario]) -> tuple[float, ...]:
+    """The drift test's σ per horizon (``drift_sigma_m``) on clean runs of one receiver: the
+    largest over the runs of :func:`fdi.drift.calibrate`."""
+    d = cfg.rover.detector
+    worst = [0.0] * len(d.drift_horizons_s)
+    for sc in runs:
+        epochs, _ = replay(cfg, sc)
+        for chain in doppler_free(epochs, d.drift_lag_s):
+            if chain[-1][0] - chain[0][0] < 2 * d.drift_horizons_s[-1]:
+                continue
+            sig = calibrate(chain, d.drift_horizons_s)
+            worst = [max(a, b) for a, b in zip(worst, sig, strict=True)]
+    return tuple(round(x, 4) for x in worst)

@@ -513,7 +513,7 @@ def generate_field(sc: RoverScenario) -> Iterator[tuple[float, bytes, dict[str, 
             v = max(0.0, v + acc * dt / sub)
             s += v * dt / sub
             t_rel += dt / sub
-            e_, n_, hd, _ = path.pose(s)
+            _, _, hd, _ = path.pose(s)
             hist.append((t_rel, v * math.sin(hd), v * math.cos(hd)))
         for p in procs:
             p[2] = p[0] * p[2] + float(rng.normal(0, p[1]))
