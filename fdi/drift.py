@@ -66,6 +66,8 @@ class DriftResult:
     ref_v: tuple[float, float]  # its Doppler velocity
 
 
+LEVEL_EVERY_S = 10.0
+LEVEL_KEEP_S = 300.0
 NO_TEST = DriftResult(0.0, 0.0, math.nan, (math.nan, math.nan), (math.nan, math.nan))
 
 
@@ -89,8 +91,8 @@ class DriftTest:
     ``horizons_s`` ascending, ``sigma_m`` the per-axis σ of (D3) at each; ``lag_sd_s`` is σ_δ.
     """
 
-    __slots__ = ("_cal", "_cal_until", "_keep", "_ref", "_t", "calibrate_s", "calibrated",
-                 "floor_frac", "horizons", "lag_sd", "sigmas")
+    __slots__ = ("_cal", "_cal_until", "_keep", "_lt_b", "_lt_t", "_ref", "_t", "calibrate_s",
+                 "calibrated", "floor_frac", "horizons", "lag_sd", "sigmas")
 
     def __init__(self, horizons_s: Sequence[float], sigma_m: Sequence[float],
                  lag_sd_s: float, calibrate_s: float = 0.0, floor_frac: float = 0.2) -> None:
@@ -108,7 +110,11 @@ class DriftTest:
         self.lag_sd = lag_sd_s
         self._t: list[float] = []  # reference times, ascending
         self._ref: list[tuple[float, float, float, float]] = []  # (b_e, b_n, v_e, v_n)
-        self._keep = 2.0 * self.horizons[-1]  # older references: fdi.level's "which side"
+        self._keep = 2.0 * self.horizons[-1]
+        # The long-term levels: one reference every LEVEL_EVERY_S, kept LEVEL_KEEP_S, that
+        # survive a restart on the receiver (fdi.level's "which side" looks back to them).
+        self._lt_t: list[float] = []
+        self._lt_b: list[tuple[float, float]] = []
         self.calibrate_s = calibrate_s
         self.floor_frac = floor_frac
         self.calibrated = calibrate_s <= 0.0
@@ -116,9 +122,21 @@ class DriftTest:
         self._cal: list[list[float]] = [[] for _ in self.horizons]
 
     def reset(self) -> None:
-        """Forget every reference (the Doppler chain broke, or a restart)."""
+        """Forget every reference, long-term levels too (the Doppler chain broke)."""
+        self.reset_short()
+        self._lt_t.clear()
+        self._lt_b.clear()
+
+    def reset_short(self) -> None:
+        """Forget the test's references, keep the long-term levels (a restart on the
+        receiver's level, the Doppler chain intact)."""
         self._t.clear()
         self._ref.clear()
+
+    def rebase(self, de: float, dn: float) -> None:
+        """The caller's displacement origin moved by −(de, dn): every b moves by +(de, dn)."""
+        self._ref = [(r[0] + de, r[1] + dn, r[2], r[3]) for r in self._ref]
+        self._lt_b = [(b[0] + de, b[1] + dn) for b in self._lt_b]
 
     def commit(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> None:
         """Keep epoch ``t`` (trusted) as a reference for later epochs."""
@@ -126,6 +144,13 @@ class DriftTest:
             self._calibrate_step(t, b)
         self._t.append(t)
         self._ref.append((b[0], b[1], v[0], v[1]))
+        lt = self._lt_t
+        if not lt or t - lt[-1] >= LEVEL_EVERY_S:
+            lt.append(t)
+            self._lt_b.append(b)
+            if t - lt[0] > LEVEL_KEEP_S:
+                del lt[0]
+                del self._lt_b[0]
         if t - self._t[0] > self._keep + 5.0:
             cut = bisect_right(self._t, t - self._keep)
             del self._t[:cut]
@@ -159,6 +184,9 @@ class DriftTest:
         cut = bisect_right(self._t, t)
         del self._t[cut:]
         del self._ref[cut:]
+        cut = bisect_right(self._lt_t, t)
+        del self._lt_t[cut:]
+        del self._lt_b[cut:]
 
     def at_or_before(self, t: float) -> tuple[float, tuple[float, float], tuple[float, float]
                                                ] | None:
@@ -170,11 +198,10 @@ class DriftTest:
         return self._t[i], (r[0], r[1]), (r[2], r[3])
 
     def oldest(self, before: float) -> tuple[float, tuple[float, float]] | None:
-        """The oldest trusted reference, if it is at or before ``before``: (time, b)."""
-        if not self._t or self._t[0] > before:
+        """The oldest long-term level, if it is at or before ``before``: (time, b)."""
+        if not self._lt_t or self._lt_t[0] > before:
             return None
-        r = self._ref[0]
-        return self._t[0], (r[0], r[1])
+        return self._lt_t[0], self._lt_b[0]
 
     def test(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> DriftResult:
         """(D2)-(D4) for an epoch at ``t`` with Doppler-free value ``b`` and velocity ``v``."""

@@ -223,7 +223,16 @@ class RoverIsolator:
 
     # -------------------------------------------------------------- helpers
 
-    def _restart(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
+    def _restart(self, z: tuple[float, float, float], r: tuple[float, float, float],
+                 keep_levels: bool = False) -> None:
+        """Restart the window, the filter and the tests on ``z``; ``keep_levels``: the
+        Doppler chain is intact, so the drift test's long-term levels are kept (rebased)."""
+        if self._drift is not None:
+            if keep_levels:
+                self._drift.rebase(self._disp[0], self._disp[1])
+                self._drift.reset_short()
+            else:
+                self._drift.reset()
         self._acc_hist.clear()
         self._acc_hist.append((z[0], z[1], 0.0, 0.0))
         self._coast_since = None
@@ -235,8 +244,6 @@ class RoverIsolator:
             gate.reset()
         self._consec = 0
         self._hold = None
-        if self._drift is not None:
-            self._drift.reset()
 
     def _r(self, fix: FixInput) -> tuple[float, float, float]:
         sd = fix.sd_enu_m if self.p.use_gst else None
@@ -587,10 +594,13 @@ class RoverIsolator:
             # the older references' level while the old track does not (the old track was
             # the faulty side: its references go).
             self._hold = None
-            if hs.action == "new_level" or hold.stale_m > 0.0:
-                # A new level (the old track was wrong, or its Doppler was void while the
-                # receiver was frozen): the references of the old level go.
+            if hold.stale_m > 0.0:
+                # The Doppler was void while the receiver was frozen: the Doppler-free values
+                # before and after no longer line up.
                 drift.reset()
+            elif hs.action == "new_level" and hold.old is not None:
+                # The old track was the faulty side: its references go, the older level stays.
+                drift.forget_after(hold.old[0])
             self._win.clear()
             self._win.append((z[0] - d[0], z[1] - d[1], z[2] - d[2]))
             self._acc_hist.clear()
@@ -602,7 +612,7 @@ class RoverIsolator:
             drift.commit(fix.t_s, b, v)
             return self._accept(z, t, "hold_exit" if hs.action == "exit" else "new_level")
         if hs.action == "give_up":
-            return self._raise_alarm(z, r, reason + "+hold_timeout", t)
+            return self._raise_alarm(z, r, reason + "+hold_timeout", t, keep_levels=True)
         out = (hs.track[0], hs.track[1], self._hold_up)
         t.pred = out
         self._window_append(out, d)  # the filter is not fed: it only predicts
@@ -699,12 +709,13 @@ class RoverIsolator:
         r: tuple[float, float, float],
         reason: str,
         t: _Tests,
+        keep_levels: bool = False,
     ) -> Decision:
         raised = not self._alarm
         self._alarm = True
         self._good_run = 0
         consecutive = self._consec
-        self._restart(z, r)
+        self._restart(z, r, keep_levels)
         dec = self._decision("alarm", True, reason, None, t, alarm_raised=raised)
         return replace(dec, consecutive=consecutive) if consecutive else dec
 
