@@ -74,8 +74,8 @@ class HoldStep:
 class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
-    __slots__ = ("_agree_since", "_recent", "anchor_b", "anchor_t", "anchor_v", "old", "p",
-                 "slow", "stale_m", "t0")
+    __slots__ = ("_agree_b", "_agree_since", "_recent", "anchor_b", "anchor_t", "anchor_v",
+                 "old", "p", "slow", "stale_m", "t0")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
                  anchor_b: tuple[float, float], anchor_v: tuple[float, float],
@@ -91,6 +91,7 @@ class LevelHold:
         self.old = old  # an older trusted reference (t_o, b_o), before the anchor
         self.slow = slow
         self._agree_since: float | None = None
+        self._agree_b = (0.0, 0.0)
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
 
     def step(self, t: float, b: tuple[float, float], v: tuple[float, float],
@@ -119,11 +120,18 @@ class LevelHold:
             max(t - t_old, 1e-3), p.horizons_s, p.sigma_m)
         # After a frozen stretch the old track rests on a void Doppler: the receiver, live
         # again and consistent with its own Doppler over the lag, is the evidence.
-        agrees = g <= p.exit_sigmas or self.stale_m > 0.0
-        if stale or not agrees or not self_ok:
+        agrees = not stale and (g <= p.exit_sigmas or (self.stale_m > 0.0 and self_ok))
+        if agrees and self._agree_since is not None:
+            # ... and the receiver stays consistent with itself since the agreement began.
+            ab = self._agree_b
+            s_a = sigma_at(max(t - self._agree_since, 1e-3), p.horizons_s, p.sigma_m)
+            if math.hypot(b[0] - ab[0], b[1] - ab[1]) > p.exit_sigmas * s_a:
+                self._agree_since = None
+        if not agrees:
             self._agree_since = None
         elif self._agree_since is None:
             self._agree_since = t
+            self._agree_b = b
         if self._agree_since is not None and t - self._agree_since >= p.exit_lag_s - 1e-9:
             return HoldStep("exit", track, g)
         old = self.old
