@@ -26,6 +26,10 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
   and the ratio carries the decision). That is the end of a slow fault the
   drift test missed (the old track is the faulty side), told apart from a multipath step
   (the new fixes are the faulty side: the old track is at the older level);
+* in a hold on a slow fault, the fixes are right again when they step back towards the old
+  track and stay consistent with their own Doppler for L: their distance from it falls by
+  more than half within L, by more than ``exit_sigmas`` of the 1 s σ (a drift ends at once;
+  the anchor may sit a little into the drift, so agreement alone can come late);
 * otherwise the old track is kept: passed on (flagged) for ``output_s``, then the alarm with
   nothing passed on (section 2.2: "stop automatic navigation") up to ``max_s``, after which
   the receiver's level is accepted again under the alarm (no lock-in). A hold that began with
@@ -48,7 +52,7 @@ from typing import Literal
 
 from fdi.drift import sigma_at
 
-HoldAction = Literal["track", "alarm", "exit", "new_level", "give_up"]
+HoldAction = Literal["track", "alarm", "exit", "ended", "new_level", "give_up"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,7 +78,7 @@ class HoldStep:
 class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
-    __slots__ = ("_agree_b", "_agree_since", "_recent", "anchor_b", "anchor_t", "anchor_v",
+    __slots__ = ("_agree_b", "_agree_since", "_dev", "_recent", "anchor_b", "anchor_t", "anchor_v",
                  "old", "p", "slow", "stale_m", "t0")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
@@ -92,6 +96,7 @@ class LevelHold:
         self.slow = slow
         self._agree_since: float | None = None
         self._agree_b = (0.0, 0.0)
+        self._dev: deque[tuple[float, float]] = deque()  # (t, |b − b_a|) over 2L
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
 
     def step(self, t: float, b: tuple[float, float], v: tuple[float, float],
@@ -134,6 +139,17 @@ class LevelHold:
             self._agree_b = b
         if self._agree_since is not None and t - self._agree_since >= p.exit_lag_s - 1e-9:
             return HoldStep("exit", track, g)
+        # A slow fault that ended: a step back towards the old track, then consistency.
+        dev = math.hypot(re, rn)
+        hist = self._dev
+        hist.append((t, dev))
+        while len(hist) > 1 and hist[1][0] <= t - 2.0 * p.exit_lag_s:
+            hist.popleft()
+        if self.slow and not stale and self_ok and self.stale_m == 0.0:
+            before = hist[0][1]
+            if (t - hist[0][0] >= p.exit_lag_s and dev <= 0.5 * before
+                    and before - dev >= p.exit_sigmas * p.sigma_m[0]):
+                return HoldStep("ended", track, g)
         old = self.old
         if (old is not None and not stale and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
                 and t - rec[0][0] >= p.exit_lag_s - 1e-9):

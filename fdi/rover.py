@@ -202,6 +202,7 @@ class RoverIsolator:
         self._hold: LevelHold | None = None
         self._hold_up = 0.0
         self._hold_reason = ""
+        self._run_t0 = 0.0  # time of the first replacement of the current run
         self._prev_sig: tuple[object, ...] | None = None
         self._prev_t = 0.0
         self._stale_since: float | None = None
@@ -566,7 +567,9 @@ class RoverIsolator:
         stale_m = 0.0
         if self._stale_since is not None:
             stale_m = math.hypot(*a_v) * (t_s - self._stale_since)
-        self._hold = LevelHold(hp, t_s, a_t, a_b, a_v, stale_m, old, slow)
+        # The hold's clock starts with the run of replacements that led to it (seconds).
+        t0 = self._run_t0 if self._consec > 0 else t_s
+        self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow)
         self._hold_reason = reason
         self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
         return True
@@ -589,7 +592,7 @@ class RoverIsolator:
         hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt)
         t.drift = hs.g
         reason = self._hold_reason
-        if hs.action in ("exit", "new_level"):
+        if hs.action in ("exit", "ended", "new_level"):
             # The new fixes agree with the old track (the receiver is right again), or sit at
             # the older references' level while the old track does not (the old track was
             # the faulty side: its references go).
@@ -601,6 +604,9 @@ class RoverIsolator:
             elif hs.action == "new_level" and hold.old is not None:
                 # The old track was the faulty side: its references go, the older level stays.
                 drift.forget_after(hold.old[0])
+            elif hs.action == "ended":
+                # A slow fault ended: the references near its start may carry part of it.
+                drift.reset_short()
             self._win.clear()
             self._win.append((z[0] - d[0], z[1] - d[1], z[2] - d[2]))
             self._acc_hist.clear()
@@ -610,7 +616,7 @@ class RoverIsolator:
             self._consec = 0
             self._coast_since = None
             drift.commit(fix.t_s, b, v)
-            return self._accept(z, t, "hold_exit" if hs.action == "exit" else "new_level")
+            return self._accept(z, t, "hold_" + hs.action)
         if hs.action == "give_up":
             return self._raise_alarm(z, r, reason + "+hold_timeout", t, keep_levels=True)
         out = (hs.track[0], hs.track[1], self._hold_up)
@@ -691,6 +697,8 @@ class RoverIsolator:
         reason: str,
         zones: tuple[int, ...] | None = None,
     ) -> Decision:
+        if self._consec == 0:
+            self._run_t0 = self._last_t if self._last_t is not None else 0.0
         self._consec += 1
         self._good_run = 0
         action: Action = "alarm" if self._alarm else "replace"
