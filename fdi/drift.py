@@ -48,6 +48,7 @@ Units: metres, seconds; shapes: 2-tuples (east, north).
 from __future__ import annotations
 
 import math
+from array import array
 from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -91,8 +92,9 @@ class DriftTest:
     ``horizons_s`` ascending, ``sigma_m`` the per-axis σ of (D3) at each; ``lag_sd_s`` is σ_δ.
     """
 
-    __slots__ = ("_cal", "_cal_until", "_keep", "_lt_b", "_lt_t", "_ref", "_t", "calibrate_s",
-                 "calibrated", "floor_frac", "horizons", "lag_sd", "sigmas")
+    __slots__ = ("_be", "_bn", "_cal", "_cal_until", "_keep", "_lt_e", "_lt_n", "_lt_t", "_t",
+                 "_ve", "_vn", "calibrate_s", "calibrated", "floor_frac", "horizons", "lag_sd",
+                 "sigmas")
 
     def __init__(self, horizons_s: Sequence[float], sigma_m: Sequence[float],
                  lag_sd_s: float, calibrate_s: float = 0.0, floor_frac: float = 0.2) -> None:
@@ -108,53 +110,61 @@ class DriftTest:
         self.horizons = tuple(float(h) for h in horizons_s)
         self.sigmas = tuple(float(s) for s in sigma_m)
         self.lag_sd = lag_sd_s
-        self._t: list[float] = []  # reference times, ascending
-        self._ref: list[tuple[float, float, float, float]] = []  # (b_e, b_n, v_e, v_n)
+        # References in flat float arrays (times ascending): nothing here for the cyclic
+        # garbage collector to walk, which tuples in lists made a 2-8 ms pause every few
+        # seconds (fdi-bridge bench, p99).
+        self._t = array("d")
+        self._be, self._bn, self._ve, self._vn = array("d"), array("d"), array("d"), array("d")
         self._keep = 2.0 * self.horizons[-1]
         # The long-term levels: one reference every LEVEL_EVERY_S, kept LEVEL_KEEP_S, that
         # survive a restart on the receiver (fdi.level's "which side" looks back to them).
-        self._lt_t: list[float] = []
-        self._lt_b: list[tuple[float, float]] = []
+        self._lt_t, self._lt_e, self._lt_n = array("d"), array("d"), array("d")
         self.calibrate_s = calibrate_s
         self.floor_frac = floor_frac
         self.calibrated = calibrate_s <= 0.0
         self._cal_until: float | None = None
-        self._cal: list[list[float]] = [[] for _ in self.horizons]
+        self._cal: list[array[float]] = [array("d") for _ in self.horizons]
 
     def reset(self) -> None:
         """Forget every reference, long-term levels too (the Doppler chain broke)."""
         self.reset_short()
-        self._lt_t.clear()
-        self._lt_b.clear()
+        for a in (self._lt_t, self._lt_e, self._lt_n):
+            del a[:]
 
     def reset_short(self) -> None:
         """Forget the test's references, keep the long-term levels (a restart on the
         receiver's level, the Doppler chain intact)."""
-        self._t.clear()
-        self._ref.clear()
+        for a in (self._t, self._be, self._bn, self._ve, self._vn):
+            del a[:]
 
     def rebase(self, de: float, dn: float) -> None:
         """The caller's displacement origin moved by −(de, dn): every b moves by +(de, dn)."""
-        self._ref = [(r[0] + de, r[1] + dn, r[2], r[3]) for r in self._ref]
-        self._lt_b = [(b[0] + de, b[1] + dn) for b in self._lt_b]
+        self._be = array("d", (x + de for x in self._be))
+        self._bn = array("d", (x + dn for x in self._bn))
+        self._lt_e = array("d", (x + de for x in self._lt_e))
+        self._lt_n = array("d", (x + dn for x in self._lt_n))
 
     def commit(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> None:
         """Keep epoch ``t`` (trusted) as a reference for later epochs."""
         if not self.calibrated:
             self._calibrate_step(t, b)
         self._t.append(t)
-        self._ref.append((b[0], b[1], v[0], v[1]))
+        self._be.append(b[0])
+        self._bn.append(b[1])
+        self._ve.append(v[0])
+        self._vn.append(v[1])
         lt = self._lt_t
         if not lt or t - lt[-1] >= LEVEL_EVERY_S:
             lt.append(t)
-            self._lt_b.append(b)
+            self._lt_e.append(b[0])
+            self._lt_n.append(b[1])
             if t - lt[0] > LEVEL_KEEP_S:
-                del lt[0]
-                del self._lt_b[0]
+                for a in (lt, self._lt_e, self._lt_n):
+                    del a[0]
         if t - self._t[0] > self._keep + 5.0:
             cut = bisect_right(self._t, t - self._keep)
-            del self._t[:cut]
-            del self._ref[:cut]
+            for a in (self._t, self._be, self._bn, self._ve, self._vn):
+                del a[:cut]
 
     def _calibrate_step(self, t: float, b: tuple[float, float]) -> None:
         if self._cal_until is None:
@@ -163,9 +173,8 @@ class DriftTest:
         for j, h in enumerate(self.horizons):
             i = bisect_right(ts, t - h) - 1
             if i >= 0 and t - ts[i] <= h + max(1.5, 0.2 * h):
-                r = self._ref[i]
-                self._cal[j].append(abs(b[0] - r[0]))
-                self._cal[j].append(abs(b[1] - r[1]))
+                self._cal[j].append(abs(b[0] - self._be[i]))
+                self._cal[j].append(abs(b[1] - self._bn[i]))
         if t >= self._cal_until:
             out = []
             for j, configured in enumerate(self.sigmas):
@@ -182,11 +191,11 @@ class DriftTest:
     def forget_after(self, t: float) -> None:
         """Drop the references newer than ``t`` (a fault may have been building since)."""
         cut = bisect_right(self._t, t)
-        del self._t[cut:]
-        del self._ref[cut:]
+        for a in (self._t, self._be, self._bn, self._ve, self._vn):
+            del a[cut:]
         cut = bisect_right(self._lt_t, t)
-        del self._lt_t[cut:]
-        del self._lt_b[cut:]
+        for a in (self._lt_t, self._lt_e, self._lt_n):
+            del a[cut:]
 
     def at_or_before(self, t: float) -> tuple[float, tuple[float, float], tuple[float, float]
                                                ] | None:
@@ -194,14 +203,13 @@ class DriftTest:
         i = bisect_right(self._t, t) - 1
         if i < 0:
             return None
-        r = self._ref[i]
-        return self._t[i], (r[0], r[1]), (r[2], r[3])
+        return self._t[i], (self._be[i], self._bn[i]), (self._ve[i], self._vn[i])
 
     def oldest(self, before: float) -> tuple[float, tuple[float, float]] | None:
         """The oldest long-term level, if it is at or before ``before``: (time, b)."""
         if not self._lt_t or self._lt_t[0] > before:
             return None
-        return self._lt_t[0], self._lt_b[0]
+        return self._lt_t[0], (self._lt_e[0], self._lt_n[0])
 
     def test(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> DriftResult:
         """(D2)-(D4) for an epoch at ``t`` with Doppler-free value ``b`` and velocity ``v``."""
@@ -217,7 +225,7 @@ class DriftTest:
             if i == last_i:
                 continue  # the same reference as a shorter horizon (a gap in references)
             last_i = i
-            be, bn, ve, vn = self._ref[i]
+            be, bn, ve, vn = self._be[i], self._bn[i], self._ve[i], self._vn[i]
             age = t - ts[i]
             s = sigma_at(age, self.horizons, self.sigmas)
             dv = self.lag_sd * math.hypot(v[0] - ve, v[1] - vn)
