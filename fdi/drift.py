@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 from array import array
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -210,6 +210,12 @@ class DriftTest:
         if not self._lt_t or self._lt_t[0] > before:
             return None
         return self._lt_t[0], (self._lt_e[0], self._lt_n[0])
+
+    def levels_between(self, t0: float, t1: float) -> list[tuple[float, tuple[float, float]]]:
+        """The long-term levels with t0 <= time <= t1: (time, b), oldest first."""
+        lt = self._lt_t
+        i, j = bisect_left(lt, t0), bisect_right(lt, t1)
+        return [(lt[k], (self._lt_e[k], self._lt_n[k])) for k in range(i, j)]
 
     def test(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> DriftResult:
         """(D2)-(D4) for an epoch at ``t`` with Doppler-free value ``b`` and velocity ``v``."""

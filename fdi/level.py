@@ -20,8 +20,8 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
   accepted. After a frozen stretch (the receiver repeated its speed and course too, so the
   Doppler the old track was moved by is void) only the second condition is asked;
 * the new fixes are also right when, after L seconds consistent with their own Doppler, they
-  sit at the level of the *older* trusted references (up to a few minutes old, from before
-  the anchor) while the old track does not: ``|b − b_o| ≤ ⅓·|b_a − b_o|`` and
+  sit at the level of an *older* trusted reference b_o (the long-term levels 20-300 s before
+  the anchor, one every 10 s) while the old track does not: ``|b − b_o| ≤ ⅓·|b_a − b_o|`` and
   ``|b_a − b_o| ≥ side_sigmas·σ(30 s)`` (not grown with the age: the DGPS error is bounded,
   and the ratio carries the decision). That is the end of a slow fault the
   drift test missed (the old track is the faulty side), told apart from a multipath step
@@ -79,12 +79,12 @@ class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
     __slots__ = ("_agree_b", "_agree_since", "_dev", "_recent", "anchor_b", "anchor_t", "anchor_v",
-                 "old", "p", "slow", "stale_m", "t0")
+                 "matched_t", "old", "p", "slow", "stale_m", "t0")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
                  anchor_b: tuple[float, float], anchor_v: tuple[float, float],
                  stale_m: float = 0.0,
-                 old: tuple[float, tuple[float, float]] | None = None,
+                 old: list[tuple[float, tuple[float, float]]] | None = None,
                  slow: bool = True) -> None:
         self.p = p
         self.t0 = t0
@@ -92,7 +92,8 @@ class LevelHold:
         self.anchor_b = anchor_b
         self.anchor_v = anchor_v
         self.stale_m = stale_m  # displacement integrated from a void (frozen) Doppler
-        self.old = old  # an older trusted reference (t_o, b_o), before the anchor
+        self.old = old or []  # older trusted levels (t_o, b_o), before the anchor
+        self.matched_t = math.nan  # the level the new fixes were found at ("new_level")
         self.slow = slow
         self._agree_since: float | None = None
         self._agree_b = (0.0, 0.0)
@@ -150,15 +151,15 @@ class LevelHold:
             if (t - hist[0][0] >= p.exit_lag_s and dev <= 0.5 * before
                     and before - dev >= p.exit_sigmas * p.sigma_m[0]):
                 return HoldStep("ended", track, g)
-        old = self.old
-        if (old is not None and not stale and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
+        if (self.old and not stale and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
                 and t - rec[0][0] >= p.exit_lag_s - 1e-9):
-            _, (oe, on) = old
-            e_new = math.hypot(b[0] - oe, b[1] - on)
-            e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)
-            s_side = sigma_at(30.0, p.horizons_s, p.sigma_m)
-            if e_new <= e_track / 3.0 and e_track >= p.side_sigmas * s_side:
-                return HoldStep("new_level", track, g)
+            s_side = p.side_sigmas * sigma_at(30.0, p.horizons_s, p.sigma_m)
+            for t_o, (oe, on) in self.old:
+                e_new = math.hypot(b[0] - oe, b[1] - on)
+                e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)
+                if e_new <= e_track / 3.0 and e_track >= s_side:
+                    self.matched_t = t_o
+                    return HoldStep("new_level", track, g)
         if t - self.t0 > (p.max_s if self.slow else p.output_s):
             return HoldStep("give_up", track, g)
         if t - self.t0 <= p.output_s:

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 from fdi.chi2 import threshold
-from fdi.drift import DriftResult, DriftTest
+from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest
 from fdi.grey import gm11_predict_shifted
 from fdi.kalman import GpsKalman
 from fdi.level import HoldParams, LevelHold
@@ -563,7 +563,7 @@ class RoverIsolator:
             anchor = anchor_or_none
         a_t, a_b, a_v = anchor
         drift.forget_after(a_t)  # a fault may have been building since
-        old = drift.oldest(a_t - hp.horizons_s[-1])
+        old = drift.levels_between(a_t - LEVEL_KEEP_S, a_t - 20.0)
         stale_m = 0.0
         if self._stale_since is not None:
             stale_m = math.hypot(*a_v) * (t_s - self._stale_since)
@@ -601,9 +601,9 @@ class RoverIsolator:
                 # The Doppler was void while the receiver was frozen: the Doppler-free values
                 # before and after no longer line up.
                 drift.reset()
-            elif hs.action == "new_level" and hold.old is not None:
-                # The old track was the faulty side: its references go, the older level stays.
-                drift.forget_after(hold.old[0])
+            elif hs.action == "new_level":
+                # The old track was the faulty side: its references go, the older levels stay.
+                drift.forget_after(hold.matched_t)
             elif hs.action == "ended":
                 # A slow fault ended: the references near its start may carry part of it.
                 drift.reset_short()

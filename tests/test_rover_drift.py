@@ -134,14 +134,14 @@ def test_hold_exits_when_the_fixes_come_back_to_the_old_track() -> None:
 def test_hold_takes_the_new_fixes_when_they_sit_at_the_older_level() -> None:
     """The end of a missed ramp: the old track (anchor) is 3 m off the level of 60 s ago,
     the new fixes are back at it."""
-    hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), old=(40.0, (0.0, 0.0)))
+    hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), old=[(40.0, (0.0, 0.0))])
     acts = _hold_run(hold, [(0.1, 0.0)] * 30, 100.0, 0.1)
     assert "new_level" in acts and acts.index("new_level") <= 12
 
 
 def test_hold_keeps_the_old_track_through_a_multipath_step() -> None:
     """A 1.5 m step: the old track is at the older level, the new fixes are not."""
-    hold = LevelHold(HP, 100.0, 99.0, (0.05, 0.0), (1.0, 0.0), old=(40.0, (0.0, 0.0)),
+    hold = LevelHold(HP, 100.0, 99.0, (0.05, 0.0), (1.0, 0.0), old=[(40.0, (0.0, 0.0))],
                      slow=False)
     acts = _hold_run(hold, [(1.55, 0.0)] * 150, 100.0, 0.1)
     assert acts[:100].count("track") == 100
