@@ -98,8 +98,10 @@ class RoverDetectorParams:
     max_coast_s: float = field(default=30.0, metadata={"ge": 0.0})
     # Slow faults and level changes (issue 13, fdi/drift.py and fdi/level.py; beyond the
     # paper). Needs predictor = "doppler" and strategy = "grey". drift_sigma_m: the per-axis
-    # σ of the Doppler-free value's change over each horizon, calibrated once per receiver on
-    # a clean recording (firmware_host/devtools/rover_harness.py: calibrate_receiver).
+    # σ of the Doppler-free value's change over each horizon: with drift_calibrate_s > 0 the
+    # wide value used until the receiver is calibrated, once, on its first drift_calibrate_s
+    # seconds of trusted fixes; with 0, the receiver's offline calibration
+    # (firmware_host/devtools/rover_harness.py: calibrate_receiver).
     drift_test: bool = True
     drift_horizons_s: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0)
     drift_sigma_m: tuple[float, ...] = (0.3, 0.4, 0.6, 0.9, 1.4)
