@@ -26,6 +26,16 @@ Beyond the paper, for real data (each is a parameter, and the paper preset turns
 * ``gate_axes = "horizontal"`` tests the horizontal residual's length, so a jump is caught
   whatever its direction; the vertical residual has its own gate.
 * quality screens (satellites, HDOP) from GGA; R from GST where the receiver sends it.
+* ``drift_test`` (issue 13, :mod:`fdi.drift`): the fix against its own Doppler displacement
+  over horizons in seconds (1, 3, 10, 30 s), a GLR with σ calibrated once per receiver and
+  never learned; it catches slow ramps and frozen receivers. A receiver that repeats its whole
+  fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed.
+* isolation after a level change (:mod:`fdi.level`): when the drift test fires, a frozen fix
+  is seen, or the fixes stay off after ``max_consecutive`` replacements, the isolator holds the
+  old track (the last trusted Doppler-free value moved by the Doppler) and decides with the
+  Doppler evidence over a short fixed lag which side is right, instead of extrapolating the
+  old track for a number of epochs; replaced fixes enter the Kalman filter with R multiplied
+  by ``replaced_r_factor`` (never at full weight) and not at all during a hold.
 
 Units: metres, seconds; positions are local east/north/up (:mod:`fdi.geodesy`).
 """
@@ -38,8 +48,10 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 from fdi.chi2 import threshold
+from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest
 from fdi.grey import gm11_predict_shifted
 from fdi.kalman import GpsKalman
+from fdi.level import HoldParams, LevelHold
 from fdi.three_zone import Action as ZoneAction
 from fdi.three_zone import ThreeZoneGate, ThreeZoneParams, Zone
 
@@ -84,6 +96,26 @@ class RoverDetectorParams:
     doppler_floor_m: float = field(default=0.5, metadata={"gt": 0.0})
     doppler_s0_m: float = field(default=0.2, metadata={"gt": 0.0})
     max_coast_s: float = field(default=30.0, metadata={"ge": 0.0})
+    # Slow faults and level changes (issue 13, fdi/drift.py and fdi/level.py; beyond the
+    # paper). Needs predictor = "doppler" and strategy = "grey". drift_sigma_m: the per-axis
+    # σ of the Doppler-free value's change over each horizon: with drift_calibrate_s > 0 the
+    # wide value used until the receiver is calibrated, once, on its first drift_calibrate_s
+    # seconds of trusted fixes; with 0, the receiver's offline calibration
+    # (firmware_host/devtools/rover_harness.py: calibrate_receiver).
+    drift_test: bool = True
+    drift_horizons_s: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0)
+    drift_sigma_m: tuple[float, ...] = (0.3, 0.4, 0.6, 0.9, 1.4)
+    drift_calibrate_s: float = field(default=300.0, metadata={"ge": 0.0})  # 0: as configured
+    drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
+    drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
+    drift_lag_sd_s: float = field(default=0.15, metadata={"ge": 0.0})
+    stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
+    hold_exit_sigmas: float = field(default=3.0, metadata={"gt": 0.0})
+    hold_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
+    hold_exit_s: float = field(default=1.0, metadata={"ge": 0.0})  # the short fixed lag
+    hold_output_s: float = field(default=10.0, metadata={"ge": 0.0})  # then alarm, no output
+    hold_max_s: float = field(default=120.0, metadata={"gt": 0.0})  # then the receiver again
+    replaced_r_factor: float = field(default=100.0, metadata={"ge": 1.0})
     # Isolation and alarm.
     max_consecutive: int = field(default=5, metadata={"ge": 0})
     recover_epochs: int = field(default=5, metadata={"ge": 1})
@@ -131,6 +163,7 @@ class Decision:
     alarm_raised: bool  # the alarm was raised at this epoch
     kf_enu: tuple[float, float, float] | None
     zones: tuple[int, ...] | None = None  # three_zone/combined: per axis 0/1/2 (e, n[, u])
+    drift: float | None = None  # the drift test's statistic (D4), or the hold's, in σ
 
 
 class RoverIsolator:
@@ -165,10 +198,44 @@ class RoverIsolator:
             if params.strategy != "grey"
             else []
         )
+        self._drift: DriftTest | None = None
+        self._hold_p: HoldParams | None = None
+        self._make_drift(params)
+        self._hold: LevelHold | None = None
+        self._hold_up = 0.0
+        self._hold_reason = ""
+        self._run_t0 = 0.0  # time of the first replacement of the current run
+        self._prev_sig: tuple[object, ...] | None = None
+        self._prev_t = 0.0
+        self._stale_since: float | None = None
+
+    @staticmethod
+    def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
+        return HoldParams(p.drift_horizons_s, sigma_m, p.drift_lag_s, p.drift_lag_sd_s,
+                          p.hold_exit_sigmas, p.hold_side_sigmas, p.hold_exit_s,
+                          p.hold_output_s, p.hold_max_s)
+
+    def _make_drift(self, p: RoverDetectorParams) -> None:
+        if p.drift_test and p.predictor == "doppler" and p.strategy == "grey":
+            self._drift = DriftTest(p.drift_horizons_s, p.drift_sigma_m, p.drift_lag_sd_s,
+                                    p.drift_calibrate_s)
+            self._hold_p = self._hold_params(p, p.drift_sigma_m)
+        else:
+            self._drift = None
+            self._hold_p = None
 
     # -------------------------------------------------------------- helpers
 
-    def _restart(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
+    def _restart(self, z: tuple[float, float, float], r: tuple[float, float, float],
+                 keep_levels: bool = False) -> None:
+        """Restart the window, the filter and the tests on ``z``; ``keep_levels``: the
+        Doppler chain is intact, so the drift test's long-term levels are kept (rebased)."""
+        if self._drift is not None:
+            if keep_levels:
+                self._drift.rebase(self._disp[0], self._disp[1])
+                self._drift.reset_short()
+            else:
+                self._drift.reset()
         self._acc_hist.clear()
         self._acc_hist.append((z[0], z[1], 0.0, 0.0))
         self._coast_since = None
@@ -179,6 +246,7 @@ class RoverIsolator:
         for gate in self._zone_gates:
             gate.reset()
         self._consec = 0
+        self._hold = None
 
     def _r(self, fix: FixInput) -> tuple[float, float, float]:
         sd = fix.sd_enu_m if self.p.use_gst else None
@@ -257,6 +325,7 @@ class RoverIsolator:
         self._last_up = z[2]
         v = self._velocity(fix)
         self._last_t = fix.t_s
+        stale = self._stale_check(fix)
 
         quality = []
         if p.min_sats and fix.num_sats is not None and fix.num_sats < p.min_sats:
@@ -291,6 +360,8 @@ class RoverIsolator:
                 self._disp = [0.0, 0.0, 0.0]
                 self._acc_hist.clear()
                 self._raw_hist.clear()
+                if self._drift is not None:
+                    self._drift.reset()
         have_doppler = v is not None and lv is not None
         self._last_v = v
         d = self._disp
@@ -306,6 +377,24 @@ class RoverIsolator:
                 raw_res = math.hypot(z[0] - q[0] - (d[0] - q[2]), z[1] - q[1] - (d[1] - q[3]))
                 raw_consistent = raw_res <= t.doppler_gate
         self._raw_hist.append((z[0], z[1], d[0], d[1]))
+
+        # Slow faults (fdi/drift.py, D1-D4) and the hold after a level change (fdi/level.py).
+        drift = self._drift
+        b: tuple[float, float] | None = None
+        if drift is not None and have_doppler and v is not None:
+            lag = p.drift_lag_s
+            b = (z[0] - d[0] - lag * v[0], z[1] - d[1] - lag * v[1])
+        if self._hold is not None:
+            if b is None or v is None:  # the Doppler chain broke: no old track to hold
+                return self._raise_alarm(z, r, self._hold_reason + "+no_doppler", t)
+            self.kf.predict(dt)
+            return self._hold_step(fix, z, r, d, v, b, stale, dt, t)
+        drift_fault = False
+        dres = None
+        if b is not None and drift is not None and v is not None:
+            dres = drift.test(fix.t_s, b, v)
+            t.drift = dres.g
+            drift_fault = dres.g > p.drift_sigmas
 
         # Section 2: grey prediction and residual ε(k) = x⁰(k) − x̂⁰(k) (eq. 18).
         y_hat = self._predict()
@@ -339,21 +428,41 @@ class RoverIsolator:
             t.pred = (a[0] + d[0] - a[2], a[1] + d[1] - a[3], t.pred[2])
             grey_fault = False
 
-        if not (grey_fault or chi2_fault or doppler_fault or quality):
+        stale_fault = stale and b is not None
+        if not (grey_fault or chi2_fault or doppler_fault or quality or drift_fault
+                or stale_fault):
             self._accepted(fix, z, t)
             self._window_append(z, d)
             self.kf.update(z, r)
+            if b is not None and drift is not None and v is not None:
+                drift.commit(fix.t_s, b, v)
             return self._accept(z, t, "")
         reasons = (
             (["grey"] if grey_fault else [])
             + (["chi2"] if chi2_fault else [])
             + (["doppler"] if doppler_fault else [])
+            + (["drift"] if drift_fault else [])
+            + (["frozen"] if stale_fault else [])
             + quality
         )
-        # Isolation: replace the faulty fix by its prediction before the filter update.
+        # A level change (slow drift, frozen receiver, or fixes that stay off past the
+        # replacement limit): hold the old track and let the Doppler decide (fdi/level.py).
+        # A jump the grey or chi-square test sees is replaced first (below), as the paper does.
+        abrupt = grey_fault or chi2_fault
+        if (b is not None and v is not None and drift is not None and not quality
+                and (stale_fault or (drift_fault and not abrupt)
+                     or self._consec >= p.max_consecutive)
+                and self._enter_hold(
+                    fix.t_s, dres if drift_fault else None, "+".join(reasons),
+                    slow=stale_fault or (drift_fault and not abrupt and dres is not None
+                                         and dres.horizon_s > 1.0))):
+            return self._hold_step(fix, z, r, d, v, b, stale, dt, t)
+        # Isolation: replace the faulty fix by its prediction before the filter update (with
+        # R inflated by replaced_r_factor: a prediction is not a measurement).
         if t.pred is not None and self._consec < p.max_consecutive:
             self._window_append(t.pred, d)
-            self.kf.update(t.pred, r)
+            f = p.replaced_r_factor
+            self.kf.update(t.pred, (r[0] * f, r[1] * f, r[2] * f))
             return self._replace(t.pred, t, "+".join(reasons))
         # Too many in a row (or nothing to replace with): alarm, stop automatic navigation.
         # Restart on the receiver's data when its own fixes are consistent with its Doppler
@@ -424,6 +533,101 @@ class RoverIsolator:
         self._accepted(fix, z, t)
         return self._accept(z, t, reason, tuple(zones), fault=over or bool(quality))
 
+    # -------------------------------------------------------------- the hold
+
+    def _stale_check(self, fix: FixInput) -> bool:
+        """Has the receiver repeated its whole fix (position, speed, course) for stale_s?"""
+        sig = (fix.enu, fix.speed_mps, fix.course_deg)
+        if sig == self._prev_sig:
+            if self._stale_since is None:
+                self._stale_since = self._prev_t
+        else:
+            self._stale_since = None
+        self._prev_sig = sig
+        self._prev_t = fix.t_s
+        since = self._stale_since
+        return since is not None and fix.t_s - since >= self.p.stale_s - 1e-9
+
+    def _enter_hold(self, t_s: float, dres: DriftResult | None, reason: str,
+                    slow: bool) -> bool:
+        """Start a hold on the last trusted reference before the fault; False if none."""
+        drift, hp = self._drift, self._hold_p
+        assert drift is not None and hp is not None
+        if hp.sigma_m != drift.sigmas:  # calibrated since
+            hp = self._hold_p = self._hold_params(self.p, drift.sigmas)
+        if dres is not None:
+            anchor = (dres.ref_t, dres.ref_b, dres.ref_v)
+        else:
+            since = self._stale_since
+            anchor_or_none = drift.at_or_before(since if since is not None else t_s)
+            if anchor_or_none is None:
+                return False
+            anchor = anchor_or_none
+        a_t, a_b, a_v = anchor
+        drift.forget_after(a_t)  # a fault may have been building since
+        old = drift.levels_between(a_t - LEVEL_KEEP_S, a_t - 20.0)
+        stale_m = 0.0
+        if self._stale_since is not None:
+            stale_m = math.hypot(*a_v) * (t_s - self._stale_since)
+        # The hold's clock starts with the run of replacements that led to it (seconds).
+        t0 = self._run_t0 if self._consec > 0 else t_s
+        self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow)
+        self._hold_reason = reason
+        self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
+        return True
+
+    def _hold_step(
+        self,
+        fix: FixInput,
+        z: tuple[float, float, float],
+        r: tuple[float, float, float],
+        d: list[float],
+        v: tuple[float, float],
+        b: tuple[float, float],
+        stale: bool,
+        dt: float,
+        t: _Tests,
+    ) -> Decision:
+        hold = self._hold
+        drift = self._drift
+        assert hold is not None and drift is not None
+        hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt)
+        t.drift = hs.g
+        reason = self._hold_reason
+        if hs.action in ("exit", "ended", "new_level"):
+            # The new fixes agree with the old track (the receiver is right again), or sit at
+            # the older references' level while the old track does not (the old track was
+            # the faulty side: its references go).
+            self._hold = None
+            if hold.stale_m > 0.0:
+                # The Doppler was void while the receiver was frozen: the Doppler-free values
+                # before and after no longer line up.
+                drift.reset()
+            elif hs.action == "new_level":
+                # The old track was the faulty side: its references go, the older levels stay.
+                drift.forget_after(hold.matched_t)
+            elif hs.action == "ended":
+                # A slow fault ended: the references near its start may carry part of it.
+                drift.reset_short()
+            self._win.clear()
+            self._win.append((z[0] - d[0], z[1] - d[1], z[2] - d[2]))
+            self._acc_hist.clear()
+            self._acc_hist.append((z[0], z[1], d[0], d[1]))
+            self._raw_hist.clear()
+            self.kf.reset(z, r)
+            self._consec = 0
+            self._coast_since = None
+            drift.commit(fix.t_s, b, v)
+            return self._accept(z, t, "hold_" + hs.action)
+        if hs.action == "give_up":
+            return self._raise_alarm(z, r, reason + "+hold_timeout", t, keep_levels=True)
+        out = (hs.track[0], hs.track[1], self._hold_up)
+        t.pred = out
+        self._window_append(out, d)  # the filter is not fed: it only predicts
+        if hs.action == "track":
+            return self._replace(out, t, reason + "+hold")
+        return self._coast(out, t, reason + "+hold")
+
     # -------------------------------------------------------------- outcomes
 
     def _decision(
@@ -458,6 +662,7 @@ class RoverIsolator:
             alarm_raised,
             kf.position if kf.initialised else None,  # kf_enu
             zones,
+            t.drift,
         )
 
     def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests) -> None:
@@ -494,6 +699,8 @@ class RoverIsolator:
         reason: str,
         zones: tuple[int, ...] | None = None,
     ) -> Decision:
+        if self._consec == 0:
+            self._run_t0 = self._last_t if self._last_t is not None else 0.0
         self._consec += 1
         self._good_run = 0
         action: Action = "alarm" if self._alarm else "replace"
@@ -512,12 +719,13 @@ class RoverIsolator:
         r: tuple[float, float, float],
         reason: str,
         t: _Tests,
+        keep_levels: bool = False,
     ) -> Decision:
         raised = not self._alarm
         self._alarm = True
         self._good_run = 0
         consecutive = self._consec
-        self._restart(z, r)
+        self._restart(z, r, keep_levels)
         dec = self._decision("alarm", True, reason, None, t, alarm_raised=raised)
         return replace(dec, consecutive=consecutive) if consecutive else dec
 
@@ -547,6 +755,8 @@ class RoverIsolator:
         if self._win.maxlen != params.window:
             self._win = deque(self._win, maxlen=params.window)
         self._ewma = 1.0 / params.gate_tau_epochs
+        self._make_drift(params)
+        self._hold = None
 
 
 @dataclass(slots=True)
@@ -561,6 +771,7 @@ class _Tests:
     res_h: float | None = None
     res_u: float | None = None
     F: float | None = None
+    drift: float | None = None
 
 
 def _learn(var: float, sample: float, w: float) -> float:

@@ -91,6 +91,10 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
         "firmware_host.devtools.rover_sim",
         "generate a rover NMEA run with injected GPS faults",
     ),
+    "rover-harness": (
+        "firmware_host.devtools.rover_harness",
+        "rover done-means: a preset over every error model x seed x rate (issue 13)",
+    ),
     "rov": ("firmware_host.rov.app", "ROV compass faults and fault-tolerant heading hold"),
     "insgnss": (
         "firmware_host.devtools.insgnss_sim",

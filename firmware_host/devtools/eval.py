@@ -8,7 +8,9 @@ Two modes.
   pipeline wrote, so the conversion to local metres is the pipeline's own) and, with
   ``--input``, also re-runs each of our strategies (grey / three_zone / combined) on the capture.
 * ``fdi-bridge eval --suite [--out DIR] [--quick] [--no-plots]`` generates the scenario suite
-  (rover at 1, 5 and 10 Hz: single jumps, bursts, a slow ramp, a frozen position, a long outage;
+  (rover at 1, 5 and 10 Hz: single jumps, bursts, a slow ramp, a frozen position, a long outage,
+  and on the independent field error models of issue 13 slow ramps of 0.02-0.3 m/s, a frozen
+  receiver (the whole fix), multipath steps and a coarse receiver with every kind;
   the ROV compass faults of issue 3; the INS/GNSS paper scenarios), runs everything on the same
   data and prints markdown tables; ``DIR/eval.json`` holds every number, ``DIR/eval.md`` the
   tables, and with matplotlib ``DIR/<scenario>.png`` one figure per rover scenario.
@@ -285,6 +287,16 @@ def rover_cases(quick: bool = False) -> list[RoverCase]:
         ("ramp", ("ramp",), {"fault_every_s": 45.0, "min_gap_s": 15.0}),
         ("frozen", ("frozen",), {"fault_every_s": 30.0, "min_gap_s": 15.0}),
         ("outage", ("outage",), {"fault_every_s": 45.0, "min_gap_s": 15.0}),
+    ]
+    # Issue 13: the independent field models (fdi-bridge sim rover --error-model), with
+    # their kinds: slow ramps of 0.02-0.3 m/s, the whole fix frozen, multipath steps.
+    spaced: dict[str, Any] = {"fault_every_s": 45.0, "min_gap_s": 25.0}
+    kinds += [
+        ("dgps-ramp", ("ramp",), {**spaced, "error_model": "dgps"}),
+        ("dgps-frozen", ("frozen",), {**spaced, "error_model": "dgps"}),
+        ("multipath", ("jump",), {**spaced, "error_model": "multipath"}),
+        ("coarse-mixed", ("jump", "burst", "ramp", "frozen"),
+         {**spaced, "error_model": "coarse"}),
     ]
     cases = [RoverCase(f"rover-{int(r)}hz-{k}", r, kk, o)
              for r in (1.0, 5.0, 10.0) for k, kk, o in kinds]

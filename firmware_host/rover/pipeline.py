@@ -264,6 +264,7 @@ class RoverPipeline:
             "grey_gate_u": _r(d.grey_gate_u),
             "doppler_res": _r(d.doppler_res),
             "doppler_gate": _r(d.doppler_gate),
+            "drift": _r(d.drift, 2),
             "chi2": _r(d.chi2),
             "chi2_threshold": _r(d.chi2_threshold),
             "consecutive": d.consecutive,

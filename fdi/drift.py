@@ -1,0 +1,273 @@
+"""Slow-fault test for the rover: the fix against its own Doppler, over horizons in seconds.
+
+Beyond Zhou & Zhang (2010), whose tests (eq. 1-6 and 18) compare a fix with a prediction from
+the last few *epochs*: a drift of 0.1 m/s moves 1 cm an epoch at 10 Hz, well inside any
+epoch-to-epoch gate, and a gate learned from the fixes it accepts widens with the drift
+(shared/FINDINGS.md, "Measured on the first product"). Here the window is in seconds.
+
+Per epoch, the *Doppler-free value* of the fix is
+
+    b(t) = z(t) − D(t) − δ·v(t)                                    (D1)
+
+with z the horizontal fix (east, north, m), D the displacement integrated from the receiver's
+Doppler velocity v (m/s) and δ the receiver's lag of Doppler behind position (s). On clean data
+b is the slowly varying DGPS error. For each horizon H (s) the residual against the newest
+trusted reference at least H old,
+
+    r_H(t) = b(t) − b(t_ref),   t_ref ≤ t − H                     (D2)
+
+is zero-mean with a per-axis variance σ_H² calibrated once for the receiver (on a clean
+recording: :func:`calibrate`), plus the lag's uncertainty σ_δ times the change of velocity
+over the horizon (a turn):
+
+    s_H² = σ(t − t_ref)² + (σ_δ·|v(t) − v(t_ref)|)²                (D3)
+
+and a ramp of rate ρ that began A seconds ago gives E[r_H] = ρ·min(A, H). The statistic is the
+generalised likelihood ratio for a change of mean of unknown size and direction, maximised over
+the grid of change times {t − H}: for each H, Λ_H = |r_H|² / s_H² (χ² with 2 degrees of freedom
+without a fault), and
+
+    g(t) = max_H sqrt(Λ_H)                                         (D4)
+
+against a threshold in sigmas. The σ are *fixed* after calibration: nothing is learned from
+accepted fixes afterwards, so a fault that builds slowly cannot widen its own gate; references
+are only the epochs the caller commits as trusted, and the caller drops those a fault may have
+reached (:meth:`DriftTest.forget_after`).
+
+Calibration, once per receiver: either offline on a clean recording (:func:`calibrate`, into
+the configured σ) or, with ``calibrate_s > 0``, once at start: over the first ``calibrate_s``
+seconds of committed references the test runs with the configured σ (meant to be wide) and
+collects the references' differences at each horizon; then σ_H becomes 1.4826 × their median
+absolute value (robust: faults that slip into the calibration, up to a large minority of the
+time, barely move it, and only upwards), never below ``floor_frac`` of the configured σ, and
+is frozen for good.
+
+Units: metres, seconds; shapes: 2-tuples (east, north).
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+from bisect import bisect_left, bisect_right
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from fdi.errors import ConfigError
+
+
+@dataclass(frozen=True, slots=True)
+class DriftResult:
+    """One epoch's test: the statistic (D4), the horizon that gave it, and its reference."""
+
+    g: float  # max over horizons of |r_H| / s_H
+    horizon_s: float  # the horizon of the reference below (0: no reference yet)
+    ref_t: float  # the oldest reference whose statistic is within 0.6 of the maximum
+    ref_b: tuple[float, float]  # its Doppler-free value
+    ref_v: tuple[float, float]  # its Doppler velocity
+
+
+LEVEL_EVERY_S = 10.0
+LEVEL_KEEP_S = 300.0
+NO_TEST = DriftResult(0.0, 0.0, math.nan, (math.nan, math.nan), (math.nan, math.nan))
+
+
+def sigma_at(age_s: float, horizons: Sequence[float], sigmas: Sequence[float]) -> float:
+    """σ of (D3) at a reference age: linear between the calibrated horizons, the first
+    horizon's below it, growing as √age beyond the last (a random walk, pessimistic for a
+    stationary error)."""
+    if age_s <= horizons[0]:
+        return sigmas[0]
+    for i in range(1, len(horizons)):
+        if age_s <= horizons[i]:
+            h0, h1 = horizons[i - 1], horizons[i]
+            w = (age_s - h0) / (h1 - h0)
+            return sigmas[i - 1] + w * (sigmas[i] - sigmas[i - 1])
+    return sigmas[-1] * math.sqrt(age_s / horizons[-1])
+
+
+class DriftTest:
+    """The multi-horizon test (D1)-(D4) over trusted references kept for the longest horizon.
+
+    ``horizons_s`` ascending, ``sigma_m`` the per-axis σ of (D3) at each; ``lag_sd_s`` is σ_δ.
+    """
+
+    __slots__ = ("_be", "_bn", "_cal", "_cal_until", "_keep", "_lt_e", "_lt_n", "_lt_t", "_t",
+                 "_ve", "_vn", "calibrate_s", "calibrated", "floor_frac", "horizons", "lag_sd",
+                 "sigmas")
+
+    def __init__(self, horizons_s: Sequence[float], sigma_m: Sequence[float],
+                 lag_sd_s: float, calibrate_s: float = 0.0, floor_frac: float = 0.2) -> None:
+        where = "[rover.detector]"
+        if len(horizons_s) != len(sigma_m) or not horizons_s:
+            raise ConfigError(where, "drift_sigma_m", "one value per drift_horizons_s",
+                              f"{len(sigma_m)} for {len(horizons_s)}")
+        if list(horizons_s) != sorted(horizons_s) or horizons_s[0] <= 0.0:
+            raise ConfigError(where, "drift_horizons_s", "positive, ascending",
+                              repr(list(horizons_s)))
+        if min(sigma_m) <= 0.0:
+            raise ConfigError(where, "drift_sigma_m", "positive values", repr(list(sigma_m)))
+        self.horizons = tuple(float(h) for h in horizons_s)
+        self.sigmas = tuple(float(s) for s in sigma_m)
+        self.lag_sd = lag_sd_s
+        # References in flat float arrays (times ascending): nothing here for the cyclic
+        # garbage collector to walk, which tuples in lists made a 2-8 ms pause every few
+        # seconds (fdi-bridge bench, p99).
+        self._t = array("d")
+        self._be, self._bn, self._ve, self._vn = array("d"), array("d"), array("d"), array("d")
+        self._keep = 2.0 * self.horizons[-1]
+        # The long-term levels: one reference every LEVEL_EVERY_S, kept LEVEL_KEEP_S, that
+        # survive a restart on the receiver (fdi.level's "which side" looks back to them).
+        self._lt_t, self._lt_e, self._lt_n = array("d"), array("d"), array("d")
+        self.calibrate_s = calibrate_s
+        self.floor_frac = floor_frac
+        self.calibrated = calibrate_s <= 0.0
+        self._cal_until: float | None = None
+        self._cal: list[array[float]] = [array("d") for _ in self.horizons]
+
+    def reset(self) -> None:
+        """Forget every reference, long-term levels too (the Doppler chain broke)."""
+        self.reset_short()
+        for a in (self._lt_t, self._lt_e, self._lt_n):
+            del a[:]
+
+    def reset_short(self) -> None:
+        """Forget the test's references, keep the long-term levels (a restart on the
+        receiver's level, the Doppler chain intact)."""
+        for a in (self._t, self._be, self._bn, self._ve, self._vn):
+            del a[:]
+
+    def rebase(self, de: float, dn: float) -> None:
+        """The caller's displacement origin moved by −(de, dn): every b moves by +(de, dn)."""
+        self._be = array("d", (x + de for x in self._be))
+        self._bn = array("d", (x + dn for x in self._bn))
+        self._lt_e = array("d", (x + de for x in self._lt_e))
+        self._lt_n = array("d", (x + dn for x in self._lt_n))
+
+    def commit(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> None:
+        """Keep epoch ``t`` (trusted) as a reference for later epochs."""
+        if not self.calibrated:
+            self._calibrate_step(t, b)
+        self._t.append(t)
+        self._be.append(b[0])
+        self._bn.append(b[1])
+        self._ve.append(v[0])
+        self._vn.append(v[1])
+        lt = self._lt_t
+        if not lt or t - lt[-1] >= LEVEL_EVERY_S:
+            lt.append(t)
+            self._lt_e.append(b[0])
+            self._lt_n.append(b[1])
+            if t - lt[0] > LEVEL_KEEP_S:
+                for a in (lt, self._lt_e, self._lt_n):
+                    del a[0]
+        if t - self._t[0] > self._keep + 5.0:
+            cut = bisect_right(self._t, t - self._keep)
+            for a in (self._t, self._be, self._bn, self._ve, self._vn):
+                del a[:cut]
+
+    def _calibrate_step(self, t: float, b: tuple[float, float]) -> None:
+        if self._cal_until is None:
+            self._cal_until = t + self.calibrate_s
+        ts = self._t
+        for j, h in enumerate(self.horizons):
+            i = bisect_right(ts, t - h) - 1
+            if i >= 0 and t - ts[i] <= h + max(1.5, 0.2 * h):
+                self._cal[j].append(abs(b[0] - self._be[i]))
+                self._cal[j].append(abs(b[1] - self._bn[i]))
+        if t >= self._cal_until:
+            out = []
+            for j, configured in enumerate(self.sigmas):
+                xs = sorted(self._cal[j])
+                if len(xs) < 20:
+                    out.append(configured)
+                    continue
+                est = 1.4826 * xs[len(xs) // 2]
+                out.append(max(est, self.floor_frac * configured))
+            self.sigmas = tuple(out)
+            self.calibrated = True
+            self._cal = []
+
+    def forget_after(self, t: float) -> None:
+        """Drop the references newer than ``t`` (a fault may have been building since)."""
+        cut = bisect_right(self._t, t)
+        for a in (self._t, self._be, self._bn, self._ve, self._vn):
+            del a[cut:]
+        cut = bisect_right(self._lt_t, t)
+        for a in (self._lt_t, self._lt_e, self._lt_n):
+            del a[cut:]
+
+    def at_or_before(self, t: float) -> tuple[float, tuple[float, float], tuple[float, float]
+                                               ] | None:
+        """The newest trusted reference at or before ``t``: (time, b, v), if any."""
+        i = bisect_right(self._t, t) - 1
+        if i < 0:
+            return None
+        return self._t[i], (self._be[i], self._bn[i]), (self._ve[i], self._vn[i])
+
+    def oldest(self, before: float) -> tuple[float, tuple[float, float]] | None:
+        """The oldest long-term level, if it is at or before ``before``: (time, b)."""
+        if not self._lt_t or self._lt_t[0] > before:
+            return None
+        return self._lt_t[0], (self._lt_e[0], self._lt_n[0])
+
+    def levels_between(self, t0: float, t1: float) -> list[tuple[float, tuple[float, float]]]:
+        """The long-term levels with t0 <= time <= t1: (time, b), oldest first."""
+        lt = self._lt_t
+        i, j = bisect_left(lt, t0), bisect_right(lt, t1)
+        return [(lt[k], (self._lt_e[k], self._lt_n[k])) for k in range(i, j)]
+
+    def test(self, t: float, b: tuple[float, float], v: tuple[float, float]) -> DriftResult:
+        """(D2)-(D4) for an epoch at ``t`` with Doppler-free value ``b`` and velocity ``v``."""
+        ts = self._t
+        if not ts:
+            return NO_TEST
+        found: list[DriftResult] = []
+        last_i = -1
+        for h in self.horizons:
+            i = bisect_right(ts, t - h) - 1
+            if i < 0:
+                break
+            if i == last_i:
+                continue  # the same reference as a shorter horizon (a gap in references)
+            last_i = i
+            be, bn, ve, vn = self._be[i], self._bn[i], self._ve[i], self._vn[i]
+            age = t - ts[i]
+            s = sigma_at(age, self.horizons, self.sigmas)
+            dv = self.lag_sd * math.hypot(v[0] - ve, v[1] - vn)
+            re, rn = b[0] - be, b[1] - bn
+            g = math.sqrt((re * re + rn * rn) / (s * s + dv * dv))
+            found.append(DriftResult(g, h, ts[i], (be, bn), (ve, vn)))
+        if not found:
+            return NO_TEST
+        g_max = max(r.g for r in found)
+        # The statistic is the maximum (D4); the reference reported with it is the *oldest*
+        # one whose statistic is within 0.6 of it: a slow fault is seen about as strongly at
+        # every horizon longer than its age, and the oldest such reference is the one most
+        # likely from before it began (the isolator anchors its hold there).
+        ref = next(r for r in reversed(found) if r.g >= 0.6 * g_max)
+        return DriftResult(g_max, ref.horizon_s, ref.ref_t, ref.ref_b, ref.ref_v)
+
+
+def calibrate(samples: Sequence[tuple[float, float, float]],
+              horizons_s: Sequence[float]) -> tuple[float, ...]:
+    """Per-axis σ of (D2) at each horizon from a clean recording, once per receiver.
+
+    ``samples``: (t, b_e, b_n) of consecutive clean epochs with an unbroken Doppler chain.
+    Robust: 1.4826 × the median absolute difference over both axes (a stray fault in the
+    recording does not widen it)."""
+    ts = [s[0] for s in samples]
+    out = []
+    for h in horizons_s:
+        diffs: list[float] = []
+        for t, be, bn in samples:
+            i = bisect_right(ts, t - h) - 1
+            if i < 0 or t - ts[i] > h + 1.5:
+                continue
+            diffs.append(abs(be - samples[i][1]))
+            diffs.append(abs(bn - samples[i][2]))
+        if not diffs:
+            raise ValueError(f"no pair of samples {h} s apart to calibrate on")
+        diffs.sort()
+        out.append(1.4826 * diffs[len(diffs) // 2])
+    return tuple(out)

@@ -1,0 +1,167 @@
+"""Isolation after a level change: which side is right, the old track or the new fixes?
+
+Beyond Zhou & Zhang (2010), whose isolation replaces a faulty fix by its GM(1,1) prediction
+and, after many in a row, alarms and restarts on the receiver (section 2.2). When the fixes
+*step and stay* (a multipath step, a drift the slow test caught, a frozen receiver), neither
+extrapolating the old track for a fixed number of epochs nor restarting on the receiver at once
+is right: the first outputs a stale extrapolation after the fault has ended (3.1-3.3 m off
+against 0.6 m raw, shared/FINDINGS.md), the second accepts the faulty level.
+
+:class:`LevelHold` carries the *old track* instead: the last trusted Doppler-free value b_a
+(:mod:`fdi.drift`, eq. D1) moved by the receiver's Doppler displacement,
+
+    x_track(t) = b_a + D(t) + δ·v(t)                                (L1)
+
+and decides with the Doppler evidence over a short fixed lag L (seconds, not epochs):
+
+* the new fixes are right when, for L seconds, they agree with the old track within
+  ``exit_sigmas`` of the drift σ at the track's age (eq. D3) **and** with their own Doppler
+  over L (a receiver consistent with itself): then the hold ends and the receiver is
+  accepted. After a frozen stretch (the receiver repeated its speed and course too, so the
+  Doppler the old track was moved by is void) only the second condition is asked;
+* the new fixes are also right when, after L seconds consistent with their own Doppler, they
+  sit at the level of an *older* trusted reference b_o (the long-term levels 20-300 s before
+  the anchor, one every 10 s) while the old track does not: ``|b − b_o| ≤ ⅓·|b_a − b_o|`` and
+  ``|b_a − b_o| ≥ side_sigmas·σ(30 s)`` (not grown with the age: the DGPS error is bounded,
+  and the ratio carries the decision). That is the end of a slow fault the
+  drift test missed (the old track is the faulty side), told apart from a multipath step
+  (the new fixes are the faulty side: the old track is at the older level);
+* in a hold on a slow fault, the fixes are right again when they step back towards the old
+  track and stay consistent with their own Doppler for L: their distance from it falls by
+  more than half within L, by more than ``exit_sigmas`` of the 1 s σ (a drift ends at once;
+  the anchor may sit a little into the drift, so agreement alone can come late);
+* otherwise the old track is kept: passed on (flagged) for ``output_s``, then the alarm with
+  nothing passed on (section 2.2: "stop automatic navigation") up to ``max_s``, after which
+  the receiver's level is accepted again under the alarm (no lock-in). A hold that began with
+  an abrupt step (``slow=False``: a jump that stayed, a multipath step) gives up at
+  ``output_s``: a step that neither side can be shown wrong about is the receiver's to keep
+  (never worse than doing nothing); a slow fault (a drift, a frozen receiver) is held to
+  ``max_s``.
+
+Nothing here feeds a filter: the caller keeps replaced values out of its Kalman filter.
+
+Units: metres, seconds; vectors are (east, north).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Literal
+
+from fdi.drift import sigma_at
+
+HoldAction = Literal["track", "alarm", "exit", "ended", "new_level", "give_up"]
+
+
+@dataclass(frozen=True, slots=True)
+class HoldParams:
+    horizons_s: tuple[float, ...]
+    sigma_m: tuple[float, ...]
+    lag_s: float
+    lag_sd_s: float
+    exit_sigmas: float
+    side_sigmas: float
+    exit_lag_s: float
+    output_s: float
+    max_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class HoldStep:
+    action: HoldAction
+    track: tuple[float, float]  # (L1) at this epoch
+    g: float  # the new fix against the old track, in σ
+
+
+class LevelHold:
+    """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
+
+    __slots__ = ("_agree_b", "_agree_since", "_dev", "_recent", "anchor_b", "anchor_t", "anchor_v",
+                 "matched_t", "old", "p", "slow", "stale_m", "t0")
+
+    def __init__(self, p: HoldParams, t0: float, anchor_t: float,
+                 anchor_b: tuple[float, float], anchor_v: tuple[float, float],
+                 stale_m: float = 0.0,
+                 old: list[tuple[float, tuple[float, float]]] | None = None,
+                 slow: bool = True) -> None:
+        self.p = p
+        self.t0 = t0
+        self.anchor_t = anchor_t
+        self.anchor_b = anchor_b
+        self.anchor_v = anchor_v
+        self.stale_m = stale_m  # displacement integrated from a void (frozen) Doppler
+        self.old = old or []  # older trusted levels (t_o, b_o), before the anchor
+        self.matched_t = math.nan  # the level the new fixes were found at ("new_level")
+        self.slow = slow
+        self._agree_since: float | None = None
+        self._agree_b = (0.0, 0.0)
+        self._dev: deque[tuple[float, float]] = deque()  # (t, |b − b_a|) over 2L
+        self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
+
+    def step(self, t: float, b: tuple[float, float], v: tuple[float, float],
+             d: tuple[float, float], stale: bool, dt: float) -> HoldStep:
+        """The receiver's Doppler-free value ``b`` at ``t``, its Doppler ``v`` and the
+        integrated displacement ``d``; ``stale``: the receiver repeats its whole fix."""
+        p = self.p
+        lag = p.lag_s
+        track = (self.anchor_b[0] + d[0] + lag * v[0], self.anchor_b[1] + d[1] + lag * v[1])
+        if stale:
+            self.stale_m += math.hypot(v[0], v[1]) * dt
+            self.slow = True
+        age = t - self.anchor_t
+        s = sigma_at(age, p.horizons_s, p.sigma_m)
+        dv = p.lag_sd_s * math.hypot(v[0] - self.anchor_v[0], v[1] - self.anchor_v[1])
+        var = s * s + dv * dv + (0.5 * self.stale_m) ** 2
+        re, rn = b[0] - self.anchor_b[0], b[1] - self.anchor_b[1]
+        g = math.sqrt((re * re + rn * rn) / var)
+        # The receiver against its own Doppler over the fixed lag.
+        rec = self._recent
+        rec.append((t, b[0], b[1]))
+        while len(rec) > 1 and rec[1][0] <= t - p.exit_lag_s:
+            rec.popleft()
+        t_old, be, bn = rec[0]
+        self_ok = math.hypot(b[0] - be, b[1] - bn) <= p.exit_sigmas * sigma_at(
+            max(t - t_old, 1e-3), p.horizons_s, p.sigma_m)
+        # After a frozen stretch the old track rests on a void Doppler: the receiver, live
+        # again and consistent with its own Doppler over the lag, is the evidence.
+        agrees = not stale and (g <= p.exit_sigmas or (self.stale_m > 0.0 and self_ok))
+        if agrees and self._agree_since is not None:
+            # ... and the receiver stays consistent with itself since the agreement began.
+            ab = self._agree_b
+            s_a = sigma_at(max(t - self._agree_since, 1e-3), p.horizons_s, p.sigma_m)
+            if math.hypot(b[0] - ab[0], b[1] - ab[1]) > p.exit_sigmas * s_a:
+                self._agree_since = None
+        if not agrees:
+            self._agree_since = None
+        elif self._agree_since is None:
+            self._agree_since = t
+            self._agree_b = b
+        if self._agree_since is not None and t - self._agree_since >= p.exit_lag_s - 1e-9:
+            return HoldStep("exit", track, g)
+        # A slow fault that ended: a step back towards the old track, then consistency.
+        dev = math.hypot(re, rn)
+        hist = self._dev
+        hist.append((t, dev))
+        while len(hist) > 1 and hist[1][0] <= t - 2.0 * p.exit_lag_s:
+            hist.popleft()
+        if self.slow and not stale and self_ok and self.stale_m == 0.0:
+            before = hist[0][1]
+            if (t - hist[0][0] >= p.exit_lag_s and dev <= 0.5 * before
+                    and before - dev >= p.exit_sigmas * p.sigma_m[0]):
+                return HoldStep("ended", track, g)
+        if (self.old and not stale and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
+                and t - rec[0][0] >= p.exit_lag_s - 1e-9):
+            s_side = p.side_sigmas * sigma_at(30.0, p.horizons_s, p.sigma_m)
+            for t_o, (oe, on) in self.old:
+                e_new = math.hypot(b[0] - oe, b[1] - on)
+                e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)
+                if e_new <= e_track / 3.0 and e_track >= s_side:
+                    self.matched_t = t_o
+                    return HoldStep("new_level", track, g)
+        if t - self.t0 > (p.max_s if self.slow else p.output_s):
+            return HoldStep("give_up", track, g)
+        if t - self.t0 <= p.output_s:
+            return HoldStep("track", track, g)
+        return HoldStep("alarm", track, g)

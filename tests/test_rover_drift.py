@@ -1,0 +1,156 @@
+"""The slow-fault test (fdi/drift.py) and the hold after a level change (fdi/level.py), on
+synthetic Doppler-free series with known noise (seeded)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fdi.drift import DriftTest, calibrate, sigma_at
+from fdi.errors import ConfigError
+from fdi.level import HoldParams, LevelHold
+
+H = (1.0, 3.0, 10.0, 30.0, 100.0)
+SIG = (0.07, 0.1, 0.16, 0.27, 0.35)
+
+
+def _walk(rng: np.random.Generator, n: int, dt: float, tau: float = 60.0,
+          sigma: float = 0.35) -> np.ndarray:
+    """A first-order Gauss-Markov error per axis (n x 2)."""
+    phi = math.exp(-dt / tau)
+    q = sigma * math.sqrt(1 - phi * phi)
+    x = np.zeros((n, 2))
+    x[0] = rng.normal(0, sigma, 2)
+    for k in range(1, n):
+        x[k] = phi * x[k - 1] + rng.normal(0, q, 2)
+    return x
+
+
+def test_sigma_at_interpolates_and_grows_beyond_the_last_horizon() -> None:
+    assert sigma_at(0.5, H, SIG) == SIG[0]
+    assert sigma_at(2.0, H, SIG) == pytest.approx(0.5 * (SIG[0] + SIG[1]))
+    assert sigma_at(400.0, H, SIG) == pytest.approx(SIG[-1] * 2.0)
+
+
+def test_bad_configuration_is_a_config_error() -> None:
+    with pytest.raises(ConfigError):
+        DriftTest((1.0, 3.0), (0.1,), 0.1)
+    with pytest.raises(ConfigError):
+        DriftTest((3.0, 1.0), (0.1, 0.1), 0.1)
+    with pytest.raises(ConfigError):
+        DriftTest((1.0, 3.0), (0.1, 0.0), 0.1)
+
+
+def test_clean_series_stays_under_the_gate_and_a_ramp_is_seen_in_seconds() -> None:
+    rng = np.random.default_rng(7)
+    dt = 0.1
+    n = 6000
+    err = _walk(rng, n, dt, tau=60.0, sigma=0.2)
+    sig = calibrate([(k * dt, err[k, 0], err[k, 1]) for k in range(n)], H)
+    test = DriftTest(H, sig, 0.0)
+    worst = 0.0
+    for k in range(n):
+        t = k * dt
+        r = test.test(t, (err[k, 0], err[k, 1]), (0.0, 0.0))
+        worst = max(worst, r.g)
+        test.commit(t, (err[k, 0], err[k, 1]), (0.0, 0.0))
+    assert worst < 5.0, worst
+    # The same receiver, then a ramp of 0.2 m/s north: caught within 10 s (offset 2 m).
+    start = n * dt
+    detected = None
+    for j in range(400):
+        t = start + j * dt
+        b = (err[-1, 0], err[-1, 1] + 0.2 * (j + 1) * dt)
+        r = test.test(t, b, (0.0, 0.0))
+        if r.g > 5.0:
+            detected = t - start
+            # The reported reference is from before the ramp began.
+            assert r.ref_t <= start
+            break
+    assert detected is not None and detected <= 10.0, detected
+
+
+def test_references_can_be_forgotten_and_rebased() -> None:
+    test = DriftTest(H, SIG, 0.0)
+    for k in range(50):
+        test.commit(float(k), (0.0, 0.0), (1.0, 0.0))
+    assert test.at_or_before(20.5) is not None
+    test.forget_after(20.0)
+    ref = test.at_or_before(49.0)
+    assert ref is not None and ref[0] == 20.0
+    test.rebase(1.0, -2.0)
+    ref = test.at_or_before(49.0)
+    assert ref is not None and ref[1] == (1.0, -2.0)
+    old = test.oldest(15.0)
+    assert old is not None and old[1] == (1.0, -2.0)
+    test.reset_short()
+    assert test.at_or_before(49.0) is None and test.oldest(15.0) is not None
+    test.reset()
+    assert test.oldest(15.0) is None
+
+
+def test_calibration_once_at_start_then_frozen() -> None:
+    rng = np.random.default_rng(3)
+    dt = 0.2
+    err = _walk(rng, 3000, dt, tau=60.0, sigma=0.2)
+    test = DriftTest(H[:4], (1.0, 1.0, 1.0, 1.0), 0.0, calibrate_s=300.0)
+    for k in range(3000):
+        test.commit(k * dt, (err[k, 0], err[k, 1]), (0.0, 0.0))
+        if k * dt < 299.0:
+            assert not test.calibrated
+    assert test.calibrated
+    # Robust σ of a 60 s Gauss-Markov process's increments (σ 0.2): about 0.03 at 1 s, 0.14 at
+    # 30 s; the floor (0.2 x the configured 1.0) holds the short horizons up.
+    assert test.sigmas[0] == pytest.approx(0.2)
+    assert 0.1 < test.sigmas[3] < 0.3
+    frozen = test.sigmas
+    for k in range(3000, 3100):
+        test.commit(k * dt, (err[-1, 0] + 5.0, 0.0), (0.0, 0.0))
+    assert test.sigmas == frozen
+
+
+HP = HoldParams(H, SIG, 0.0, 0.0, exit_sigmas=3.0, side_sigmas=2.0, exit_lag_s=1.0,
+                output_s=10.0, max_s=120.0)
+
+
+def _hold_run(hold: LevelHold, bs: list[tuple[float, float]], t0: float, dt: float,
+              stale: bool = False) -> list[str]:
+    out = []
+    for j, b in enumerate(bs):
+        out.append(hold.step(t0 + j * dt, b, (1.0, 0.0), (0.0, 0.0), stale, dt).action)
+    return out
+
+
+def test_hold_exits_when_the_fixes_come_back_to_the_old_track() -> None:
+    hold = LevelHold(HP, 10.0, 9.0, (0.0, 0.0), (1.0, 0.0))
+    acts = _hold_run(hold, [(1.5, 0.0)] * 20 + [(0.02, 0.0)] * 20, 10.0, 0.1)
+    assert acts[:20] == ["track"] * 20
+    assert "exit" in acts[20:]
+    assert acts.index("exit") - 20 <= 12  # the short fixed lag (1 s at 10 Hz) and a margin
+
+
+def test_hold_takes_the_new_fixes_when_they_sit_at_the_older_level() -> None:
+    """The end of a missed ramp: the old track (anchor) is 3 m off the level of 60 s ago,
+    the new fixes are back at it."""
+    hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), old=[(40.0, (0.0, 0.0))])
+    acts = _hold_run(hold, [(0.1, 0.0)] * 30, 100.0, 0.1)
+    assert "new_level" in acts and acts.index("new_level") <= 12
+
+
+def test_hold_keeps_the_old_track_through_a_multipath_step() -> None:
+    """A 1.5 m step: the old track is at the older level, the new fixes are not."""
+    hold = LevelHold(HP, 100.0, 99.0, (0.05, 0.0), (1.0, 0.0), old=[(40.0, (0.0, 0.0))],
+                     slow=False)
+    acts = _hold_run(hold, [(1.55, 0.0)] * 150, 100.0, 0.1)
+    assert acts[:100].count("track") == 100
+    assert "give_up" in acts  # an abrupt step is the receiver's again after output_s
+
+
+def test_hold_after_a_frozen_stretch_trusts_the_live_receiver() -> None:
+    hold = LevelHold(HP, 10.0, 9.0, (0.0, 0.0), (1.0, 0.0), stale_m=1.0)
+    frozen = _hold_run(hold, [(-0.1 * j, 0.0) for j in range(50)], 10.0, 0.1, stale=True)
+    assert "exit" not in frozen
+    live = _hold_run(hold, [(6.0, 0.0)] * 30, 15.0, 0.1)
+    assert "exit" in live
