@@ -160,7 +160,7 @@ def test_receiver_dead_reckoning_quality_6_is_no_fix() -> None:  # item 2
     dr = set(range(15, 20))
     for i, (t, la, lo, alt) in enumerate(_track(30, 1.0, seed=2)):
         lines += [_gga(t, la, lo, alt, quality=6 if i in dr else 2), _rmc(t, la, lo, 2.0, 45.0)]
-    gps, sink, pipe = _run(lines)
+    gps, sink, _ = _run(lines)
     assert len(gps) == 30
     for i, m in enumerate(gps):
         if i in dr:
@@ -268,7 +268,7 @@ def test_alarm_mode_defaults_and_named_modes_load(tmp_path: Path, output: str,
     'vehicle = "rover"\nalarm_mode = "AUTO"', 'vehicle = "tank"',
 ])
 def test_invalid_alarm_mode_is_refused_at_load(tmp_path: Path, output: str) -> None:  # item 6
-    with pytest.raises(ConfigError, match="alarm_mode|vehicle"):
+    with pytest.raises(ConfigError, match=r"alarm_mode|vehicle"):
         load_file(BridgeConfig, _write(tmp_path, output))
 
 

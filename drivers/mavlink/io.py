@@ -105,6 +105,11 @@ def crc_extra_table() -> dict[int, int]:
     return {msgid: int(cls.crc_extra) for msgid, cls in mavlink2.mavlink_map.items()}
 
 
+def payload_length_table() -> dict[int, int]:
+    """``{msgid: payload length with every extension field}`` for the dialect."""
+    return {msgid: int(cls.unpacker.size) for msgid, cls in mavlink2.mavlink_map.items()}
+
+
 def target_offsets() -> dict[int, tuple[int | None, int | None]]:
     """``{msgid: (target_system offset, target_component offset)}`` in the wire payload.
 
@@ -345,6 +350,14 @@ class _Encoders:
         msg = self._mav.param_set_encode(
             target_system, target_component, raw, value, MAV_PARAM_TYPE_REAL32
         )
+        return self._emit(msg)
+
+    def send_file_transfer_protocol(self, target_system: int, target_component: int,
+                                    payload: bytes, target_network: int = 0) -> bytes:
+        """FILE_TRANSFER_PROTOCOL (MAVLink FTP) with ``payload`` (at most 251 bytes)."""
+        data = list(payload[:251]) + [0] * (251 - min(len(payload), 251))
+        msg = self._mav.file_transfer_protocol_encode(target_network, target_system,
+                                                      target_component, data)
         return self._emit(msg)
 
     def send_param_request_list(self, target_system: int, target_component: int) -> bytes:

@@ -41,7 +41,9 @@ log = logging.getLogger("fdi_bridge.mavlink")
 
 DEFAULT_SERVER_HOST = "127.0.0.1"
 MAX_UDP_PEERS = 16
-UDP_PEER_TIMEOUT_S = 30.0
+UDP_PEER_TIMEOUT_S = 0.0
+"""Default for a UDP server's ``peer_timeout_s``: 0 = a peer is kept until 16 others displace it
+(a listen-only ground station never goes dark); > 0 stops sending to a silent peer."""
 # Receive buffer asked for on UDP sockets (the kernel caps it at net.core.rmem_max): ~1 s of a
 # 1 000 packet/s link, so a burst that arrives while the loop is descheduled is not dropped by
 # the kernel before the router's own (counted) queues see it.
@@ -129,9 +131,11 @@ class _UdpLink(Link):
 
 
 class UdpServerLink(_UdpLink):
-    def __init__(self, url: str, host: str, port: int) -> None:
+    def __init__(self, url: str, host: str, port: int,
+                 peer_timeout_s: float = UDP_PEER_TIMEOUT_S) -> None:
         self.url = url
         self._clock = time.monotonic
+        self.peer_timeout_s = peer_timeout_s
         try:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -163,15 +167,16 @@ class UdpServerLink(_UdpLink):
 
     def write(self, data: bytes) -> bool:
         peers = self.peers
+        timeout = self.peer_timeout_s
         if len(peers) == 1:  # the usual case: one ground station
             addr = next(iter(peers))
-            if self._clock() - peers[addr] > UDP_PEER_TIMEOUT_S:
+            if timeout > 0 and self._clock() - peers[addr] > timeout:
                 del peers[addr]
                 return True
             return self._sendto(data, addr)
         now = self._clock()
         for addr, seen in list(peers.items()):
-            if now - seen > UDP_PEER_TIMEOUT_S:
+            if timeout > 0 and now - seen > timeout:
                 del peers[addr]
             elif not self._sendto(data, addr):
                 # One peer's buffer is full: that peer loses this datagram (as on the air);
@@ -196,8 +201,14 @@ class UdpServerLink(_UdpLink):
 
 
 class UdpClientLink(_UdpLink):
-    def __init__(self, url: str, host: str, port: int) -> None:
+    """``udpout:HOST:PORT``: sends to HOST:PORT and accepts datagrams from that address only
+    (``accept_any=True``: from any sender, as mavutil does); others are dropped and counted in
+    ``foreign``, so another local program cannot inject packets through the link."""
+
+    def __init__(self, url: str, host: str, port: int, accept_any: bool = False) -> None:
         self.url = url
+        self.accept_any = accept_any
+        self.foreign = 0
         try:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF_BYTES)
@@ -217,6 +228,9 @@ class UdpClientLink(_UdpLink):
             except OSError:
                 self.errors += 1  # ICMP port unreachable while nobody listens yet
                 return
+            if addr != self.target and not self.accept_any:
+                self.foreign += 1
+                continue
             yield data, addr, True
 
     def write(self, data: bytes) -> bool:
@@ -496,16 +510,19 @@ class SerialLink(Link):
         self.port.close()
 
 
-def open_link(url: str, baud: int = 115200, backoff_max_s: float = 5.0) -> Link:
+def open_link(url: str, baud: int = 115200, backoff_max_s: float = 5.0, *,
+              peer_timeout_s: float = UDP_PEER_TIMEOUT_S, accept_any: bool = False) -> Link:
     """Open a link from its URL (see the module docstring); ``backoff_max_s``: the longest wait
-    between reconnection attempts of a serial or TCP client link."""
+    between reconnection attempts of a serial or TCP client link; ``peer_timeout_s``: a UDP
+    server's silent-peer timeout (0 = never); ``accept_any``: a UDP client takes datagrams
+    from any sender, not only from the address it sends to."""
     scheme, sep, rest = url.partition(":")
     if sep and scheme == "udpin":
         host, port = _split_hostport(rest, url, DEFAULT_SERVER_HOST)
-        return UdpServerLink(url, host, port)
+        return UdpServerLink(url, host, port, peer_timeout_s)
     if sep and scheme == "udpout":
         host, port = _split_hostport(rest, url, None)
-        return UdpClientLink(url, host, port)
+        return UdpClientLink(url, host, port, accept_any)
     if sep and scheme == "tcpin":
         host, port = _split_hostport(rest, url, DEFAULT_SERVER_HOST)
         return TcpServerLink(url, host, port)
