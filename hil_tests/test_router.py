@@ -102,8 +102,9 @@ def test_ardusub_dive_replayed_through_the_bridge_byte_for_byte(tmp_path: Path) 
             elif frames and ok:
                 expected.append(r.raw)
         # The 4 camera packets (259/260/262/269), CRC computed before the trailing zeros were
-        # cut, are checked over the padded payload and pass, as through mavlink-router. The GCS's own 1 767 packets recorded in
-        # the dive do not go back to it (loop guard): 267 of them were broadcasts that did.
+        # cut, are checked over the padded payload and pass, as through mavlink-router. The
+        # GCS's own 1 767 packets recorded in the dive do not go back to it (loop guard): 267
+        # of them were broadcasts that did.
         assert framer.stats.bad_crc == 0 and framer.stats.crc_untruncated == 4
         n_valid = sum(r.msg is not None for r in records)
         assert (len(records), n_valid, len(expected)) == (35_916, 35_912, 34_412 - 267)

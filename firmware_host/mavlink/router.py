@@ -226,6 +226,7 @@ class TlogWriter:
         self.min_free_bytes = min_free_bytes
         self.wall_clock = wall_clock
         self.clock = clock
+        self.retry_s = TLOG_RETRY_S
         self.files: list[Path] = []
         self._f: Any = None
         self._size = 0
@@ -285,10 +286,10 @@ class TlogWriter:
         self._unflushed = 0
         if not self._failing:
             log.warning("tlog: not written (%s); forwarding goes on, a new file is tried every "
-                        "%.0f s", err.strerror or err, TLOG_RETRY_S)
+                        "%.0f s", err.strerror or err, self.retry_s)
         self._failing = True
         self._close_file()
-        self._retry_at = self.clock() + TLOG_RETRY_S
+        self._retry_at = self.clock() + self.retry_s
 
     def _close_file(self) -> None:
         f, self._f = self._f, None
