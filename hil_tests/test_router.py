@@ -599,3 +599,77 @@ def test_tcp_client_link_reconnects_when_the_server_restarts(tmp_path: Path) -> 
         ap.close()
         if ap2 is not None:
             ap2.close()
+
+
+PASSPHRASE = "fdiBridgeTest42"  # MAVProxy's `signing key/setup` takes one word (first only)
+
+
+@pytest.mark.skipif(
+    not MAVPROXY.exists(), reason="MAVProxy is not installed (pip install MAVProxy)"
+)
+def test_documented_mavproxy_signing_commands_set_a_parameter(tmp_path: Path) -> None:
+    """docs/mavlink.md's recipe: the key file from ``sha256(passphrase)``, MAVProxy's
+    ``signing key PASSPHRASE``; MAVProxy's signed PARAM_SET is accepted on a signing link."""
+    import hashlib
+    import subprocess
+
+    key_dir = Path("/tmp") / f"fdi-mavproxy-key-{os.getpid()}"
+    key_dir.mkdir(exist_ok=True)
+    key_file = key_dir / "signing.key"
+    # The documented command: printf '%s' PASSPHRASE | sha256sum | cut -d' ' -f1 > FILE
+    out = subprocess.run(f"printf '%s' '{PASSPHRASE}' | sha256sum | cut -d' ' -f1",
+                         shell=True, capture_output=True, text=True, check=True).stdout
+    key_file.write_text(out)
+    os.chmod(key_file, 0o600)
+    assert load_signing_key(key_file) == hashlib.sha256(PASSPHRASE.encode()).digest()
+    params = ParamStore(tmp_path / "params.toml")
+    params.register(ParamSpec("FDI_ALPHA", 0.05, 1e-6, 0.5))
+    params.register(ParamSpec("FDI_WINDOW", 12.0, 1.0, 500.0, integer=True))
+    router = Router(MavlinkConfig(
+        autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+        gcs=(EndpointConfig("udpin:127.0.0.1:0", signing=True),),
+        signing_key_file=str(key_file), signing_state_file=str(tmp_path / "sig.state"),
+    ), params=params)
+    router.start()
+    cmd = [
+        sys.executable, str(MAVPROXY), f"--master=udpout:127.0.0.1:{_port(router, 1)}",
+        "--target-system=1", "--target-component=191", "--source-system=255", "--nowait",
+        f"--state-basedir={tmp_path / 'mavproxy'}", "--default-modules=param,signing",
+    ]  # fmt: skip
+    (tmp_path / "mavproxy").mkdir()
+    env = dict(os.environ, HOME=str(tmp_path))  # no ~/.mavproxy/signing.keys of the user's
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env=env)
+    assert proc.stdin is not None and proc.stdout is not None
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")),  # type: ignore[union-attr]
+                              daemon=True)  # fmt: skip
+    reader.start()
+    try:
+        proc.stdin.write(f"signing key {PASSPHRASE}\n")
+        proc.stdin.flush()
+        next_try = 0.0
+
+        def set_param() -> bool:
+            nonlocal next_try
+            if time.monotonic() >= next_try:
+                proc.stdin.write("param set FDI_WINDOW 33\n")  # type: ignore[union-attr]
+                proc.stdin.flush()  # type: ignore[union-attr]
+                next_try = time.monotonic() + 0.5
+            return params.get("FDI_WINDOW") == 33.0
+
+        _wait(set_param, "MAVProxy's signed PARAM_SET", 20.0)
+    finally:
+        with contextlib.suppress(OSError):
+            proc.stdin.close()
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+        reader.join(timeout=5)
+        router.close()
+    s = router.summary()
+    # Accepted although the link refuses every unsigned PARAM_SET: MAVProxy signed it.
+    assert s["params_set"] >= 1 and s["bad_signature"] == 0
