@@ -440,3 +440,64 @@ def test_config_rejects_unknown_message_names() -> None:
     with pytest.raises(ValueError, match="not a message"):
         EndpointConfig("udpin:127.0.0.1:0", block_out=("NOT_A_MESSAGE",))
     assert replace(EndpointConfig("x"), allow_unsigned=()).ids("allow_unsigned") == frozenset()
+
+
+def test_each_tcp_client_is_its_own_endpoint_and_a_stalled_one_starves_nobody(
+    tmp_path: Path,
+) -> None:  # item 15
+    r = _router(tmp_path, gcs=EndpointConfig("tcpin:127.0.0.1:0"), queue_packets=500)
+    ap = _Peer(1, 1)
+    stalled = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 2048)
+    stalled.connect(("127.0.0.1", _port(r, 1)))
+    healthy = socket.create_connection(("127.0.0.1", _port(r, 1)))
+    healthy.settimeout(0.05)
+    stalled.settimeout(0.05)
+    fr_h, fr_s = MavFramer(), MavFramer()
+
+    def read(sock: socket.socket, fr: MavFramer, seconds: float) -> list[Any]:
+        out: list[Any] = []
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                data = sock.recv(1 << 16)
+            except TimeoutError:
+                continue
+            out += [mio.decode_packet(f.raw) for f in fr.feed(data)]
+        return out
+
+    try:
+        stalled.sendall(mio.MavPacker(255, 190).send_heartbeat())
+        healthy.sendall(mio.MavPacker(254, 190).send_heartbeat())
+        ap.send(ap.p.send_heartbeat(), _port(r, 0))
+        _wait(lambda: len([e for e in r.endpoints if e.parent is not None and e.seen]) == 2,
+              "two TCP clients, two endpoints")
+        # Targeted at the healthy client: only it receives it; and the clients see each other.
+        ap.send(ap.p.send_command_ack(400, 0, 254, 190), _port(r, 0))
+        got_h = read(healthy, fr_h, 0.4)
+        got_s = read(stalled, fr_s, 0.4)
+        assert any(m.get_type() == "COMMAND_ACK" for m in got_h)
+        assert not any(m.get_type() == "COMMAND_ACK" for m in got_s)
+        assert any(m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 255 for m in got_h)
+        # The stalled client stops reading; 40 000 packets for both, paced by the healthy one.
+        n, window, received = 40_000, 500, 0
+        fr_h2 = MavFramer()
+        healthy.settimeout(0.02)
+        for start in range(0, n, window):
+            for i in range(start, start + window):
+                ap.send(ap.p.send_statustext(6, f"telemetry {i:06d} " + "x" * 30), _port(r, 0))
+            end = time.monotonic() + 5.0
+            while received < start + window and time.monotonic() < end:
+                try:
+                    data = healthy.recv(1 << 16)
+                except TimeoutError:
+                    continue
+                received += sum(f.sysid == 1 and f.compid == 1 for f in fr_h2.feed(data))
+        assert received == n  # the healthy client lost nothing
+        clients = {e.name: e.stats for e in r.endpoints if e.parent is not None}
+        assert sum(s.dropped_queue_full for s in clients.values()) > 0  # the stalled one's
+    finally:
+        r.close()
+        ap.close()
+        stalled.close()
+        healthy.close()

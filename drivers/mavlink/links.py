@@ -335,6 +335,7 @@ class TcpServerLink(_TcpBase):
     def __init__(self, url: str, host: str, port: int) -> None:
         self.url = url
         self.conns = []
+        self.children: list[TcpClientConnLink] = []
         self._n = 0
         try:
             self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -354,6 +355,14 @@ class TcpServerLink(_TcpBase):
         return [self.listener.fileno(), *super().filenos()]
 
     def read(self, max_chunks: int) -> Iterator[Chunk]:
+        for link in self.accept_links():
+            self.conns.extend(link.conns)
+        return self._read_conns(max_chunks)
+
+    def accept_links(self) -> list[TcpClientConnLink]:
+        """Accept every waiting client, each as a link of its own (the router makes each one
+        an endpoint: its own routes, queue and counters)."""
+        out: list[TcpClientConnLink] = []
         while True:
             try:
                 sock, addr = self.listener.accept()
@@ -362,15 +371,35 @@ class TcpServerLink(_TcpBase):
             sock.setblocking(False)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._n += 1
-            self.conns.append(_TcpConn(sock, ("tcp", self._n, addr)))
+            out.append(TcpClientConnLink(f"{self.url}#{self._n}", sock, ("tcp", self._n, addr)))
+        self.children = [c for c in self.children if c.has_peer()] + out
+        return out
+
+    def listener_filenos(self) -> list[int]:
+        return [self.listener.fileno()]
+
+    def has_peer(self) -> bool:
+        return bool(self.conns) or any(c.has_peer() for c in self.children)
+
+    def close(self) -> None:
+        super().close()
+        for c in self.children:
+            c.close()
+        self.listener.close()
+
+
+class TcpClientConnLink(_TcpBase):
+    """One accepted client of a TCP server link: its socket, its own write backlog."""
+
+    def __init__(self, url: str, sock: socket.socket, key: Hashable) -> None:
+        self.url = url
+        self.conns = [_TcpConn(sock, key)]
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
         return self._read_conns(max_chunks)
 
     def has_peer(self) -> bool:
         return bool(self.conns)
-
-    def close(self) -> None:
-        super().close()
-        self.listener.close()
 
 
 class TcpClientLink(_TcpBase):

@@ -55,7 +55,7 @@ from typing import Any
 from drivers.configload import load_dataclass, read_toml
 from drivers.mavlink import io as mio
 from drivers.mavlink.framer import MavFrame, MavFramer, frame_target, signature_ok
-from drivers.mavlink.links import Link, open_link
+from drivers.mavlink.links import Link, TcpServerLink, open_link
 from fdi.errors import ConfigError, PortError
 from firmware_host.mavlink.params import ParamStore
 
@@ -391,6 +391,13 @@ class Endpoint:
         self.max_out_pps = c.max_out_pps
         self._tokens = c.max_out_pps
         self._tokens_t = 0.0
+        self.cfg = c
+        # A TCP server only accepts: each client becomes an endpoint of its own (``clients``),
+        # with its own routes, queue and counters, so one stalled client starves nobody.
+        self.server = isinstance(link, TcpServerLink)
+        self.parent: Endpoint | None = None
+        self.clients = 0
+        self.clients_gone = 0
 
     def rate_ok(self, now: float) -> bool:
         """Token bucket of ``max_out_pps`` packets/s (a burst of one second's worth)."""
@@ -405,6 +412,8 @@ class Endpoint:
 
     def send(self, raw: bytes) -> None:
         """Write ``raw`` now when nothing waits before it; else queue it behind the others."""
+        if self.server:
+            return  # a TCP server's clients are endpoints of their own
         if self.queue:
             self.enqueue(raw)
         elif not self.link.has_peer():
@@ -734,8 +743,39 @@ class Router:
         for ep in self.endpoints:
             if ep.blocked():
                 ep.flush()
+        self._reap()
+
+    def _accept(self, server: Endpoint) -> None:
+        """New clients of a TCP server: one endpoint each (named ``<server>.<n>``)."""
+        link = server.link
+        assert isinstance(link, TcpServerLink)
+        for client in link.accept_links():
+            server.clients += 1
+            ep = Endpoint(f"{server.name}.{server.clients}", client, is_gcs=server.is_gcs,
+                          signing=server.signing, queue=self.cfg.queue_packets, cfg=server.cfg)
+            ep.parent = server
+            self.endpoints = [*self.endpoints, ep]  # copied: other threads may iterate it
+
+    def _reap(self) -> None:
+        """Drop the endpoints of TCP clients that have gone (their counters fold into the
+        server's: ``clients_gone``, and their link errors)."""
+        gone = [ep for ep in self.endpoints if ep.parent is not None and not ep.link.has_peer()]
+        if not gone:
+            return
+        for ep in gone:
+            parent = ep.parent
+            assert parent is not None
+            parent.clients_gone += 1
+            parent.stats.no_peer += ep.stats.no_peer + len(ep.queue)
+            parent.stats.rx_packets += ep.stats.rx_packets
+            parent.stats.tx_packets += ep.stats.tx_packets
+            parent.stats.dropped_queue_full += ep.stats.dropped_queue_full
+        self.endpoints = [ep for ep in self.endpoints if ep not in gone]
 
     def _read(self, src: Endpoint) -> None:
+        if src.server:
+            self._accept(src)
+            return
         framers = src.framers
         route = self._route
         for data, key, boundary in src.link.read(self.cfg.read_burst):
@@ -785,7 +825,7 @@ class Router:
         sent = False
         now = 0.0
         for dst in self.endpoints:
-            if dst is src:
+            if dst is src or dst.server:
                 continue
             if source in dst.seen:  # loop guard: never back to where the source lives
                 dst.stats.loop_guard += 1
@@ -1110,6 +1150,8 @@ class Router:
             out.update(self.tlog.counters())
         for ep in self.endpoints:
             extra: dict[str, Any] = {"queued": len(ep.queue), "link_errors": ep.link.errors}
+            if ep.server:
+                extra.update(clients=ep.clients, clients_gone=ep.clients_gone)
             foreign = getattr(ep.link, "foreign", None)
             if foreign is not None:
                 extra["foreign_dropped"] = foreign
