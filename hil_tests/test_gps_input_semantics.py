@@ -301,3 +301,36 @@ def test_mode_tables_match_pymavlink() -> None:
             if name in ours:
                 assert ours[name] == number, (vehicle, name)
         assert all(table.get(n) == name for name, n in ours.items()), vehicle
+
+
+@pytest.mark.parametrize("answer", ["refuse", "accept", "silent"])
+def test_direct_endpoint_confirms_the_mode_request(answer: str) -> None:  # item 7 (no router)
+    import socket
+
+    ap = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    ap.bind(("127.0.0.1", 0))
+    ap.settimeout(0.2)
+    ep = mio.MavEndpoint(f"udpout:127.0.0.1:{ap.getsockname()[1]}")
+    ep.command_retry_s = 0.05
+    packer = mio.MavPacker(1, 1)
+    try:
+        ep.request_mode(1, "HOLD", "rover")
+        data, addr = ap.recvfrom(65535)
+        assert mio.decode_packet(data).get_type() == "COMMAND_LONG"
+        if answer != "silent":
+            result = mio.MAV_RESULT_DENIED if answer == "refuse" else mio.MAV_RESULT_ACCEPTED
+            ap.sendto(packer.send_command_ack(176, result, 1, 191), addr)
+        end = time.monotonic() + 2.0
+        while ep._pending is not None and time.monotonic() < end:
+            ep.send_heartbeat()  # every later send looks for the answer (never blocks)
+            time.sleep(0.01)
+        st = ep.command_stats
+        if answer == "refuse":
+            assert st["command_refused"] == 1 and st["command_sent"] == 1
+        elif answer == "accept":
+            assert st["command_accepted"] == 1
+        else:
+            assert st["command_unacked"] == 1 and st["command_sent"] == ep.command_retries
+    finally:
+        ep.close()
+        ap.close()

@@ -22,6 +22,7 @@ opened or written; bad packets are answered with ``None`` (a counted policy, nev
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import struct
@@ -35,6 +36,7 @@ from drivers.mavlink.modes import mode_number
 from fdi.errors import PortError
 
 DIALECT = "ardupilotmega"
+_log = logging.getLogger("fdi_bridge.mavlink")
 
 # pymavlink reads these when mavutil is imported and whenever set_dialect() runs: fix them here,
 # once, for the whole process (rule 7). MAVLINK20 selects the v20 dialect modules, which send
@@ -528,7 +530,79 @@ class MavEndpoint(_Encoders):
             self._mav.send(msg)
         except OSError as err:
             raise PortError(f"could not write to {self.url!r}: {err}") from err
+        if self._pending is not None:
+            self._service_command()
         return bytes(msg.get_msgbuf())
+
+    _pending: tuple[int, int, Any] | None = None  # (command, attempts, re-encode)
+    _pending_due = 0.0
+    command_retries = 5
+    command_retry_s = 1.0
+
+    @property
+    def command_stats(self) -> dict[str, int]:
+        """COMMAND_LONGs of :meth:`request_mode`: sent (with retries), accepted, refused,
+        unacknowledged after :attr:`command_retries` attempts."""
+        if "_cmd_stats" not in self.__dict__:
+            self._cmd_stats = {"command_sent": 0, "command_accepted": 0,
+                               "command_refused": 0, "command_unacked": 0}
+        return self._cmd_stats
+
+    def request_mode(self, target_system: int, mode: str, vehicle: str = "rover") -> bytes:
+        """As :meth:`_Encoders.request_mode`, then wait (without blocking: at each later send)
+        for the autopilot's COMMAND_ACK, resending every :attr:`command_retry_s` up to
+        :attr:`command_retries` times; a refusal or no answer is counted and logged."""
+        self._pending = None
+        raw = super().request_mode(target_system, mode, vehicle)
+        self.command_stats["command_sent"] += 1
+
+        def again() -> bytes:
+            return super(MavEndpoint, self).request_mode(target_system, mode, vehicle)
+
+        self._pending = (MAV_CMD_DO_SET_MODE, 1, again)
+        self._pending_due = time.monotonic() + self.command_retry_s
+        self._pending_what = f"mode {mode}"
+        return raw
+
+    def _service_command(self) -> None:
+        pending = self._pending
+        if pending is None:
+            return
+        command, attempts, again = pending
+        for _ in range(64):  # what arrived since the last send (non-blocking)
+            try:
+                msg = self._conn.recv_msg()
+            except OSError:
+                break
+            if msg is None:
+                break
+            if msg.get_type() != "COMMAND_ACK" or int(msg.command) != command:
+                continue
+            result = int(msg.result)
+            if result == MAV_RESULT_IN_PROGRESS:
+                self._pending_due = time.monotonic() + self.command_retry_s
+                continue
+            self._pending = None
+            key = "command_accepted" if result == MAV_RESULT_ACCEPTED else "command_refused"
+            self.command_stats[key] += 1
+            if result != MAV_RESULT_ACCEPTED:
+                _log.warning("autopilot refused %s (MAV_RESULT %d)", self._pending_what, result)
+            return
+        if time.monotonic() < self._pending_due:
+            return
+        if attempts >= self.command_retries:
+            self._pending = None
+            self.command_stats["command_unacked"] += 1
+            _log.warning("no COMMAND_ACK for %s after %d attempts", self._pending_what, attempts)
+            return
+        self._pending = (command, attempts + 1, again)
+        self._pending_due = time.monotonic() + self.command_retry_s
+        self.command_stats["command_sent"] += 1
+        self._pending, keep = None, self._pending  # no recursion from the resend's own _emit
+        try:
+            again()
+        finally:
+            self._pending = keep
 
     def send_raw(self, data: bytes) -> None:
         """Write already-packed bytes (a replayed packet) unchanged."""

@@ -361,7 +361,9 @@ class MavlinkGpsSink:
 
     def stats(self) -> dict[str, int]:
         st = self._gps
-        return {"gps_input_sent": self.sent, "no_date": self.no_date,
+        commands = getattr(self.endpoint, "command_stats", None)  # a direct MavEndpoint's
+        extra = dict(commands) if isinstance(commands, dict) else {}
+        return {**extra, "gps_input_sent": self.sent, "no_date": self.no_date,
                 "date_from_clock": st.date_from_clock, "alt_held": st.alt_held,
                 "alt_unknown_2d": st.alt_unknown, "velocity_held": st.vel_held,
                 "velocity_from_positions": st.vel_from_positions,
