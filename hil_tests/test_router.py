@@ -144,7 +144,8 @@ def test_ardusub_dive_replayed_through_the_bridge_byte_for_byte(tmp_path: Path) 
         # 1 500 packets addressed to system 1: 1 499 have no route, and one, the GCS's
         # PARAM_REQUEST_LIST to (1, 0), is for every component of system 1: the bridge answers.
         # The GCS's 267 broadcasts have nowhere to go but back to it (loop guard).
-        assert s["autopilot"]["unroutable"] == 1_499 + 267 and s["for_bridge"] == 1
+        assert s["autopilot"]["unroutable"] == 1_499 and s["for_bridge"] == 1
+        assert s["no_destination"] >= 267
         assert s["gcs0"]["dropped_queue_full"] == 0
         _wait(pump(len(expected)), "late own packets", 1.0)
         assert own and all(mio.decode_packet(p) is not None for p in own)

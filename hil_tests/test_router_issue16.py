@@ -501,3 +501,28 @@ def test_each_tcp_client_is_its_own_endpoint_and_a_stalled_one_starves_nobody(
         ap.close()
         stalled.close()
         healthy.close()
+
+
+def test_each_udp_peer_of_a_gcs_server_is_its_own_endpoint(tmp_path: Path) -> None:  # item 15
+    r = _router(tmp_path)
+    ap, a, b = _Peer(1, 1), _Peer(255, 190), _Peer(254, 190)
+    try:
+        a.send(a.p.send_heartbeat(), _port(r, 1))
+        b.send(b.p.send_heartbeat(), _port(r, 1))
+        ap.send(ap.p.send_heartbeat(), _port(r, 0))
+        _wait(lambda: len([e for e in r.endpoints if e.parent is not None and e.seen]) == 2,
+              "two peers, two endpoints")
+        ap.send(ap.p.send_command_ack(400, 0, 254, 190), _port(r, 0))  # for b only
+        a.send(a.p.send_heartbeat(), _port(r, 1))  # now that b is there too
+        got_a, got_b = a.recv_all(0.5), b.recv_all(0.1)
+        assert not any(m.get_type() == "COMMAND_ACK" for m in got_a)
+        assert any(m.get_type() == "COMMAND_ACK" for m in got_b)
+        # The peers see each other (a's heartbeat reached b), not themselves.
+        assert any(m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 255 for m in got_b)
+        assert not any(m.get_srcSystem() == 255 for m in got_a)
+        s = r.summary()["gcs0"]
+        assert s["clients"] == 2 and s["rx_packets"] == 3
+    finally:
+        r.close()
+        for p in (ap, a, b):
+            p.close()

@@ -200,6 +200,51 @@ class UdpServerLink(_UdpLink):
         self.sock.close()
 
 
+class UdpPeerLink(Link):
+    """One peer of a UDP server link, as a link of its own: writes go to that address only,
+    through the server's socket (the server reads for every peer). A full send buffer loses
+    the datagram for this peer (counted in ``dropped``), as on the air."""
+
+    passive = True  # no descriptor of its own: its server's socket is waited on
+
+    def __init__(self, server: UdpServerLink, addr: tuple[str, int]) -> None:
+        self.url = f"{server.url}#{addr[0]}:{addr[1]}"
+        self.server = server
+        self.addr = addr
+        self.dropped = 0
+
+    def filenos(self) -> list[int]:
+        return []
+
+    def write_filenos(self) -> list[int]:
+        return []
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        return iter(())
+
+    def write(self, data: bytes) -> bool:
+        if not self.server._sendto(data, self.addr):
+            self.dropped += 1
+        return True
+
+    def has_peer(self) -> bool:
+        srv = self.server
+        seen = srv.peers.get(self.addr)
+        if seen is None:
+            return False
+        if srv.peer_timeout_s > 0 and srv._clock() - seen > srv.peer_timeout_s:
+            del srv.peers[self.addr]
+            return False
+        return True
+
+    @property
+    def errors(self) -> int:  # type: ignore[override]
+        return 0
+
+    def close(self) -> None:
+        return None  # the server's socket is the server's
+
+
 class UdpClientLink(_UdpLink):
     """``udpout:HOST:PORT``: sends to HOST:PORT and accepts datagrams from that address only
     (``accept_any=True``: from any sender, as mavutil does); others are dropped and counted in

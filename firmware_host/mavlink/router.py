@@ -50,12 +50,12 @@ from collections import deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from drivers.configload import load_dataclass, read_toml
 from drivers.mavlink import io as mio
 from drivers.mavlink.framer import MavFrame, MavFramer, frame_target, signature_ok
-from drivers.mavlink.links import Link, TcpServerLink, open_link
+from drivers.mavlink.links import Link, TcpServerLink, UdpPeerLink, UdpServerLink, open_link
 from fdi.errors import ConfigError, PortError
 from firmware_host.mavlink.params import ParamStore
 
@@ -394,10 +394,15 @@ class Endpoint:
         self.cfg = c
         # A TCP server only accepts: each client becomes an endpoint of its own (``clients``),
         # with its own routes, queue and counters, so one stalled client starves nobody.
-        self.server = isinstance(link, TcpServerLink)
+        # A ground station's UDP server the same way: each peer (address) is an endpoint.
+        self.server = isinstance(link, TcpServerLink) or (is_gcs and isinstance(link,
+                                                                               UdpServerLink))
         self.parent: Endpoint | None = None
+        self.children: list[Endpoint] = []
+        self.by_addr: dict[Hashable, Endpoint] = {}
         self.clients = 0
         self.clients_gone = 0
+        self.gone_stats = EndpointStats()  # what clients that have gone had counted
 
     def rate_ok(self, now: float) -> bool:
         """Token bucket of ``max_out_pps`` packets/s (a burst of one second's worth)."""
@@ -412,8 +417,10 @@ class Endpoint:
 
     def send(self, raw: bytes) -> None:
         """Write ``raw`` now when nothing waits before it; else queue it behind the others."""
-        if self.server:
-            return  # a TCP server's clients are endpoints of their own
+        if self.server:  # its clients are endpoints of their own: to each of them
+            for child in self.children:
+                child.send(raw)
+            return
         if self.queue:
             self.enqueue(raw)
         elif not self.link.has_peer():
@@ -460,6 +467,7 @@ class Endpoint:
 @dataclass
 class RouterStats:
     forwarded: int = 0
+    no_destination: int = 0  # broadcasts nobody could take (no other peer, or loop guard)
     for_bridge: int = 0
     bad_crc: int = 0
     dropped_bytes: int = 0
@@ -670,7 +678,7 @@ class Router:
         polled = False
         for ep in self.endpoints:
             fds = ep.link.filenos()
-            if not fds:
+            if not fds and not getattr(ep.link, "passive", False):
                 polled = True
             for fd in fds:
                 want[fd] = (selectors.EVENT_READ, ep)
@@ -736,7 +744,8 @@ class Router:
                 self._read(ep)
         if polled:
             for ep in self.endpoints:
-                if not ep.link.filenos() and ep not in done:
+                if not ep.link.filenos() and ep not in done and not getattr(
+                        ep.link, "passive", False):
                     self._read(ep)
         self._drain_outbox()
         self.tick(self.clock())
@@ -750,11 +759,33 @@ class Router:
         link = server.link
         assert isinstance(link, TcpServerLink)
         for client in link.accept_links():
-            server.clients += 1
-            ep = Endpoint(f"{server.name}.{server.clients}", client, is_gcs=server.is_gcs,
-                          signing=server.signing, queue=self.cfg.queue_packets, cfg=server.cfg)
-            ep.parent = server
-            self.endpoints = [*self.endpoints, ep]  # copied: other threads may iterate it
+            self._add_client(server, client)
+
+    def _add_client(self, server: Endpoint, link: Link) -> Endpoint:
+        server.clients += 1
+        ep = Endpoint(f"{server.name}.{server.clients}", link, is_gcs=server.is_gcs,
+                      signing=server.signing, queue=self.cfg.queue_packets, cfg=server.cfg)
+        ep.parent = server
+        server.children = [*server.children, ep]
+        self.endpoints = [*self.endpoints, ep]  # copied: other threads may iterate it
+        return ep
+
+    def _read_udp_server(self, server: Endpoint) -> None:
+        """A ground station's UDP server: each datagram is routed from its peer's endpoint."""
+        link = server.link
+        assert isinstance(link, UdpServerLink)
+        by_addr = server.by_addr
+        route = self._route
+        for data, addr, boundary in link.read(self.cfg.read_burst):
+            src = by_addr.get(addr)
+            if src is None or src.parent is None:
+                peer = cast(tuple[str, int], addr)
+                src = by_addr[addr] = self._add_client(server, UdpPeerLink(link, peer))
+            framer = src.framers.get(addr)
+            if framer is None:
+                framer = src.framers[addr] = MavFramer(on_drop=self._on_drop)
+            for frame in framer.feed(data, boundary=boundary):
+                route(src, frame)
 
     def _reap(self) -> None:
         """Drop the endpoints of TCP clients that have gone (their counters fold into the
@@ -766,15 +797,21 @@ class Router:
             parent = ep.parent
             assert parent is not None
             parent.clients_gone += 1
-            parent.stats.no_peer += ep.stats.no_peer + len(ep.queue)
-            parent.stats.rx_packets += ep.stats.rx_packets
-            parent.stats.tx_packets += ep.stats.tx_packets
-            parent.stats.dropped_queue_full += ep.stats.dropped_queue_full
+            ep.stats.no_peer += len(ep.queue)
+            for name, value in ep.stats.__dict__.items():
+                setattr(parent.gone_stats, name, getattr(parent.gone_stats, name) + value)
+            parent.children = [c for c in parent.children if c is not ep]
+            if isinstance(ep.link, UdpPeerLink):
+                parent.by_addr.pop(ep.link.addr, None)
+            ep.parent = None
         self.endpoints = [ep for ep in self.endpoints if ep not in gone]
 
     def _read(self, src: Endpoint) -> None:
         if src.server:
-            self._accept(src)
+            if isinstance(src.link, UdpServerLink):
+                self._read_udp_server(src)
+            else:
+                self._accept(src)
             return
         framers = src.framers
         route = self._route
@@ -856,7 +893,10 @@ class Router:
             self.stats.for_bridge += 1
             self._ftp_nak(src, frame)
         elif not sent:
-            src.stats.unroutable += 1  # addressed to a system no other endpoint has shown
+            if target is not None and target[0] != 0:
+                src.stats.unroutable += 1  # addressed to a system no other endpoint has shown
+            else:
+                self.stats.no_destination += 1  # a broadcast with nobody (else) to take it
 
     def _addressed_to_me(self, target: tuple[int, int]) -> bool:
         sysid, compid = target
@@ -1057,7 +1097,8 @@ class Router:
             dest.send(raw)
             return
         for ep in self.endpoints:
-            ep.send(raw)
+            if not ep.server:  # a server's clients are in the list themselves
+                ep.send(raw)
 
     def _drain_outbox(self) -> None:
         while self._outbox:
@@ -1150,12 +1191,18 @@ class Router:
             out.update(self.tlog.counters())
         for ep in self.endpoints:
             extra: dict[str, Any] = {"queued": len(ep.queue), "link_errors": ep.link.errors}
-            if ep.server:
+            counts = dict(ep.stats.__dict__)
+            if ep.server:  # the server's line adds up its clients, present and gone
                 extra.update(clients=ep.clients, clients_gone=ep.clients_gone)
+                for child in [*ep.children, None]:
+                    st = child.stats if child is not None else ep.gone_stats
+                    for name, value in st.__dict__.items():
+                        counts[name] += value
+                extra["queued"] += sum(len(c.queue) for c in ep.children)
             foreign = getattr(ep.link, "foreign", None)
             if foreign is not None:
                 extra["foreign_dropped"] = foreign
-            out[ep.name] = dict(ep.stats.__dict__, **extra)
+            out[ep.name] = dict(counts, **extra)
         return out
 
 
