@@ -526,3 +526,23 @@ def test_each_udp_peer_of_a_gcs_server_is_its_own_endpoint(tmp_path: Path) -> No
         r.close()
         for p in (ap, a, b):
             p.close()
+
+
+def test_periodic_statistics_are_logged(tmp_path: Path,
+                                        caplog: pytest.LogCaptureFixture) -> None:  # item 18
+    import json
+    import logging
+
+    caplog.set_level(logging.INFO, logger="fdi_bridge.router")
+    r = _router(tmp_path, report_stats_s=0.2)
+    ap = _Peer(1, 1)
+    try:
+        for _ in range(5):
+            ap.send(ap.p.send_heartbeat(), _port(r, 0))
+        _wait(lambda: sum("router stats" in m for m in caplog.messages) >= 2, "two reports", 3.0)
+    finally:
+        r.close()
+        ap.close()
+    line = [m for m in caplog.messages if "router stats" in m][-1]
+    stats = json.loads(line.split("router stats ", 1)[1])
+    assert stats["autopilot"]["rx_packets"] == 5 and "gcs0" in stats
