@@ -578,6 +578,8 @@ class Router:
             self.close()
             raise
         self._pending: _PendingCommand | None = None
+        self._any_clients = False
+        self._next_reap = 0.0
         self._sel = selectors.DefaultSelector()
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
@@ -752,7 +754,11 @@ class Router:
         for ep in self.endpoints:
             if ep.blocked():
                 ep.flush()
-        self._reap()
+        if self._any_clients:
+            now = self.clock()
+            if now >= self._next_reap:
+                self._next_reap = now + 0.05
+                self._reap()
 
     def _accept(self, server: Endpoint) -> None:
         """New clients of a TCP server: one endpoint each (named ``<server>.<n>``)."""
@@ -766,6 +772,7 @@ class Router:
         ep = Endpoint(f"{server.name}.{server.clients}", link, is_gcs=server.is_gcs,
                       signing=server.signing, queue=self.cfg.queue_packets, cfg=server.cfg)
         ep.parent = server
+        self._any_clients = True
         server.children = [*server.children, ep]
         self.endpoints = [*self.endpoints, ep]  # copied: other threads may iterate it
         return ep
@@ -997,6 +1004,8 @@ class Router:
                                  f"FDI: autopilot REFUSED {pending.what} (result {result})")
 
     def _retry_command(self, now: float) -> None:
+        if self._pending is None:
+            return
         with self._lock:
             pending = self._pending
             if pending is None:
