@@ -674,3 +674,52 @@ def test_documented_mavproxy_signing_commands_set_a_parameter(tmp_path: Path) ->
     s = router.summary()
     # Accepted although the link refuses every unsigned PARAM_SET: MAVProxy signed it.
     assert s["params_set"] >= 1 and s["bad_signature"] == 0
+
+
+@pytest.mark.skipif(
+    not MAVPROXY.exists(), reason="MAVProxy is not installed (pip install MAVProxy)"
+)
+def test_mavproxy_with_ftp_gets_the_parameter_list_without_waiting(tmp_path: Path) -> None:
+    """MAVProxy with its ftp module first asks for ``@PARAM/param.pck`` by MAVLink FTP; the
+    bridge's NAK makes it fall back to PARAM_REQUEST_LIST at once, not after its timeout."""
+    import subprocess
+
+    params = ParamStore(tmp_path / "params.toml")
+    for i in range(5):
+        params.register(ParamSpec(f"FDI_P{i}", float(i), -10.0, 10.0))
+    router = Router(MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+                                  gcs=(EndpointConfig("udpin:127.0.0.1:0"),)), params=params)
+    router.start()
+    cmd = [
+        sys.executable, str(MAVPROXY), f"--master=udpout:127.0.0.1:{_port(router, 1)}",
+        "--target-system=1", "--target-component=191", "--source-system=255", "--nowait",
+        f"--state-basedir={tmp_path / 'mavproxy'}", "--default-modules=param,ftp",
+    ]  # fmt: skip
+    (tmp_path / "mavproxy").mkdir()
+    t0 = time.monotonic()
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True,
+                            env=dict(os.environ, HOME=str(tmp_path)))
+    assert proc.stdin is not None and proc.stdout is not None
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")),  # type: ignore[union-attr]
+                              daemon=True)  # fmt: skip
+    reader.start()
+    try:
+        _wait(lambda: any("Received 5 parameters" in x for x in list(lines)),
+              "MAVProxy to receive the 5 parameters", 30.0)
+        took = time.monotonic() - t0
+    finally:
+        with contextlib.suppress(OSError):
+            proc.stdin.close()
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+        reader.join(timeout=5)
+        router.close()
+    assert router.stats.ftp_nak >= 1, "".join(lines)
+    assert "(ftp)" not in "".join(lines)  # by the parameter protocol, after the NAK
+    assert took < 15.0, f"{took:.1f} s"  # MAVProxy's own start-up included (loaded machine)
