@@ -722,4 +722,5 @@ def test_mavproxy_with_ftp_gets_the_parameter_list_without_waiting(tmp_path: Pat
         router.close()
     assert router.stats.ftp_nak >= 1, "".join(lines)
     assert "(ftp)" not in "".join(lines)  # by the parameter protocol, after the NAK
-    assert took < 15.0, f"{took:.1f} s"  # MAVProxy's own start-up included (loaded machine)
+    # measured: 3.6 s with the NAK (MAVProxy start-up included), 13.6 s without (its timeout)
+    assert took < 10.0, f"{took:.1f} s"
