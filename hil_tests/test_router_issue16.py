@@ -546,3 +546,47 @@ def test_periodic_statistics_are_logged(tmp_path: Path,
     line = [m for m in caplog.messages if "router stats" in m][-1]
     stats = json.loads(line.split("router stats ", 1)[1])
     assert stats["autopilot"]["rx_packets"] == 5 and "gcs0" in stats
+
+
+def test_block_in_and_a_configured_peer_timeout(tmp_path: Path) -> None:  # items 17, 18
+    gcs_cfg = EndpointConfig("udpin:127.0.0.1:0", block_in=("COMMAND_LONG",),
+                             peer_timeout_s=0.3)
+    r = _router(tmp_path, gcs=gcs_cfg)
+    ap, gcs = _Peer(1, 1), _Peer(255, 190)
+    try:
+        ap.send(ap.p.send_heartbeat(), _port(r, 0))
+        _wait(lambda: r.autopilot.link.has_peer(), "the autopilot")
+        disarm = gcs.p._mav.command_long_encode(1, 1, 400, 0, 0, 0, 0, 0, 0, 0, 0)
+        gcs.send(gcs.p._emit(disarm), _port(r, 1))
+        gcs.send(gcs.p.send_heartbeat(), _port(r, 1))
+        got = ap.recv_all(0.4)
+        assert not any(m.get_type() == "COMMAND_LONG" for m in got)
+        assert any(m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 255 for m in got)
+        assert r.summary()["gcs0"]["filtered_in"] == 1
+        time.sleep(0.4)  # the GCS falls silent past peer_timeout_s: it is forgotten
+        for _ in range(3):
+            ap.send(ap.p.send_heartbeat(), _port(r, 0))
+        _wait(lambda: r.summary()["gcs0"]["clients_gone"] == 1, "the silent peer forgotten")
+        assert not any(m.get_srcSystem() == 1 and m.get_srcComponent() == 1
+                       for m in gcs.recv_all(0.3)[1:])
+    finally:
+        r.close()
+        ap.close()
+        gcs.close()
+
+
+def test_tlog_pauses_below_min_free_space(tmp_path: Path) -> None:  # item 17
+    with small_tmpfs(tmp_path / "disk", 512) as disk:
+        r = _router(tmp_path, tlog_dir=str(disk / "tlog"), tlog_max_bytes=65536,
+                    tlog_min_free_bytes=600 * 1024)  # more than the disk has
+        ap = _Peer(1, 1)
+        try:
+            for _ in range(10):
+                ap.send(ap.p.send_heartbeat(), _port(r, 0))
+            _wait(lambda: r.summary().get("tlog_lost_packets", 0) >= 10, "packets not logged")
+            s = r.summary()
+            assert s["tlog_packets"] == 0 and s["tlog_write_errors"] >= 1
+            assert s["autopilot"]["rx_packets"] == 10  # routed all the same
+        finally:
+            r.close()
+            ap.close()

@@ -242,7 +242,7 @@ class TlogWriter:
 
     def _open(self) -> None:
         if self._f is not None:
-            self.flush()
+            self._flush_buffer()
         self._close_file()
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
@@ -323,9 +323,21 @@ class TlogWriter:
         self._unflushed += 1
 
     def flush(self) -> None:
-        """Push the buffer to the file (the router does it at least once a second)."""
-        if self._f is None:
+        """Push the buffer to the file (the router does it at least once a second); below
+        ``min_free_bytes`` free, rotate (the oldest files deleted) or pause."""
+        if not self._flush_buffer() or not self.min_free_bytes:
             return
+        try:
+            low = shutil.disk_usage(self.dir).free < self.min_free_bytes
+        except OSError:
+            low = False
+        if low:
+            self._open()
+
+    def _flush_buffer(self) -> bool:
+        """Flush; False when there is no file or the flush failed (counted)."""
+        if self._f is None:
+            return False
         try:
             self._f.flush()
         except OSError as err:
@@ -334,11 +346,12 @@ class TlogWriter:
             self.lost_packets += self._unflushed
             self._unflushed = 0
             self._fail(err)
-            return
+            return False
         self._unflushed = 0
+        return True
 
     def close(self) -> None:
-        self.flush()
+        self._flush_buffer()
         self._close_file()
 
     def counters(self) -> dict[str, int]:
