@@ -154,9 +154,12 @@ def test_mavlink1_unknown_id_is_not_marked_crc_checked() -> None:
     pkt = bytes([0xFE, 2, 0, 1, 1, unknown, 0xAA, 0xBB, 0x12, 0x34])
     good = MAV[-1]  # a MAVLink 1 heartbeat, CRC-checked
     framer = MavFramer(extras)
-    got = framer.feed(good + pkt)
+    got = framer.feed(good + pkt, boundary=True)  # a datagram: its end closes the frame
     assert [f.crc_checked for f in got] == [True, False]
     assert framer.stats.unchecked == 1
+    stream = MavFramer(extras)  # on a stream an unchecked frame is decided by the next byte
+    assert [f.crc_checked for f in stream.feed(good + pkt)] == [True]
+    assert [f.crc_checked for f in stream.feed(good)] == [False, True]
 
 
 # --------------------------------------------------------------------------- the command

@@ -23,7 +23,12 @@ EXAMPLE = Path(__file__).resolve().parents[1] / "config" / "mavlink-example.toml
 def test_example_config_loads_both_tables() -> None:
     cfg = load_mavlink_config(EXAMPLE)
     assert cfg.autopilot == EndpointConfig("/dev/ttyAMA0", 921600, False, "autopilot")
-    assert [g.url for g in cfg.gcs] == ["udpin:127.0.0.1:14550", "udpout:192.168.2.1:14550"]
+    assert [g.url for g in cfg.gcs] == ["udpin:127.0.0.1:14550", "udpout:127.0.0.1:14551"]
+    text = EXAMPLE.read_text()
+    live = [line.split("#", 1)[0] for line in text.splitlines()]
+    addresses = [w for line in live for w in line.replace('"', " ").split()
+                 if w.startswith(("udpin:", "udpout:", "tcp:", "tcpin:"))]
+    assert addresses and all(":127.0.0.1:" in a for a in addresses)  # loopback only
     assert (cfg.system_id, cfg.component_id, cfg.pilot_system_id) == (1, 191, 255)
     assert cfg.tlog_max_bytes == 64 * 1024 * 1024 and cfg.stats_hz == 2.0
     bridge = load_vehicle_config(EXAMPLE)

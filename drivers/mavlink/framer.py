@@ -16,8 +16,18 @@ Policy
   (ardupilotmega, taken from pymavlink through :mod:`drivers.mavlink.io`). A frame whose CRC
   fails is counted (``bad_crc``) and only its start byte is dropped: the framer resyncs from the
   next byte, so a corrupted length byte cannot swallow the good packets that follow.
+* **One datagram is one framing context**: the resync state (below) ends with the datagram,
+  so a corrupt datagram does not make the router refuse the next datagram's unknown ids.
+* **CRC over the untruncated payload**: a MAVLink 2 sender that computed the CRC before
+  cutting the payload's trailing zeros (ArduSub's camera messages 259/260/262/269 in
+  ``small.tlog``) fails the normal check; the CRC is then tried over the zero-padded payload
+  (up to the dialect's length). A match is a checked frame (``crc_untruncated``), forwarded
+  byte for byte, as mavlink-router forwards them; anything else is ``bad_crc``.
 * **Unknown message ids** (no CRC_EXTRA) are passed through *framed but unchecked*
-  (``unchecked``), as mavlink-router does, so a dialect the bridge does not know still flows.
+  (``unchecked``), as mavlink-router does, so a dialect the bridge does not know still flows,
+  if the byte after the frame is a start byte (or the datagram ends there; on a stream the
+  frame waits for the next byte): an unknown id whose length is wrong (a byte lost inside it)
+  would otherwise swallow the next packet.
   Without a CRC such a frame cannot be told from noise, so while the framer is resyncing
   (after dropped bytes, until a CRC-checked frame has been found) unknown-id candidates are
   dropped too (``unknown_refused``): a 0xFD inside a damaged packet must not become a frame.
@@ -37,7 +47,7 @@ import hmac
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from drivers.mavlink.io import crc_extra_table
+from drivers.mavlink.io import crc_extra_table, payload_length_table
 
 MAGIC_V1 = 0xFE
 MAGIC_V2 = 0xFD
@@ -133,6 +143,7 @@ class FramerStats:
     bad_crc: int = 0  # candidate frames whose CRC failed (their start byte dropped)
     bad_flags: int = 0  # MAVLink 2 headers with unsupported incompatibility flags
     unknown_refused: int = 0  # unknown-id candidates dropped (resyncing, or pass_unknown=False)
+    crc_untruncated: int = 0  # CRC right over the zero-padded payload (a sender's bug): passed
     junk_bytes: int = 0  # bytes dropped while looking for a start byte
     dropped_bytes: int = 0  # every byte dropped for any reason
     by_reason: dict[str, int] = field(default_factory=dict)
@@ -145,6 +156,7 @@ class FramerStats:
             "bad_crc": self.bad_crc,
             "bad_flags": self.bad_flags,
             "unknown_refused": self.unknown_refused,
+            "crc_untruncated": self.crc_untruncated,
             "junk_bytes": self.junk_bytes,
             "dropped_bytes": self.dropped_bytes,
         }
@@ -155,6 +167,10 @@ OnDrop = Callable[[bytes, str], None]
 
 def _default_crc_extras() -> Mapping[int, int]:
     return crc_extra_table()
+
+
+def _default_full_lengths() -> Mapping[int, int]:
+    return payload_length_table()
 
 
 class MavFramer:
@@ -171,9 +187,13 @@ class MavFramer:
         *,
         on_drop: OnDrop | None = None,
         pass_unknown: bool = True,
+        full_lengths: Mapping[int, int] | None = None,
     ) -> None:
         self._pass_unknown = pass_unknown
         self._extras = _default_crc_extras() if crc_extras is None else crc_extras
+        if full_lengths is None:
+            full_lengths = _default_full_lengths() if crc_extras is None else {}
+        self._full_len = full_lengths
         self._on_drop = on_drop
         self._buf = bytearray()
         self._in_sync = True
@@ -242,13 +262,25 @@ class MavFramer:
                 msgid = buf[pos + 5]
             extra = extras.get(msgid)
             crc_end = pos + hlen + plen
+            checked = extra is not None
+            if end == n and not boundary and self._pass_unknown and self._in_sync and (
+                    extra is None or not self._crc_ok(buf, pos, crc_end, extra)):
+                break  # unchecked on a stream: decided by the next byte (see _next_is_start)
             if extra is not None:
                 crc = x25crc(bytes(buf[pos + 1 : crc_end]) + bytes((extra,)))
-                if crc != buf[crc_end] | (buf[crc_end + 1] << 8):
-                    st.bad_crc += 1
-                    self._drop(buf[pos : pos + 1], "bad_crc")
-                    pos += 1
-                    continue
+                wire = buf[crc_end] | (buf[crc_end + 1] << 8)
+                if crc != wire:
+                    # A sender that computed the CRC before cutting the trailing zeros
+                    # (ArduSub's camera component: 259/260/262/269 in small.tlog; mavlink-router
+                    # forwards them): the CRC is checked over the zero-padded payload.
+                    full = self._full_len.get(msgid, 0) if hlen == HEADER_V2 else 0
+                    if full > plen and _padded_crc_ok(buf, pos, crc_end, plen, full, extra, wire):
+                        st.crc_untruncated += 1
+                    else:
+                        st.bad_crc += 1
+                        self._drop(buf[pos : pos + 1], "bad_crc")
+                        pos += 1
+                        continue
             elif not self._pass_unknown:
                 st.unknown_refused += 1
                 self._drop(buf[pos : pos + 1], "unknown_id")
@@ -262,20 +294,35 @@ class MavFramer:
                 self._drop(buf[pos : pos + 1], "unchecked_resync")
                 pos += 1
                 continue
+            elif not _next_is_start(buf, end, n, boundary):
+                # In sync, but what follows is not a frame start: the length byte of this
+                # unknown-id packet is wrong (a byte lost inside it), and taking it whole would
+                # swallow the start of the good packet after it.
+                st.unknown_refused += 1
+                self._drop(buf[pos : pos + 1], "unchecked_overrun")
+                pos += 1
+                continue
             raw = bytes(buf[pos:end])
             if hlen == HEADER_V2:
-                frame = MavFrame(raw, 2, raw[4], raw[5], raw[6], msgid, signed, extra is not None)
+                frame = MavFrame(raw, 2, raw[4], raw[5], raw[6], msgid, signed, checked)
             else:
-                frame = MavFrame(raw, 1, raw[2], raw[3], raw[4], msgid, False, extra is not None)
+                frame = MavFrame(raw, 1, raw[2], raw[3], raw[4], msgid, False, checked)
             st.frames += 1
-            if extra is None:
+            if not checked:
                 st.unchecked += 1
             self._in_sync = True
             out.append(frame)
             pos = end
         if pos:
             del buf[:pos]
+        if boundary:
+            self._in_sync = True  # one datagram is one framing context: the next starts afresh
         return out
+
+    @staticmethod
+    def _crc_ok(buf: bytearray, pos: int, crc_end: int, extra: int) -> bool:
+        crc = x25crc(bytes(buf[pos + 1 : crc_end]) + bytes((extra,)))
+        return crc == buf[crc_end] | (buf[crc_end + 1] << 8)
 
     @staticmethod
     def _stalled(buf: bytearray, pos: int, n: int, boundary: bool) -> bool:
@@ -296,6 +343,27 @@ class MavFramer:
     def pending(self) -> int:
         """Bytes held waiting for the rest of a frame."""
         return len(self._buf)
+
+
+def _padded_crc_ok(buf: bytearray, pos: int, crc_end: int, plen: int, full: int, extra: int,
+                   wire: int) -> bool:
+    """True when the CRC matches the packet with its payload zero-padded to ``n`` bytes (and
+    the length byte saying ``n``) for some ``plen < n <= full``."""
+    body = bytes(buf[pos + 2 : crc_end])
+    for n in range(plen + 1, full + 1):
+        if x25crc(bytes((n,)) + body + bytes(n - plen) + bytes((extra,))) == wire:
+            return True
+    return False
+
+
+def _next_is_start(buf: bytearray, end: int, n: int, boundary: bool) -> bool:
+    """True when the frame ending at ``end`` is followed by a start byte or a datagram's end.
+    (On a stream the caller waits for the next byte first, so framing does not depend on how
+    the bytes were chunked.)"""
+    if end < n:
+        b = buf[end]
+        return b in (MAGIC_V2, MAGIC_V1)
+    return boundary
 
 
 def _next_magic(buf: bytearray, start: int) -> int:

@@ -22,16 +22,21 @@ opened or written; bad packets are answered with ``None`` (a counted policy, nev
 from __future__ import annotations
 
 import contextlib
+import logging
+import math
 import os
 import struct
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from drivers.mavlink.modes import mode_number
 from fdi.errors import PortError
 
 DIALECT = "ardupilotmega"
+_log = logging.getLogger("fdi_bridge.mavlink")
 
 # pymavlink reads these when mavutil is imported and whenever set_dialect() runs: fix them here,
 # once, for the whole process (rule 7). MAVLINK20 selects the v20 dialect modules, which send
@@ -56,6 +61,8 @@ MAV_STATE_ACTIVE = mavlink2.MAV_STATE_ACTIVE
 MAV_CMD_DO_SET_MODE = mavlink2.MAV_CMD_DO_SET_MODE
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 MAV_PARAM_TYPE_REAL32 = mavlink2.MAV_PARAM_TYPE_REAL32
+MAV_PARAM_TYPE_INT32 = mavlink2.MAV_PARAM_TYPE_INT32
+MAV_RESULT_IN_PROGRESS = mavlink2.MAV_RESULT_IN_PROGRESS
 MAV_RESULT_ACCEPTED = mavlink2.MAV_RESULT_ACCEPTED
 MAV_RESULT_DENIED = mavlink2.MAV_RESULT_DENIED
 MAV_RESULT_UNSUPPORTED = mavlink2.MAV_RESULT_UNSUPPORTED
@@ -68,6 +75,7 @@ MAV_SEVERITY_NOTICE = mavlink2.MAV_SEVERITY_NOTICE
 MAV_SEVERITY_INFO = mavlink2.MAV_SEVERITY_INFO
 MAV_SEVERITY_DEBUG = mavlink2.MAV_SEVERITY_DEBUG
 
+GPS_INPUT_IGNORE_FLAG_ALT = mavlink2.GPS_INPUT_IGNORE_FLAG_ALT
 GPS_INPUT_IGNORE_FLAG_VDOP = mavlink2.GPS_INPUT_IGNORE_FLAG_VDOP
 GPS_INPUT_IGNORE_FLAG_VEL_HORIZ = mavlink2.GPS_INPUT_IGNORE_FLAG_VEL_HORIZ
 GPS_INPUT_IGNORE_FLAG_VEL_VERT = mavlink2.GPS_INPUT_IGNORE_FLAG_VEL_VERT
@@ -77,11 +85,14 @@ STATUSTEXT_LEN = 50
 NAMED_VALUE_NAME_LEN = 10
 PARAM_ID_LEN = 16
 
-# Custom-mode tables per vehicle, from pymavlink (ArduPilot's mode numbers): name -> number.
-_MODE_TABLES: dict[str, dict[int, str]] = {
+# Custom-mode tables per vehicle, from pymavlink (ArduPilot's mode numbers): number -> name.
+# drivers.mavlink.modes holds the same tables without pymavlink (a test keeps them equal).
+PYMAVLINK_MODE_TABLES: dict[str, dict[int, str]] = {
     "rover": mavutil.mode_mapping_rover,
     "boat": mavutil.mode_mapping_rover,
     "sub": mavutil.mode_mapping_sub,
+    "copter": mavutil.mode_mapping_acm,
+    "plane": mavutil.mode_mapping_apm,
 }
 
 
@@ -94,6 +105,11 @@ def crc_extra(msgid: int) -> int | None:
 def crc_extra_table() -> dict[int, int]:
     """``{msgid: CRC_EXTRA}`` for every message of the dialect (a fresh dict)."""
     return {msgid: int(cls.crc_extra) for msgid, cls in mavlink2.mavlink_map.items()}
+
+
+def payload_length_table() -> dict[int, int]:
+    """``{msgid: payload length with every extension field}`` for the dialect."""
+    return {msgid: int(cls.unpacker.size) for msgid, cls in mavlink2.mavlink_map.items()}
 
 
 def target_offsets() -> dict[int, tuple[int | None, int | None]]:
@@ -134,20 +150,18 @@ def message_id(name: str) -> int:
 
 def custom_mode_number(mode: str, vehicle: str = "rover") -> int:
     """ArduPilot's custom-mode number of ``mode`` on ``vehicle`` (``"HOLD"``, rover -> 4)."""
-    table = _MODE_TABLES.get(vehicle.lower())
-    if table is None:
-        raise ValueError(f"unknown vehicle {vehicle!r}; known: {', '.join(sorted(_MODE_TABLES))}")
-    for number, name in table.items():
-        if name == mode.upper():
-            return int(number)
-    raise ValueError(f"{vehicle} has no mode {mode!r}; known: {', '.join(table.values())}")
+    return mode_number(mode, vehicle)
 
 
 @dataclass(frozen=True)
 class GpsInputFix:
     """A fix for the autopilot's MAVLink GPS (GPS_INPUT; ArduPilot ``GPSn_TYPE = 14``).
 
-    ``None`` velocity components or ``vdop`` are sent as zero with the matching ignore flag.
+    ``None`` velocity components, ``vdop`` or ``alt_m`` are sent as zero with the matching
+    ignore flag (AP_GPS_MAV then leaves the altitude at 0 and the velocity at its *previous*
+    value: the sink never sends an ignored velocity on a fix, see
+    :class:`firmware_host.rover.outputs.MavlinkGpsSink`). ``yaw_deg`` (a dual-antenna heading)
+    is sent in centidegrees, north as 36000 (0 means "no yaw" in GPS_INPUT).
     """
 
     time_usec: int  # bridge's own timestamp (µs)
@@ -156,7 +170,7 @@ class GpsInputFix:
     fix_type: int  # 0/1 no fix, 2 2D, 3 3D, 4 DGPS, 5 RTK float, 6 RTK fixed (GPS_FIX_TYPE)
     lat_deg: float
     lon_deg: float
-    alt_m: float  # AMSL
+    alt_m: float | None  # AMSL; None: not known (GPS_INPUT_IGNORE_FLAG_ALT)
     hdop: float
     vdop: float | None
     vn_mps: float | None
@@ -167,11 +181,14 @@ class GpsInputFix:
     vert_accuracy_m: float
     satellites_visible: int
     gps_id: int = 0
+    yaw_deg: float | None = None
 
 
 def gps_input_ignore_flags(fix: GpsInputFix) -> int:
     """GPS_INPUT_IGNORE_FLAGS for the fields of ``fix`` that are not known."""
     flags = 0
+    if fix.alt_m is None:
+        flags |= GPS_INPUT_IGNORE_FLAG_ALT
     if fix.vdop is None:
         flags |= GPS_INPUT_IGNORE_FLAG_VDOP
     if fix.vn_mps is None or fix.ve_mps is None:
@@ -183,6 +200,14 @@ def gps_input_ignore_flags(fix: GpsInputFix) -> int:
 
 def _or0(value: float | None) -> float:
     return 0.0 if value is None else float(value)
+
+
+def gps_input_yaw(yaw_deg: float | None) -> int:
+    """GPS_INPUT ``yaw`` (cdeg, 1..36000; 0 = not available) of a heading in degrees."""
+    if yaw_deg is None or not math.isfinite(yaw_deg):
+        return 0
+    cdeg = round(yaw_deg % 360.0 * 100.0) % 36000
+    return cdeg or 36000
 
 
 def statustext_chunks(text: str) -> list[bytes]:
@@ -222,7 +247,7 @@ class _Encoders:
             int(fix.fix_type),
             round(fix.lat_deg * 1e7),
             round(fix.lon_deg * 1e7),
-            float(fix.alt_m),
+            _or0(fix.alt_m),
             float(fix.hdop),
             _or0(fix.vdop),
             _or0(fix.vn_mps),
@@ -232,6 +257,7 @@ class _Encoders:
             float(fix.horiz_accuracy_m),
             float(fix.vert_accuracy_m),
             int(fix.satellites_visible),
+            gps_input_yaw(fix.yaw_deg),
         )
         return self._emit(msg)
 
@@ -284,10 +310,17 @@ class _Encoders:
         msg = self._mav.named_value_float_encode(int(time_boot_ms) & 0xFFFFFFFF, raw, value)
         return self._emit(msg)
 
-    def send_param_value(self, name: str, value: float, index: int, count: int) -> bytes:
-        """PARAM_VALUE of a REAL32 parameter (``name`` up to 16 ASCII bytes)."""
+    def send_param_value(self, name: str, value: float, index: int, count: int,
+                         param_type: int = MAV_PARAM_TYPE_REAL32) -> bytes:
+        """PARAM_VALUE (``name`` up to 16 ASCII bytes) of a REAL32 or INT32 parameter.
+
+        An INT32 value travels as a float holding the integer's value (what ArduPilot,
+        MAVProxy and QGroundControl do for ``param_value``), rounded here.
+        """
         raw = name.encode("ascii", errors="replace")[:PARAM_ID_LEN]
-        msg = self._mav.param_value_encode(raw, value, MAV_PARAM_TYPE_REAL32, count, index)
+        if param_type != MAV_PARAM_TYPE_REAL32:
+            value = float(round(value))
+        msg = self._mav.param_value_encode(raw, value, param_type, count, index)
         return self._emit(msg)
 
     def send_command_ack(
@@ -321,6 +354,14 @@ class _Encoders:
         )
         return self._emit(msg)
 
+    def send_file_transfer_protocol(self, target_system: int, target_component: int,
+                                    payload: bytes, target_network: int = 0) -> bytes:
+        """FILE_TRANSFER_PROTOCOL (MAVLink FTP) with ``payload`` (at most 251 bytes)."""
+        data = list(payload[:251]) + [0] * (251 - min(len(payload), 251))
+        msg = self._mav.file_transfer_protocol_encode(target_network, target_system,
+                                                      target_component, data)
+        return self._emit(msg)
+
     def send_param_request_list(self, target_system: int, target_component: int) -> bytes:
         return self._emit(self._mav.param_request_list_encode(target_system, target_component))
 
@@ -343,15 +384,34 @@ class _Encoders:
         signing.sign_outgoing = True
         signing.link_id = link_id
         signing.timestamp = signing_timestamp_now() if timestamp is None else timestamp
+        self._sign_clock = _signing_clock if timestamp is None else None
+
+    _sign_clock: Any = None
+
+    def _stamp(self) -> None:
+        """Before each signed packet: timestamp = max(last + 1, now) (MAVLink 2 signing spec).
+
+        pymavlink adds 1 per packet only, so a stream sent at 1 packet/s would lag the clock by
+        almost a second per second, and a receiver that starts listening later (or reboots)
+        refuses a new stream more than a minute old.
+        """
+        clock = self._sign_clock
+        if clock is not None:
+            signing = self._mav.signing
+            now = clock()
+            if now > signing.timestamp:
+                signing.timestamp = now
 
 
 _SIGNING_EPOCH_S = 1420070400  # 2015-01-01T00:00:00Z
 
 
+def _signing_clock() -> int:
+    return signing_timestamp_now()
+
+
 def signing_timestamp_now(now_s: float | None = None) -> int:
     """A MAVLink signing timestamp (10 µs units since 2015-01-01) for ``now_s`` (Unix s)."""
-    import time
-
     t = time.time() if now_s is None else now_s
     return int(max(0.0, t - _SIGNING_EPOCH_S) * 100_000)
 
@@ -385,6 +445,8 @@ class MavPacker(_Encoders):
         return int(self._mav.srcComponent)
 
     def _emit(self, msg: Any) -> bytes:
+        if self._sign_clock is not None:
+            self._stamp()
         self._mav.send(msg)
         return self._sink.last
 
@@ -462,11 +524,85 @@ class MavEndpoint(_Encoders):
         return str(host), int(portnum)
 
     def _emit(self, msg: Any) -> bytes:
+        if self._sign_clock is not None:
+            self._stamp()
         try:
             self._mav.send(msg)
         except OSError as err:
             raise PortError(f"could not write to {self.url!r}: {err}") from err
+        if self._pending is not None:
+            self._service_command()
         return bytes(msg.get_msgbuf())
+
+    _pending: tuple[int, int, Any] | None = None  # (command, attempts, re-encode)
+    _pending_due = 0.0
+    command_retries = 5
+    command_retry_s = 1.0
+
+    @property
+    def command_stats(self) -> dict[str, int]:
+        """COMMAND_LONGs of :meth:`request_mode`: sent (with retries), accepted, refused,
+        unacknowledged after :attr:`command_retries` attempts."""
+        if "_cmd_stats" not in self.__dict__:
+            self._cmd_stats = {"command_sent": 0, "command_accepted": 0,
+                               "command_refused": 0, "command_unacked": 0}
+        return self._cmd_stats
+
+    def request_mode(self, target_system: int, mode: str, vehicle: str = "rover") -> bytes:
+        """As :meth:`_Encoders.request_mode`, then wait (without blocking: at each later send)
+        for the autopilot's COMMAND_ACK, resending every :attr:`command_retry_s` up to
+        :attr:`command_retries` times; a refusal or no answer is counted and logged."""
+        self._pending = None
+        raw = super().request_mode(target_system, mode, vehicle)
+        self.command_stats["command_sent"] += 1
+
+        def again() -> bytes:
+            return super(MavEndpoint, self).request_mode(target_system, mode, vehicle)
+
+        self._pending = (MAV_CMD_DO_SET_MODE, 1, again)
+        self._pending_due = time.monotonic() + self.command_retry_s
+        self._pending_what = f"mode {mode}"
+        return raw
+
+    def _service_command(self) -> None:
+        pending = self._pending
+        if pending is None:
+            return
+        command, attempts, again = pending
+        for _ in range(64):  # what arrived since the last send (non-blocking)
+            try:
+                msg = self._conn.recv_msg()
+            except OSError:
+                break
+            if msg is None:
+                break
+            if msg.get_type() != "COMMAND_ACK" or int(msg.command) != command:
+                continue
+            result = int(msg.result)
+            if result == MAV_RESULT_IN_PROGRESS:
+                self._pending_due = time.monotonic() + self.command_retry_s
+                continue
+            self._pending = None
+            key = "command_accepted" if result == MAV_RESULT_ACCEPTED else "command_refused"
+            self.command_stats[key] += 1
+            if result != MAV_RESULT_ACCEPTED:
+                _log.warning("autopilot refused %s (MAV_RESULT %d)", self._pending_what, result)
+            return
+        if time.monotonic() < self._pending_due:
+            return
+        if attempts >= self.command_retries:
+            self._pending = None
+            self.command_stats["command_unacked"] += 1
+            _log.warning("no COMMAND_ACK for %s after %d attempts", self._pending_what, attempts)
+            return
+        self._pending = (command, attempts + 1, again)
+        self._pending_due = time.monotonic() + self.command_retry_s
+        self.command_stats["command_sent"] += 1
+        self._pending, keep = None, self._pending  # no recursion from the resend's own _emit
+        try:
+            again()
+        finally:
+            self._pending = keep
 
     def send_raw(self, data: bytes) -> None:
         """Write already-packed bytes (a replayed packet) unchanged."""
@@ -481,8 +617,6 @@ class MavEndpoint(_Encoders):
         Packets pymavlink could not decode (``BAD_DATA``) are counted in :attr:`bad_packets`
         and skipped.
         """
-        import time
-
         deadline = time.monotonic() + max(0.0, timeout_s)
         while True:
             try:

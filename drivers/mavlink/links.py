@@ -41,7 +41,9 @@ log = logging.getLogger("fdi_bridge.mavlink")
 
 DEFAULT_SERVER_HOST = "127.0.0.1"
 MAX_UDP_PEERS = 16
-UDP_PEER_TIMEOUT_S = 30.0
+UDP_PEER_TIMEOUT_S = 0.0
+"""Default for a UDP server's ``peer_timeout_s``: 0 = a peer is kept until 16 others displace it
+(a listen-only ground station never goes dark); > 0 stops sending to a silent peer."""
 # Receive buffer asked for on UDP sockets (the kernel caps it at net.core.rmem_max): ~1 s of a
 # 1 000 packet/s link, so a burst that arrives while the loop is descheduled is not dropped by
 # the kernel before the router's own (counted) queues see it.
@@ -129,9 +131,11 @@ class _UdpLink(Link):
 
 
 class UdpServerLink(_UdpLink):
-    def __init__(self, url: str, host: str, port: int) -> None:
+    def __init__(self, url: str, host: str, port: int,
+                 peer_timeout_s: float = UDP_PEER_TIMEOUT_S) -> None:
         self.url = url
         self._clock = time.monotonic
+        self.peer_timeout_s = peer_timeout_s
         try:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -163,15 +167,16 @@ class UdpServerLink(_UdpLink):
 
     def write(self, data: bytes) -> bool:
         peers = self.peers
+        timeout = self.peer_timeout_s
         if len(peers) == 1:  # the usual case: one ground station
             addr = next(iter(peers))
-            if self._clock() - peers[addr] > UDP_PEER_TIMEOUT_S:
+            if timeout > 0 and self._clock() - peers[addr] > timeout:
                 del peers[addr]
                 return True
             return self._sendto(data, addr)
         now = self._clock()
         for addr, seen in list(peers.items()):
-            if now - seen > UDP_PEER_TIMEOUT_S:
+            if timeout > 0 and now - seen > timeout:
                 del peers[addr]
             elif not self._sendto(data, addr):
                 # One peer's buffer is full: that peer loses this datagram (as on the air);
@@ -195,9 +200,60 @@ class UdpServerLink(_UdpLink):
         self.sock.close()
 
 
+class UdpPeerLink(Link):
+    """One peer of a UDP server link, as a link of its own: writes go to that address only,
+    through the server's socket (the server reads for every peer). A full send buffer loses
+    the datagram for this peer (counted in ``dropped``), as on the air."""
+
+    passive = True  # no descriptor of its own: its server's socket is waited on
+
+    def __init__(self, server: UdpServerLink, addr: tuple[str, int]) -> None:
+        self.url = f"{server.url}#{addr[0]}:{addr[1]}"
+        self.server = server
+        self.addr = addr
+        self.dropped = 0
+
+    def filenos(self) -> list[int]:
+        return []
+
+    def write_filenos(self) -> list[int]:
+        return []
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
+        return iter(())
+
+    def write(self, data: bytes) -> bool:
+        if not self.server._sendto(data, self.addr):
+            self.dropped += 1
+        return True
+
+    def has_peer(self) -> bool:
+        srv = self.server
+        seen = srv.peers.get(self.addr)
+        if seen is None:
+            return False
+        if srv.peer_timeout_s > 0 and srv._clock() - seen > srv.peer_timeout_s:
+            del srv.peers[self.addr]
+            return False
+        return True
+
+    @property
+    def errors(self) -> int:  # type: ignore[override]
+        return 0
+
+    def close(self) -> None:
+        return None  # the server's socket is the server's
+
+
 class UdpClientLink(_UdpLink):
-    def __init__(self, url: str, host: str, port: int) -> None:
+    """``udpout:HOST:PORT``: sends to HOST:PORT and accepts datagrams from that address only
+    (``accept_any=True``: from any sender, as mavutil does); others are dropped and counted in
+    ``foreign``, so another local program cannot inject packets through the link."""
+
+    def __init__(self, url: str, host: str, port: int, accept_any: bool = False) -> None:
         self.url = url
+        self.accept_any = accept_any
+        self.foreign = 0
         try:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF_BYTES)
@@ -217,6 +273,9 @@ class UdpClientLink(_UdpLink):
             except OSError:
                 self.errors += 1  # ICMP port unreachable while nobody listens yet
                 return
+            if addr != self.target and not self.accept_any:
+                self.foreign += 1
+                continue
             yield data, addr, True
 
     def write(self, data: bytes) -> bool:
@@ -321,6 +380,7 @@ class TcpServerLink(_TcpBase):
     def __init__(self, url: str, host: str, port: int) -> None:
         self.url = url
         self.conns = []
+        self.children: list[TcpClientConnLink] = []
         self._n = 0
         try:
             self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -340,6 +400,14 @@ class TcpServerLink(_TcpBase):
         return [self.listener.fileno(), *super().filenos()]
 
     def read(self, max_chunks: int) -> Iterator[Chunk]:
+        for link in self.accept_links():
+            self.conns.extend(link.conns)
+        return self._read_conns(max_chunks)
+
+    def accept_links(self) -> list[TcpClientConnLink]:
+        """Accept every waiting client, each as a link of its own (the router makes each one
+        an endpoint: its own routes, queue and counters)."""
+        out: list[TcpClientConnLink] = []
         while True:
             try:
                 sock, addr = self.listener.accept()
@@ -348,15 +416,35 @@ class TcpServerLink(_TcpBase):
             sock.setblocking(False)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._n += 1
-            self.conns.append(_TcpConn(sock, ("tcp", self._n, addr)))
+            out.append(TcpClientConnLink(f"{self.url}#{self._n}", sock, ("tcp", self._n, addr)))
+        self.children = [c for c in self.children if c.has_peer()] + out
+        return out
+
+    def listener_filenos(self) -> list[int]:
+        return [self.listener.fileno()]
+
+    def has_peer(self) -> bool:
+        return bool(self.conns) or any(c.has_peer() for c in self.children)
+
+    def close(self) -> None:
+        super().close()
+        for c in self.children:
+            c.close()
+        self.listener.close()
+
+
+class TcpClientConnLink(_TcpBase):
+    """One accepted client of a TCP server link: its socket, its own write backlog."""
+
+    def __init__(self, url: str, sock: socket.socket, key: Hashable) -> None:
+        self.url = url
+        self.conns = [_TcpConn(sock, key)]
+
+    def read(self, max_chunks: int) -> Iterator[Chunk]:
         return self._read_conns(max_chunks)
 
     def has_peer(self) -> bool:
         return bool(self.conns)
-
-    def close(self) -> None:
-        super().close()
-        self.listener.close()
 
 
 class TcpClientLink(_TcpBase):
@@ -496,16 +584,19 @@ class SerialLink(Link):
         self.port.close()
 
 
-def open_link(url: str, baud: int = 115200, backoff_max_s: float = 5.0) -> Link:
+def open_link(url: str, baud: int = 115200, backoff_max_s: float = 5.0, *,
+              peer_timeout_s: float = UDP_PEER_TIMEOUT_S, accept_any: bool = False) -> Link:
     """Open a link from its URL (see the module docstring); ``backoff_max_s``: the longest wait
-    between reconnection attempts of a serial or TCP client link."""
+    between reconnection attempts of a serial or TCP client link; ``peer_timeout_s``: a UDP
+    server's silent-peer timeout (0 = never); ``accept_any``: a UDP client takes datagrams
+    from any sender, not only from the address it sends to."""
     scheme, sep, rest = url.partition(":")
     if sep and scheme == "udpin":
         host, port = _split_hostport(rest, url, DEFAULT_SERVER_HOST)
-        return UdpServerLink(url, host, port)
+        return UdpServerLink(url, host, port, peer_timeout_s)
     if sep and scheme == "udpout":
         host, port = _split_hostport(rest, url, None)
-        return UdpClientLink(url, host, port)
+        return UdpClientLink(url, host, port, accept_any)
     if sep and scheme == "tcpin":
         host, port = _split_hostport(rest, url, DEFAULT_SERVER_HOST)
         return TcpServerLink(url, host, port)

@@ -14,7 +14,11 @@ Checks, in order:
    ``tcp:HOST:PORT``, ``tcpin:[HOST:]PORT``, or a device); a listening UDP port is test-bound on
    127.0.0.1 only (never on a public interface) to find a port already in use;
 5. the flight recorder's directory: it exists or can be created, is writable, and its disk has
-   room for the configured cap.
+   room for the configured cap;
+6. with a MAVLink output: the GPS receiver's rate, read for ``--gps-probe-s`` seconds (a warning
+   below 5 Hz: ArduPilot's ``AP_GPS::is_healthy`` wants a fix at least every ~215 ms); with a
+   ``[mavlink]`` table, the tlog directory and the parameter file's directory are writable and
+   have room (a full disk stops them, not forwarding).
 
 :func:`diagnose` returns a :class:`Report`; only :func:`run` prints. Exit status 1 when
 anything is wrong, 0 otherwise (warnings do not fail).
@@ -24,17 +28,23 @@ from __future__ import annotations
 
 import argparse
 import grp
+import itertools
 import os
 import shutil
 import socket
 import stat
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
+from drivers.gps.stream import NmeaStream
 from drivers.mavlink.links import is_network_url
+from drivers.transport import SerialSettings, open_port
 from fdi.errors import ConfigError, FdiBridgeError
 from firmware_host.runtime.config import load_bridge_file, run_mode
+from firmware_host.runtime.config_mavlink import MavlinkConfig
 
 _SCHEMES = ("socket://", "rfc2217://", "loop://", "spy://", "alt://", "hwgrep://", "cp2110://")
 
@@ -176,6 +186,70 @@ def check_recorder(rep: Report, directory: str, dir_max_mb: float, file_max_mb: 
                   f"{dir_max_mb:g} MB)")
 
 
+GPS_HEALTHY_PERIOD_S = 0.215  # ArduPilot AP_GPS::is_healthy: updates faster than this
+
+
+def check_gps_rate(rep: Report, url: str, baudrate: int, seconds: float,
+                   opener: Callable[..., Any] | None = None) -> None:
+    """Read the receiver for ``seconds`` and warn when its epochs are slower than ArduPilot's
+    GPS health check accepts (a 1 Hz receiver feeding GPS_INPUT). A port that cannot be opened
+    (in use by the running bridge, absent) is skipped: the device check reports it."""
+    try:
+        port = (opener or open_port)(SerialSettings(url=url, baudrate=baudrate, timeout_s=0.1))
+    except (FdiBridgeError, OSError, ValueError):
+        return
+    stream = NmeaStream()
+    times: list[float] = []
+    try:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            data = port.read(4096)
+            for e in stream.feed(data or b""):
+                if e.utc_s is not None:
+                    times.append(e.utc_s)
+    except (OSError, ValueError) as err:
+        rep.warnings.append(f"GPS rate: could not read {url}: {err}")
+        return
+    finally:
+        port.close()
+    gaps = sorted(b - a for a, b in itertools.pairwise(times) if b > a)
+    if not gaps:
+        rep.warnings.append(f"GPS rate: fewer than two epochs from {url} in {seconds:g} s")
+        return
+    period = gaps[len(gaps) // 2]
+    if period > GPS_HEALTHY_PERIOD_S:
+        rep.warnings.append(
+            f"GPS rate: the receiver sends a fix every {period:.2f} s ({1 / period:.1f} Hz); "
+            f"ArduPilot's GPS health check wants one every {GPS_HEALTHY_PERIOD_S * 1000:.0f} ms "
+            "or faster (5 Hz or more): set the receiver to 5-10 Hz or GPS_INPUT is unhealthy")
+    else:
+        rep.ok.append(f"GPS rate: {1 / period:.1f} Hz")
+
+
+def check_mavlink_disk(rep: Report, mc: MavlinkConfig) -> None:
+    """The ``[mavlink]`` tlog directory and parameter file: writable, with room."""
+    places = [("tlog", Path(mc.tlog_dir), mc.tlog_min_free_bytes + mc.tlog_max_bytes)
+              if mc.tlog_dir else None,
+              ("parameter file", Path(mc.param_file).parent, 4096) if mc.param_file else None]
+    for place in places:
+        if place is None:
+            continue
+        what, d, need = place
+        probe = d
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        if not os.access(probe, os.W_OK):
+            rep.warnings.append(f"mavlink {what}: {d} is not writable: it will not be written "
+                                "(forwarding goes on)")
+            continue
+        free = shutil.disk_usage(probe).free
+        if free < need:
+            rep.warnings.append(f"mavlink {what}: {free / 1e6:.1f} MB free at {d}, less than "
+                                f"{need / 1e6:.1f} MB: it pauses until space returns")
+        else:
+            rep.ok.append(f"mavlink {what}: {d} writable ({free / 1e6:.0f} MB free)")
+
+
 def diagnose(
     config: str | Path,
     *,
@@ -183,6 +257,7 @@ def diagnose(
     record_dir: str | None = None,
     list_ports: Callable[[], list[str]] = _system_ports,
     access: Callable[[str, int], bool] = os.access,
+    gps_probe_s: float = 0.0,
 ) -> Report:
     rep = Report()
     try:
@@ -216,6 +291,10 @@ def diagnose(
         check_mavlink_url(rep, "MAVLink autopilot", mc.autopilot.url)
         for i, gcs in enumerate(mc.gcs):
             check_mavlink_url(rep, f"MAVLink gcs {gcs.name or i}", gcs.url)
+        check_mavlink_disk(rep, mc)
+    if gps_probe_s > 0 and bf.rover is not None and (
+            bf.mavlink is not None or mavlink_url or bf.rover.output.mavlink_url):
+        check_gps_rate(rep, bf.rover.port.url, bf.rover.port.baudrate, gps_probe_s)
     rc_rec = bf.recorder
     check_recorder(rep, record_dir if record_dir is not None else rc_rec.dir,
                    rc_rec.dir_max_mb, rc_rec.file_max_mb, access=access)
@@ -224,12 +303,16 @@ def diagnose(
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True, help="config file or preset name")
+    parser.add_argument("--gps-probe-s", type=float, default=3.0,
+                        help="with a MAVLink output, read the GPS this long to check its rate "
+                             "(0: do not)")
     parser.add_argument("--mavlink", default=None, help="the MAVLink URL `run` will be given")
     parser.add_argument("--record", default=None, help="the recorder directory `run` will use")
 
 
 def run(args: argparse.Namespace) -> int:
-    rep = diagnose(args.config, mavlink_url=args.mavlink, record_dir=args.record)
+    rep = diagnose(args.config, mavlink_url=args.mavlink, record_dir=args.record,
+                   gps_probe_s=args.gps_probe_s)
     for line in rep.lines():
         print(line)
     return 1 if rep.problems else 0

@@ -13,6 +13,7 @@ override file holds only values that differ from the defaults.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import re
@@ -26,6 +27,8 @@ from typing import Any
 from drivers.configload import read_toml
 from fdi.errors import ConfigError
 
+log = logging.getLogger("fdi_bridge.params")
+
 PARAM_ID_MAX = 16
 _NAME = re.compile(r"^[A-Z0-9_]{1,16}$")
 
@@ -34,13 +37,18 @@ OnChange = Callable[[str, float], None]
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One parameter: name (<= 16 chars, ``[A-Z0-9_]``), default, bounds, doc."""
+    """One parameter: name (<= 16 chars, ``[A-Z0-9_]``), default, bounds, doc.
+
+    ``integer``: the value is a whole number (MAV_PARAM_TYPE_INT32 on the wire); a value set
+    is rounded, and what is in force is what is echoed.
+    """
 
     name: str
     default: float
     min: float = -math.inf
     max: float = math.inf
     doc: str = ""
+    integer: bool = False
 
     def __post_init__(self) -> None:
         if not _NAME.match(self.name):
@@ -61,6 +69,8 @@ class ParamStore:
         self._override_file = Path(override_file) if override_file else None
         self._overrides: dict[str, float] = {}
         self.rejected = 0  # PARAM_SETs refused (unknown name, out of bounds, not finite)
+        self.write_errors = 0  # failed writes of the override file (disk full, read-only)
+        self._unsaved = False  # values in force that the override file does not hold yet
         if self._override_file is not None and self._override_file.exists():
             table = read_toml(self._override_file).get("params", {})
             if not isinstance(table, dict):
@@ -109,7 +119,12 @@ class ParamStore:
             hi = float(meta["le"]) if "le" in meta else math.inf
             if "lt" in meta:
                 hi = math.nextafter(float(meta["lt"]), -math.inf)
-            self.register(ParamSpec(name, float(value), lo, hi, str(meta.get("doc", ""))))
+            integer = isinstance(value, int)
+            if integer:  # whole-number bounds (a strict bound's nextafter rounded inwards)
+                lo = float(math.ceil(lo)) if math.isfinite(lo) else lo
+                hi = float(math.floor(hi)) if math.isfinite(hi) else hi
+            self.register(ParamSpec(name, float(value), lo, hi, str(meta.get("doc", "")),
+                                    integer))
             names[fld.name] = name
         return names
 
@@ -157,6 +172,8 @@ class ParamStore:
         """
         with self._lock:
             spec = self._specs.get(name)
+            if spec is not None and spec.integer and math.isfinite(value):
+                value = float(round(value))
             if spec is None or not math.isfinite(value) or not spec.min <= value <= spec.max:
                 self.rejected += 1
                 return False
@@ -165,11 +182,39 @@ class ParamStore:
                 self._overrides.pop(name, None)
             else:
                 self._overrides[name] = float(value)
-            self._write_overrides()
+            self._save()
             callbacks = list(self._callbacks)
         for cb in callbacks:
             cb(name, float(value))
         return True
+
+    @property
+    def unsaved(self) -> bool:
+        """True while values in force are not in the override file (its last write failed)."""
+        return self._unsaved
+
+    def retry_save(self) -> bool:
+        """Write the override file again after a failure; True when it is up to date."""
+        with self._lock:
+            if self._unsaved:
+                self._save()
+            return not self._unsaved
+
+    def _save(self) -> None:
+        """Write the override file; a full or read-only disk is logged once and counted, and
+        the value stays in force (the router retries with :meth:`retry_save`)."""
+        try:
+            self._write_overrides()
+        except OSError as err:
+            self.write_errors += 1
+            if not self._unsaved:
+                log.warning("parameter file %s not written (%s); values stay in force and "
+                            "the write is retried", self._override_file, err.strerror or err)
+            self._unsaved = True
+            return
+        if self._unsaved:
+            log.warning("parameter file %s written again", self._override_file)
+        self._unsaved = False
 
     def _write_overrides(self) -> None:
         if self._override_file is None:
@@ -186,6 +231,8 @@ class ParamStore:
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 f.write("\n".join(lines) + "\n")
+                f.flush()
+                os.fsync(f.fileno())
             os.replace(tmp, path)
         except OSError:
             Path(tmp).unlink(missing_ok=True)

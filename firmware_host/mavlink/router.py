@@ -35,8 +35,12 @@ periodic jobs for a given time so tests drive it with
 from __future__ import annotations
 
 import contextlib
+import errno
+import json
 import logging
+import os
 import selectors
+import shutil
 import socket
 import struct
 import threading
@@ -45,11 +49,11 @@ from collections import deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from drivers.mavlink import io as mio
 from drivers.mavlink.framer import MavFrame, MavFramer, frame_target, signature_ok
-from drivers.mavlink.links import Link, open_link
+from drivers.mavlink.links import Link, TcpServerLink, UdpPeerLink, UdpServerLink, open_link
 from fdi.errors import ConfigError, PortError
 from firmware_host.mavlink.params import ParamStore
 from firmware_host.runtime.config import (
@@ -117,43 +121,159 @@ def load_signing_key(path: str | Path) -> bytes:
 
 
 class TlogWriter:
-    """QGroundControl ``.tlog``: 8-byte big-endian µs (Unix time) before each packet; rotated."""
+    """QGroundControl ``.tlog``: 8-byte big-endian µs (Unix time) before each packet; rotated.
 
-    def __init__(self, directory: str | Path, max_bytes: int, wall_clock: Clock = time.time):
+    A full or read-only disk never stops forwarding: the failure is logged once, counted
+    (``write_errors``, and every packet not written in ``lost_packets``), the file is closed,
+    and a new file is tried every :data:`TLOG_RETRY_S` (monotonic), so writing resumes by
+    itself when space returns. The directory is kept under ``dir_max_bytes`` (oldest
+    ``fdi-*.tlog`` deleted first) and the disk above ``min_free_bytes`` (the oldest files go
+    first; when that is not enough the tlog pauses, counted, and retries).
+    """
+
+    def __init__(self, directory: str | Path, max_bytes: int, wall_clock: Clock = time.time,
+                 *, dir_max_bytes: int = 0, min_free_bytes: int = 0,
+                 clock: Clock = time.monotonic) -> None:
         self.dir = Path(directory)
         self.max_bytes = max_bytes
+        self.dir_max_bytes = dir_max_bytes
+        self.min_free_bytes = min_free_bytes
         self.wall_clock = wall_clock
-        self.dir.mkdir(parents=True, exist_ok=True)
+        self.clock = clock
+        self.retry_s = TLOG_RETRY_S
         self.files: list[Path] = []
         self._f: Any = None
         self._size = 0
+        self._n = 0
         self.packets = 0
+        self.write_errors = 0
+        self.lost_packets = 0
+        self.deleted_files = 0
+        self._unflushed = 0
+        self._failing = False
+        self._retry_at = 0.0
         self._open()
 
     def _open(self) -> None:
         if self._f is not None:
-            self._f.close()
-        stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime(self.wall_clock()))
-        path = self.dir / f"fdi-{stamp}-{len(self.files):03d}.tlog"
-        self._f = open(path, "ab")  # noqa: SIM115  (kept open across calls, closed in close())
+            self._flush_buffer()
+        self._close_file()
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+            self._make_room()
+            stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime(self.wall_clock()))
+            path = self.dir / f"fdi-{stamp}-{self._n:03d}.tlog"
+            self._f = open(path, "ab")  # noqa: SIM115  (kept open across calls, closed in close())
+        except OSError as err:
+            self._fail(err)
+            return
+        self._n += 1
         self.files.append(path)
         self._size = 0
+        self._unflushed = 0
+        if self._failing:
+            log.warning("tlog: writing again (%s)", path)
+            self._failing = False
+
+    def _make_room(self) -> None:
+        """Delete the oldest tlogs while the directory or the disk is over its limit."""
+        if not (self.dir_max_bytes or self.min_free_bytes):
+            return
+        old = sorted(self.dir.glob("fdi-*.tlog"), key=lambda q: q.stat().st_mtime)
+        total = sum(q.stat().st_size for q in old)
+        while old:
+            free = shutil.disk_usage(self.dir).free
+            over_dir = self.dir_max_bytes and total + self.max_bytes > self.dir_max_bytes
+            if not over_dir and free - self.max_bytes >= self.min_free_bytes:
+                break
+            victim = old.pop(0)
+            total -= victim.stat().st_size
+            victim.unlink()
+            self.deleted_files += 1
+        if shutil.disk_usage(self.dir).free < self.min_free_bytes:
+            raise OSError(errno.ENOSPC, "less free space than tlog_min_free_bytes")
+
+    def _fail(self, err: OSError) -> None:
+        self.write_errors += 1
+        self.packets -= self._unflushed  # a write error loses the buffer with the file
+        self.lost_packets += self._unflushed
+        self._unflushed = 0
+        if not self._failing:
+            log.warning("tlog: not written (%s); forwarding goes on, a new file is tried every "
+                        "%.0f s", err.strerror or err, self.retry_s)
+        self._failing = True
+        self._close_file()
+        self._retry_at = self.clock() + self.retry_s
+
+    def _close_file(self) -> None:
+        f, self._f = self._f, None
+        if f is not None:
+            with contextlib.suppress(OSError):
+                f.close()
 
     def write(self, raw: bytes, t_s: float | None = None) -> None:
-        if self._size + 8 + len(raw) > self.max_bytes and self._size > 0:
+        if self._f is None:
+            if self.clock() < self._retry_at:
+                self.lost_packets += 1
+                return
             self._open()
+            if self._f is None:
+                self.lost_packets += 1
+                return
+        elif self._size + 8 + len(raw) > self.max_bytes and self._size > 0:
+            self._open()
+            if self._f is None:
+                self.lost_packets += 1
+                return
         t = self.wall_clock() if t_s is None else t_s
-        self._f.write(struct.pack(">Q", int(t * 1e6)) + raw)
+        try:
+            self._f.write(struct.pack(">Q", int(t * 1e6)) + raw)
+        except OSError as err:
+            self.lost_packets += 1
+            self._fail(err)
+            return
         self._size += 8 + len(raw)
         self.packets += 1
+        self._unflushed += 1
 
     def flush(self) -> None:
-        self._f.flush()
+        """Push the buffer to the file (the router does it at least once a second); below
+        ``min_free_bytes`` free, rotate (the oldest files deleted) or pause."""
+        if not self._flush_buffer() or not self.min_free_bytes:
+            return
+        try:
+            low = shutil.disk_usage(self.dir).free < self.min_free_bytes
+        except OSError:
+            low = False
+        if low:
+            self._open()
+
+    def _flush_buffer(self) -> bool:
+        """Flush; False when there is no file or the flush failed (counted)."""
+        if self._f is None:
+            return False
+        try:
+            self._f.flush()
+        except OSError as err:
+            # What sat in the buffer is lost with the file (counted as such).
+            self.packets -= self._unflushed
+            self.lost_packets += self._unflushed
+            self._unflushed = 0
+            self._fail(err)
+            return False
+        self._unflushed = 0
+        return True
 
     def close(self) -> None:
-        if self._f is not None:
-            self._f.close()
-            self._f = None
+        self._flush_buffer()
+        self._close_file()
+
+    def counters(self) -> dict[str, int]:
+        return {"tlog_packets": self.packets, "tlog_write_errors": self.write_errors,
+                "tlog_lost_packets": self.lost_packets, "tlog_deleted_files": self.deleted_files}
+
+
+TLOG_RETRY_S = 5.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -167,12 +287,17 @@ class EndpointStats:
     dropped_queue_full: int = 0
     no_peer: int = 0  # packets for this endpoint while nobody was there to take them
     unroutable: int = 0  # targeted packets from here that no other endpoint could take
+    loop_guard: int = 0  # packets not sent here because their source was seen here
+    filtered_in: int = 0  # packets from here dropped by block_in
+    filtered_out: int = 0  # packets not sent here by allow_out / block_out
+    rate_limited: int = 0  # packets not sent here beyond max_out_pps
 
 
 class Endpoint:
     """A link, its framers (one per stream), its outgoing queue and what it has seen."""
 
-    def __init__(self, name: str, link: Link, *, is_gcs: bool, signing: bool, queue: int):
+    def __init__(self, name: str, link: Link, *, is_gcs: bool, signing: bool, queue: int,
+                 cfg: EndpointConfig | None = None):
         self.name = name
         self.link = link
         self.is_gcs = is_gcs
@@ -183,9 +308,46 @@ class Endpoint:
         self.seen_sys: set[int] = set()
         self.seen: set[tuple[int, int]] = set()
         self.stats = EndpointStats()
+        c = cfg or EndpointConfig("")
+        self.allow_unsigned = c.ids("allow_unsigned")
+        self.block_in = c.ids("block_in")
+        allow_out, block_out = c.ids("allow_out"), c.ids("block_out")
+        self.filter_out: Callable[[int], bool] | None = None
+        if allow_out or block_out:
+            self.filter_out = lambda m: (not allow_out or m in allow_out) and m not in block_out
+        self.max_out_pps = c.max_out_pps
+        self._tokens = c.max_out_pps
+        self._tokens_t = 0.0
+        self.cfg = c
+        # A TCP server only accepts: each client becomes an endpoint of its own (``clients``),
+        # with its own routes, queue and counters, so one stalled client starves nobody.
+        # A ground station's UDP server the same way: each peer (address) is an endpoint.
+        self.server = isinstance(link, TcpServerLink) or (is_gcs and isinstance(link,
+                                                                               UdpServerLink))
+        self.parent: Endpoint | None = None
+        self.children: list[Endpoint] = []
+        self.by_addr: dict[Hashable, Endpoint] = {}
+        self.clients = 0
+        self.clients_gone = 0
+        self.gone_stats = EndpointStats()  # what clients that have gone had counted
+
+    def rate_ok(self, now: float) -> bool:
+        """Token bucket of ``max_out_pps`` packets/s (a burst of one second's worth)."""
+        rate = self.max_out_pps
+        self._tokens = min(rate, self._tokens + (now - self._tokens_t) * rate)
+        self._tokens_t = now
+        if self._tokens >= 1.0:
+            self._tokens -= 1.0
+            return True
+        self.stats.rate_limited += 1
+        return False
 
     def send(self, raw: bytes) -> None:
         """Write ``raw`` now when nothing waits before it; else queue it behind the others."""
+        if self.server:  # its clients are endpoints of their own: to each of them
+            for child in self.children:
+                child.send(raw)
+            return
         if self.queue:
             self.enqueue(raw)
         elif not self.link.has_peer():
@@ -232,17 +394,25 @@ class Endpoint:
 @dataclass
 class RouterStats:
     forwarded: int = 0
+    no_destination: int = 0  # broadcasts nobody could take (no other peer, or loop guard)
     for_bridge: int = 0
     bad_crc: int = 0
     dropped_bytes: int = 0
     unchecked: int = 0
-    refused_unsigned: int = 0
+    refused_unsigned: int = 0  # unsigned packets dropped from a signing link
     bad_signature: int = 0
-    replayed_signature: int = 0
+    replayed_signature: int = 0  # not newer than its stream's last packet
+    old_stream_refused: int = 0  # a new stream more than a minute behind our timestamp
+    signing_state_errors: int = 0  # failed writes of the signing state file
     params_set: int = 0
     params_rejected: int = 0
     own_sent: int = 0
     statustext_dropped: int = 0
+    command_sent: int = 0  # the bridge's COMMAND_LONGs (first attempts and retries)
+    command_accepted: int = 0
+    command_refused: int = 0  # COMMAND_ACK with a result other than ACCEPTED / IN_PROGRESS
+    command_unacked: int = 0  # no COMMAND_ACK after command_retries attempts
+    ftp_nak: int = 0
 
 
 _COMMAND_IDS = frozenset(
@@ -252,6 +422,25 @@ _PARAM_READ_IDS = frozenset(
     {mio.message_id("PARAM_REQUEST_LIST"), mio.message_id("PARAM_REQUEST_READ")}
 )
 _FOR_BRIDGE_IDS = _COMMAND_IDS | _PARAM_READ_IDS
+_COMMAND_ACK = mio.message_id("COMMAND_ACK")
+_FTP = mio.message_id("FILE_TRANSFER_PROTOCOL")
+_FTP_NAK = 129
+_FTP_ERR_FAIL = 1
+_FTP_ERR_FILE_NOT_FOUND = 10
+_FTP_OPEN_RO = 4
+SIGNING_NEW_STREAM_WINDOW = 6_000_000  # one minute in signing units (10 µs)
+SIGNING_STATE_EVERY_S = 30.0
+
+
+@dataclass
+class _PendingCommand:
+    """A COMMAND_LONG of the bridge waiting for its COMMAND_ACK (resent until answered)."""
+
+    command: int
+    what: str  # for the operator: "mode HOLD"
+    encode: Callable[[], bytes]
+    attempts: int = 1
+    due: float | None = None  # set by the loop thread at its next tick
 
 
 class Router:
@@ -281,27 +470,43 @@ class Router:
         if signing_key is not None:
             self._own.setup_signing(signing_key, link_id=0)
             self._pilot.setup_signing(signing_key, link_id=1)  # an ArduSub that checks signatures
-        self._sig_last: dict[tuple[int, int, int], int] = {}
+        self._sig_last: dict[tuple[int, int, int], int] = {}  # (link id, sys, comp) -> ts
+        self._sig_local = 0  # our signing timestamp: max(clock, every accepted timestamp)
+        self._sig_state_path: Path | None = None
+        self._sig_dirty = False
+        if signing_key is not None:
+            state = cfg.signing_state_file or (
+                f"{cfg.signing_key_file}.state" if cfg.signing_key_file else "")
+            self._sig_state_path = Path(state).expanduser() if state else None
+            self._load_signing_state()
         self.tlog = tlog
         if tlog is None and cfg.tlog_dir:
-            self.tlog = TlogWriter(cfg.tlog_dir, cfg.tlog_max_bytes, wall_clock)
+            self.tlog = TlogWriter(cfg.tlog_dir, cfg.tlog_max_bytes, wall_clock,
+                                   dir_max_bytes=cfg.tlog_dir_max_bytes,
+                                   min_free_bytes=cfg.tlog_min_free_bytes, clock=clock)
         self.endpoints: list[Endpoint] = []
         try:
-            ap = open_link(cfg.autopilot.url, cfg.autopilot.baud, cfg.reconnect_max_s)
+            a = cfg.autopilot
+            ap = open_link(a.url, a.baud, cfg.reconnect_max_s, peer_timeout_s=a.peer_timeout_s,
+                           accept_any=a.accept_any)
             self.autopilot = Endpoint(
-                cfg.autopilot.name or "autopilot", ap, is_gcs=False, signing=False,
-                queue=cfg.queue_packets,
+                a.name or "autopilot", ap, is_gcs=False, signing=False,
+                queue=cfg.queue_packets, cfg=a,
             )  # fmt: skip
             self.endpoints.append(self.autopilot)
             for i, g in enumerate(cfg.gcs):
-                link = open_link(g.url, g.baud, cfg.reconnect_max_s)
+                link = open_link(g.url, g.baud, cfg.reconnect_max_s,
+                                 peer_timeout_s=g.peer_timeout_s, accept_any=g.accept_any)
                 self.endpoints.append(
                     Endpoint(g.name or f"gcs{i}", link, is_gcs=True, signing=g.signing,
-                             queue=cfg.queue_packets)
+                             queue=cfg.queue_packets, cfg=g)
                 )  # fmt: skip
         except PortError:
             self.close()
             raise
+        self._pending: _PendingCommand | None = None
+        self._any_clients = False
+        self._next_reap = 0.0
         self._sel = selectors.DefaultSelector()
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
@@ -317,6 +522,9 @@ class Router:
         self._next_stats = self._t0
         self._text_tokens = cfg.statustext_per_s
         self._last_tick = self._t0
+        self._next_flush = self._t0 + 1.0
+        self._next_slow = self._t0 + SIGNING_STATE_EVERY_S
+        self._next_report = self._t0 + cfg.report_stats_s
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
 
@@ -356,8 +564,15 @@ class Router:
     ) -> bytes:
         """COMMAND_LONG DO_SET_MODE (``"HOLD"``) to the autopilot (system ``target_system``)."""
         target = self.cfg.system_id if target_system is None else target_system
+
+        def encode() -> bytes:
+            with self._lock:
+                return self._own.request_mode(target, mode, vehicle)
+
+        raw = encode()
         with self._lock:
-            raw = self._own.request_mode(target, mode, vehicle)
+            self._pending = _PendingCommand(mio.MAV_CMD_DO_SET_MODE, f"mode {mode}", encode)
+            self.stats.command_sent += 1
         self._post(raw, self.autopilot)
         return raw
 
@@ -392,7 +607,7 @@ class Router:
         polled = False
         for ep in self.endpoints:
             fds = ep.link.filenos()
-            if not fds:
+            if not fds and not getattr(ep.link, "passive", False):
                 polled = True
             for fd in fds:
                 want[fd] = (selectors.EVENT_READ, ep)
@@ -458,15 +673,80 @@ class Router:
                 self._read(ep)
         if polled:
             for ep in self.endpoints:
-                if not ep.link.filenos() and ep not in done:
+                if not ep.link.filenos() and ep not in done and not getattr(
+                        ep.link, "passive", False):
                     self._read(ep)
         self._drain_outbox()
         self.tick(self.clock())
         for ep in self.endpoints:
             if ep.blocked():
                 ep.flush()
+        if self._any_clients:
+            now = self.clock()
+            if now >= self._next_reap:
+                self._next_reap = now + 0.05
+                self._reap()
+
+    def _accept(self, server: Endpoint) -> None:
+        """New clients of a TCP server: one endpoint each (named ``<server>.<n>``)."""
+        link = server.link
+        assert isinstance(link, TcpServerLink)
+        for client in link.accept_links():
+            self._add_client(server, client)
+
+    def _add_client(self, server: Endpoint, link: Link) -> Endpoint:
+        server.clients += 1
+        ep = Endpoint(f"{server.name}.{server.clients}", link, is_gcs=server.is_gcs,
+                      signing=server.signing, queue=self.cfg.queue_packets, cfg=server.cfg)
+        ep.parent = server
+        self._any_clients = True
+        server.children = [*server.children, ep]
+        self.endpoints = [*self.endpoints, ep]  # copied: other threads may iterate it
+        return ep
+
+    def _read_udp_server(self, server: Endpoint) -> None:
+        """A ground station's UDP server: each datagram is routed from its peer's endpoint."""
+        link = server.link
+        assert isinstance(link, UdpServerLink)
+        by_addr = server.by_addr
+        route = self._route
+        for data, addr, boundary in link.read(self.cfg.read_burst):
+            src = by_addr.get(addr)
+            if src is None or src.parent is None:
+                peer = cast(tuple[str, int], addr)
+                src = by_addr[addr] = self._add_client(server, UdpPeerLink(link, peer))
+            framer = src.framers.get(addr)
+            if framer is None:
+                framer = src.framers[addr] = MavFramer(on_drop=self._on_drop)
+            for frame in framer.feed(data, boundary=boundary):
+                route(src, frame)
+
+    def _reap(self) -> None:
+        """Drop the endpoints of TCP clients that have gone (their counters fold into the
+        server's: ``clients_gone``, and their link errors)."""
+        gone = [ep for ep in self.endpoints if ep.parent is not None and not ep.link.has_peer()]
+        if not gone:
+            return
+        for ep in gone:
+            parent = ep.parent
+            assert parent is not None
+            parent.clients_gone += 1
+            ep.stats.no_peer += len(ep.queue)
+            for name, value in ep.stats.__dict__.items():
+                setattr(parent.gone_stats, name, getattr(parent.gone_stats, name) + value)
+            parent.children = [c for c in parent.children if c is not ep]
+            if isinstance(ep.link, UdpPeerLink):
+                parent.by_addr.pop(ep.link.addr, None)
+            ep.parent = None
+        self.endpoints = [ep for ep in self.endpoints if ep not in gone]
 
     def _read(self, src: Endpoint) -> None:
+        if src.server:
+            if isinstance(src.link, UdpServerLink):
+                self._read_udp_server(src)
+            else:
+                self._accept(src)
+            return
         framers = src.framers
         route = self._route
         for data, key, boundary in src.link.read(self.cfg.read_burst):
@@ -483,54 +763,220 @@ class Router:
 
     def _route(self, src: Endpoint, frame: MavFrame) -> None:
         src.stats.rx_packets += 1
-        src.seen_sys.add(frame.sysid)
-        src.seen.add((frame.sysid, frame.compid))
-        if not frame.crc_checked:
+        msgid = frame.msgid
+        verified = False
+        if src.signing and msgid not in src.allow_unsigned:
+            # A link marked for signing passes only correctly signed, fresh packets, towards
+            # the vehicle and anywhere else (MAVLink 2 signing: sig, stream order, 1 min).
+            # Unsigned parameter reads addressed to the bridge are answered, not forwarded.
+            if not frame.signed and msgid in _PARAM_READ_IDS:
+                target = frame_target(frame, self._offsets)
+                if target is not None and target[0] != 0 and self._addressed_to_me(target):
+                    self.stats.for_bridge += 1
+                    self._handle(src, frame, False)
+                else:
+                    self.stats.refused_unsigned += 1
+                return
+            if not self._signature_accepted(frame):
+                return
+            verified = True
+        if msgid in src.block_in:
+            src.stats.filtered_in += 1
+            return
+        source = (frame.sysid, frame.compid)
+        if frame.crc_checked:  # only a checked packet teaches a route (as mavlink-router)
+            src.seen_sys.add(frame.sysid)
+            src.seen.add(source)
+        else:
             self.stats.unchecked += 1
         raw = frame.raw
         if self.tlog is not None:
             self.tlog.write(raw)
         target = frame_target(frame, self._offsets)
         sent = False
+        now = 0.0
         for dst in self.endpoints:
-            if dst is src:
+            if dst is src or dst.server:
+                continue
+            if source in dst.seen:  # loop guard: never back to where the source lives
+                dst.stats.loop_guard += 1
                 continue
             if target is None or dst.accepts(target):
+                if dst.filter_out is not None and not dst.filter_out(msgid):
+                    dst.stats.filtered_out += 1
+                    continue
+                if dst.max_out_pps > 0:
+                    now = now or self.clock()
+                    if not dst.rate_ok(now):
+                        continue
                 dst.send(raw)
                 sent = True
         if sent:
             self.stats.forwarded += 1
         if self._listeners and src is self.autopilot:
-            for cb in self._listeners.get(frame.msgid, ()):
+            for cb in self._listeners.get(msgid, ()):
                 cb(frame)
         mine = target is not None and self._addressed_to_me(target)
-        if mine and frame.msgid in _FOR_BRIDGE_IDS:
+        if mine and msgid in _FOR_BRIDGE_IDS:
             self.stats.for_bridge += 1
-            self._handle(src, frame)
+            self._handle(src, frame, verified)
+        elif msgid == _COMMAND_ACK and target is not None and self._ack_for_me(target):
+            self.stats.for_bridge += 1
+            self._on_ack(frame)
+        elif mine and msgid == _FTP and target is not None and target[0] != 0:
+            self.stats.for_bridge += 1
+            self._ftp_nak(src, frame)
         elif not sent:
-            src.stats.unroutable += 1  # addressed to a system no other endpoint has shown
+            if target is not None and target[0] != 0:
+                src.stats.unroutable += 1  # addressed to a system no other endpoint has shown
+            else:
+                self.stats.no_destination += 1  # a broadcast with nobody (else) to take it
 
     def _addressed_to_me(self, target: tuple[int, int]) -> bool:
         sysid, compid = target
         return sysid in (0, self.cfg.system_id) and compid in (0, self.cfg.component_id)
 
+    def _ack_for_me(self, target: tuple[int, int]) -> bool:
+        """A COMMAND_ACK for the bridge: addressed to its component, or (MAVLink 1, or an
+        autopilot that leaves the target empty) to nobody while a command of ours waits."""
+        if target == (self.cfg.system_id, self.cfg.component_id):
+            return True
+        return target == (0, 0) and self._pending is not None
+
+    # -- signing ---------------------------------------------------------------------------
+
     def _signature_accepted(self, frame: MavFrame) -> bool:
-        """Signed with our key and newer than the last packet of its (sys, comp, link) stream."""
+        """MAVLink 2 signing's acceptance rules, counted by reason.
+
+        Signed with our key; newer than the last packet of its (link id, system, component)
+        stream; a stream not seen before must be at most one minute behind our timestamp
+        (which follows the clock and every accepted packet, and survives a restart through
+        the signing state file, with every stream's last timestamp: a packet captured before
+        a restart is refused after it).
+        """
         if self._key is None or not frame.signed:
+            self.stats.refused_unsigned += 1
             return False
         if not signature_ok(frame, self._key):
             self.stats.bad_signature += 1
             return False
-        stream = (frame.sysid, frame.compid, frame.link_id or 0)
+        stream = (frame.link_id or 0, frame.sysid, frame.compid)
         ts = frame.signature_timestamp or 0
-        if ts <= self._sig_last.get(stream, -1):
-            self.stats.replayed_signature += 1
+        last = self._sig_last.get(stream)
+        local = max(self._sig_local, mio.signing_timestamp_now())
+        if last is not None:
+            if ts <= last:
+                self.stats.replayed_signature += 1
+                return False
+        elif ts + SIGNING_NEW_STREAM_WINDOW < local:
+            self.stats.old_stream_refused += 1
             return False
         self._sig_last[stream] = ts
+        self._sig_local = max(local, ts)
+        self._sig_dirty = True
         return True
 
-    def _handle(self, src: Endpoint, frame: MavFrame) -> None:
-        if src.signing and frame.msgid in _COMMAND_IDS and not self._signature_accepted(frame):
+    def _load_signing_state(self) -> None:
+        path = self._sig_state_path
+        if path is None or not path.exists():
+            return
+        try:
+            state = json.loads(path.read_text(encoding="utf-8"))
+            self._sig_local = int(state.get("timestamp", 0))
+            for key, ts in state.get("streams", {}).items():
+                link, sysid, compid = (int(x) for x in key.split(","))
+                self._sig_last[(link, sysid, compid)] = int(ts)
+        except (OSError, ValueError, TypeError, AttributeError) as err:
+            log.warning("signing state %s unreadable (%s): starting from the clock", path, err)
+
+    def save_signing_state(self) -> None:
+        """Write our signing timestamp and every stream's last one (atomically)."""
+        path = self._sig_state_path
+        if path is None or not self._sig_dirty:
+            return
+        state = {"timestamp": max(self._sig_local, mio.signing_timestamp_now()),
+                 "streams": {f"{k[0]},{k[1]},{k[2]}": v for k, v in self._sig_last.items()}}
+        tmp = path.with_name(path.name + ".tmp")
+        try:
+            tmp.write_text(json.dumps(state), encoding="utf-8")
+            os.chmod(tmp, 0o600)
+            os.replace(tmp, path)
+        except OSError as err:
+            if not self.stats.signing_state_errors:
+                log.warning("signing state %s not written (%s); retried", path, err)
+            self.stats.signing_state_errors += 1
+            return
+        self._sig_dirty = False
+
+    # -- what is addressed to the bridge -----------------------------------------------------
+
+    def _on_ack(self, frame: MavFrame) -> None:
+        msg = mio.decode_packet(frame.raw)
+        with self._lock:
+            pending = self._pending
+            if msg is None or pending is None or int(msg.command) != pending.command:
+                return
+            result = int(msg.result)
+            if result == mio.MAV_RESULT_IN_PROGRESS:
+                pending.due = None  # the autopilot is working on it: wait a full period more
+                return
+            self._pending = None
+        if result == mio.MAV_RESULT_ACCEPTED:
+            self.stats.command_accepted += 1
+            self.post_statustext(mio.MAV_SEVERITY_INFO, f"FDI: autopilot accepted {pending.what}")
+        else:
+            self.stats.command_refused += 1
+            log.warning("autopilot refused %s (MAV_RESULT %d)", pending.what, result)
+            self.post_statustext(mio.MAV_SEVERITY_WARNING,
+                                 f"FDI: autopilot REFUSED {pending.what} (result {result})")
+
+    def _retry_command(self, now: float) -> None:
+        if self._pending is None:
+            return
+        with self._lock:
+            pending = self._pending
+            if pending is None:
+                return
+            if pending.due is None:
+                pending.due = now + self.cfg.command_retry_s
+                return
+            if now < pending.due:
+                return
+            if pending.attempts >= self.cfg.command_retries:
+                self._pending = None
+                self.stats.command_unacked += 1
+                give_up = True
+            else:
+                pending.attempts += 1
+                pending.due = now + self.cfg.command_retry_s
+                self.stats.command_sent += 1
+                give_up = False
+        if give_up:
+            log.warning("no COMMAND_ACK for %s after %d attempts", pending.what, pending.attempts)
+            self.post_statustext(mio.MAV_SEVERITY_WARNING,
+                                 f"FDI: no answer from the autopilot to {pending.what}")
+            return
+        self._emit(pending.encode(), self.autopilot)
+
+    def _ftp_nak(self, src: Endpoint, frame: MavFrame) -> None:
+        """MAVLink FTP is not served: NAK at once, so a client (MAVProxy fetching parameters
+        by FTP) falls back to PARAM_REQUEST_LIST instead of waiting for its timeout."""
+        msg = mio.decode_packet(frame.raw)
+        if msg is None:
+            return
+        req = bytes(msg.payload)
+        seq = int.from_bytes(req[0:2], "little")
+        session, opcode = req[2], req[3]
+        error = _FTP_ERR_FILE_NOT_FOUND if opcode == _FTP_OPEN_RO else _FTP_ERR_FAIL
+        reply = struct.pack("<HBBBBBBI", (seq + 1) & 0xFFFF, session, _FTP_NAK, 1, opcode, 0, 0,
+                            0) + bytes((error,))
+        with self._lock:
+            raw = self._own.send_file_transfer_protocol(frame.sysid, frame.compid, reply)
+        self.stats.ftp_nak += 1
+        self._emit(raw, src)
+
+    def _handle(self, src: Endpoint, frame: MavFrame, verified: bool = False) -> None:
+        if src.signing and frame.msgid in _COMMAND_IDS and not verified:
             self.stats.refused_unsigned += 1
             return
         msg = mio.decode_packet(frame.raw)
@@ -573,8 +1019,10 @@ class Router:
             self._emit(raw, src)
 
     def _param_value(self, name: str, index: int, count: int) -> bytes:
+        spec = self.params.spec(name)
+        kind = mio.MAV_PARAM_TYPE_INT32 if spec.integer else mio.MAV_PARAM_TYPE_REAL32
         with self._lock:
-            return self._own.send_param_value(name, self.params.get(name), index, count)
+            return self._own.send_param_value(name, self.params.get(name), index, count, kind)
 
     def _emit(self, raw: bytes, dest: Endpoint | None) -> None:
         """Queue one of the bridge's own packets: to ``dest``, or to every endpoint."""
@@ -585,7 +1033,8 @@ class Router:
             dest.send(raw)
             return
         for ep in self.endpoints:
-            ep.send(raw)
+            if not ep.server:  # a server's clients are in the list themselves
+                ep.send(raw)
 
     def _drain_outbox(self) -> None:
         while self._outbox:
@@ -614,6 +1063,19 @@ class Router:
             if self._next_stats <= now:
                 periods = int((now - self._next_stats) * cfg.stats_hz) + 1
                 self._next_stats += periods / cfg.stats_hz
+        self._retry_command(now)
+        if now >= self._next_flush:
+            self._next_flush = now + 1.0
+            if self.tlog is not None:
+                self.tlog.flush()  # at least once a second: a crash loses at most a second
+            if self.params.unsaved:
+                self.params.retry_save()
+        if now >= self._next_slow:
+            self._next_slow = now + SIGNING_STATE_EVERY_S
+            self.save_signing_state()
+        if cfg.report_stats_s > 0 and now >= self._next_report:
+            self._next_report = now + cfg.report_stats_s
+            log.info("router stats %s", json.dumps(self.summary(), separators=(",", ":")))
         dt = max(0.0, now - self._last_tick)
         self._last_tick = now
         self._text_tokens = min(cfg.statustext_per_s, self._text_tokens + dt * cfg.statustext_per_s)
@@ -652,13 +1114,31 @@ class Router:
             self._wake_w.close()
         if self.tlog is not None:
             self.tlog.close()
+        if hasattr(self, "_sig_dirty"):
+            self.save_signing_state()
 
     def summary(self) -> dict[str, Any]:
         """Counters of the router and of each endpoint (for logs and tests)."""
         out: dict[str, Any] = dict(self.stats.__dict__)
         out["params_rejected"] += self.params.rejected - self.stats.params_rejected
+        out["param_write_errors"] = self.params.write_errors
+        out["params_unsaved"] = self.params.unsaved
+        if self.tlog is not None:
+            out.update(self.tlog.counters())
         for ep in self.endpoints:
-            out[ep.name] = dict(ep.stats.__dict__, queued=len(ep.queue), link_errors=ep.link.errors)
+            extra: dict[str, Any] = {"queued": len(ep.queue), "link_errors": ep.link.errors}
+            counts = dict(ep.stats.__dict__)
+            if ep.server:  # the server's line adds up its clients, present and gone
+                extra.update(clients=ep.clients, clients_gone=ep.clients_gone)
+                for child in [*ep.children, None]:
+                    st = child.stats if child is not None else ep.gone_stats
+                    for name, value in st.__dict__.items():
+                        counts[name] += value
+                extra["queued"] += sum(len(c.queue) for c in ep.children)
+            foreign = getattr(ep.link, "foreign", None)
+            if foreign is not None:
+                extra["foreign_dropped"] = foreign
+            out[ep.name] = dict(counts, **extra)
         return out
 
 

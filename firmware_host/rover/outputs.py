@@ -18,11 +18,13 @@ import errno
 import math
 import os
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
 from drivers.mavlink.io import GpsInputFix
+from drivers.mavlink.modes import alarm_mode
 from drivers.ptypair import PtyPair
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
@@ -197,11 +199,64 @@ class NmeaSink:
         self.writer.close()
 
 
-_FIX_TYPE = {1: 3, 2: 4, 3: 3, 4: 6, 5: 5, 6: 3, 7: 3, 8: 3, 9: 4}
+# GGA quality -> GPS_FIX_TYPE. 6 (dead reckoning), 7 (manual input) and 8 (simulator) are not
+# here: ArduPilot's own NMEA driver (AP_GPS_NMEA) reports them as no fix, and so do we.
+_FIX_TYPE = {1: 3, 2: 4, 3: 3, 4: 6, 5: 5, 9: 4}
+NO_FIX_QUALITIES = frozenset({6, 7, 8})
+
+ALT_HOLD_S = 10.0
+"""A 2D epoch (RMC only, or its GGA lost to a bad checksum) keeps the last good altitude this
+long, as a 3D fix whose vertical accuracy grows by :data:`ALT_DRIFT_MPS` per second of age;
+after that it goes out as a 2D fix (fix type 2, ``GPS_INPUT_IGNORE_FLAG_ALT``)."""
+ALT_DRIFT_MPS = 0.5
+VEL_HOLD_S = 1.5
+"""Without Doppler (speed and course) in an epoch, the last Doppler velocity is held this long,
+its speed accuracy raised by :data:`ACCEL_MPS2` per second of age; after that the velocity is
+the difference of the output positions over :data:`VEL_BASELINE_S`."""
+ACCEL_MPS2 = 1.0
+VEL_BASELINE_S = (0.5, 3.0)
+DOPPLER_ACC_MPS = 0.1
+UNKNOWN_SPEED_ACC_MPS = 50.0
+"""Speed accuracy sent with a zero velocity when no velocity is known (first epochs, after a
+gap): GPS_INPUT has no "velocity unknown" that ArduPilot honours (an ignored velocity keeps
+the previous one), so the value is sent with an accuracy the EKF gives no weight."""
+_EARTH_R = 6378137.0
+
+
+def _date_from_clock(utc_s: float, now_unix: float) -> tuple[int, int, int] | None:
+    """The UTC date on which time of day ``utc_s`` is nearest to ``now_unix``; None when the
+    system clock is not plausibly set (before 2020)."""
+    if now_unix < 1577836800.0:  # 2020-01-01
+        return None
+    day = math.floor(now_unix / 86400.0)
+    best = min((day - 1, day, day + 1), key=lambda d: abs(d * 86400.0 + utc_s - now_unix))
+    y, m, d = time.gmtime(best * 86400)[:3]
+    return y, m, d
 
 
 class MavlinkGpsSink:
-    """GPS_INPUT per epoch; STATUSTEXT and HOLD on alarm; heartbeat at 1 Hz of fix time."""
+    """GPS_INPUT per epoch; STATUSTEXT and the alarm mode on alarm; heartbeat at 1 Hz of fix time.
+
+    What the autopilot fuses (ArduPilot ``AP_GPS_MAV``), field by field:
+
+    * **fix type**: from the receiver's GGA quality (DGPS 4, RTK float 5, fixed 6); a replaced
+      fix is 3 (3D); quality 6/7/8 (dead reckoning, manual, simulator) and the alarm are no fix
+      (type 1, position 0), as ArduPilot's NMEA driver treats them;
+    * **altitude**: the fix's; an epoch without one (RMC-only, a lost GGA) holds the last good
+      altitude for :data:`ALT_HOLD_S` with a growing vertical accuracy, then goes out as a 2D
+      fix with the ALT ignore flag -- never 0 m as a 3D fix;
+    * **velocity**: the epoch's Doppler; else the last Doppler held for :data:`VEL_HOLD_S`
+      (accuracy grows with its age); else from the output positions; else zero with an accuracy
+      of :data:`UNKNOWN_SPEED_ACC_MPS` m/s. Never the ignore flag on a fix (AP_GPS_MAV would keep
+      a stale velocity);
+    * **time**: GPS week and ms from the epoch's date (RMC, ZDA, or the last one seen); with no
+      date at all, from the system clock's date when it is set (after 2020), else week 0 and
+      the UTC time of day in ``time_week_ms`` (ArduPilot accepts week 0; it then skips its
+      jitter correction);
+    * ``gps_id`` from ``[rover.output] gps_id`` (1 feeds GPS2).
+    """
+
+    wall_clock: Callable[[], float] = staticmethod(time.time)
 
     def __init__(self, cfg: RoverConfig, endpoint: MavlinkOutput | None = None) -> None:
         self._fix_cls = GpsInputFix
@@ -214,28 +269,50 @@ class MavlinkGpsSink:
         self.no_date = 0
         self._next_heartbeat: float | None = None
         self._was_alarm = False
+        self._gps = _GpsInputState()
 
     def emit(self, out: EpochOutcome) -> None:
-        e, d = out.epoch, out.decision
+        d = out.decision
         o = self.cfg.output
         due = self._next_heartbeat
         if out.t_s is not None and (due is None or out.t_s >= due):
             self.endpoint.send_heartbeat()
             self._next_heartbeat = math.floor(out.t_s) + 1.0
+        fix = self.build_fix(out)
+        if fix is not None:
+            self.endpoint.send_gps_input(fix)
+            self.sent += 1
         if d.alarm_raised:
             self.endpoint.send_statustext(
                 2, f"FDI GPS: {self.cfg.detector.max_consecutive}+ faults in a row, auto-nav stop"
             )
             if o.hold_on_alarm:
-                self.endpoint.request_mode(o.target_system, "HOLD", o.vehicle)
+                self.endpoint.request_mode(o.target_system, alarm_mode(o.vehicle, o.alarm_mode),
+                                           o.vehicle)
         elif self._was_alarm and not d.alarm:
             self.endpoint.send_statustext(5, "FDI GPS: fixes consistent again, alarm cleared")
         self._was_alarm = d.alarm
-        if e.date is None or e.utc_s is None:
+
+    def build_fix(self, out: EpochOutcome) -> Any | None:
+        """The GPS_INPUT fields of one epoch (see the class docstring); None without a time."""
+        e, d = out.epoch, out.decision
+        st = self._gps
+        if e.utc_s is None:
             self.no_date += 1
-            return
-        unix_s = unix_time(e.date, e.utc_s)
-        week, ms = gps_week_ms(unix_s)
+            return None
+        date = e.date
+        if date is None:
+            date = _date_from_clock(e.utc_s, self.wall_clock())
+            st.date_from_clock += date is not None
+        if date is not None:
+            unix_s = unix_time(date, e.utc_s)
+            week, ms = gps_week_ms(unix_s)
+            time_usec = round(unix_s * 1e6)
+        else:
+            self.no_date += 1
+            week, ms = 0, round(e.utc_s * 1000.0) % 86_400_000
+            time_usec = round(self.wall_clock() * 1e6)
+        t = out.t_s if out.t_s is not None else e.utc_s
         replaced = d.action != "accept"
         if e.sd_lat_m is not None and e.sd_lon_m is not None:
             h_acc = math.hypot(e.sd_lat_m, e.sd_lon_m)
@@ -243,36 +320,116 @@ class MavlinkGpsSink:
         else:
             h_acc = self.cfg.detector.sigma_m * math.sqrt(2.0) * max(1.0, e.hdop or 1.0)
             v_acc = self.cfg.detector.sigma_up_m * max(1.0, e.hdop or 1.0)
-        s_acc = 0.1
-        factor = o.replaced_accuracy_factor if replaced else 1.0
+        factor = self.cfg.output.replaced_accuracy_factor if replaced else 1.0
+        h_acc *= factor
+        v_acc *= factor
         valid = out.lat is not None and out.lon is not None
-        vn = ve = None
-        if e.speed_mps is not None and e.course_deg is not None:
-            c = math.radians(e.course_deg)
-            vn, ve = e.speed_mps * math.cos(c), e.speed_mps * math.sin(c)
-        fix = self._fix_cls(
-            time_usec=round(unix_s * 1e6),
+        if valid and not replaced and e.quality in NO_FIX_QUALITIES:
+            valid = False
+            st.estimated_no_fix += 1
+        fix_type = (3 if replaced else _FIX_TYPE.get(e.quality, 3)) if valid else 1
+        lat = out.lat if valid and out.lat is not None else 0.0
+        lon = out.lon if valid and out.lon is not None else 0.0
+        alt: float | None = 0.0
+        vn: float | None = None
+        ve: float | None = None
+        s_acc = DOPPLER_ACC_MPS * factor
+        if not valid:
+            st.forget()
+        else:
+            alt, v_acc, fix_type = st.altitude(out.alt, v_acc, t, fix_type)
+            vn, ve, s_acc = st.velocity(e.speed_mps, e.course_deg, lat, lon, h_acc, t, factor)
+        return self._fix_cls(
+            time_usec=time_usec,
             gps_week=week,
             gps_week_ms=ms,
-            fix_type=(3 if replaced else _FIX_TYPE.get(e.quality, 3)) if valid else 1,
-            lat_deg=out.lat if out.lat is not None else 0.0,
-            lon_deg=out.lon if out.lon is not None else 0.0,
-            alt_m=(out.alt or 0.0) if valid else 0.0,
+            fix_type=fix_type,
+            lat_deg=lat,
+            lon_deg=lon,
+            alt_m=alt,
             hdop=e.hdop if e.hdop is not None else 99.99,
             vdop=e.vdop,
             vn_mps=vn,
             ve_mps=ve,
             vd_mps=None,
-            speed_accuracy_mps=s_acc * factor,
-            horiz_accuracy_m=h_acc * factor,
-            vert_accuracy_m=v_acc * factor,
+            speed_accuracy_mps=s_acc,
+            horiz_accuracy_m=h_acc,
+            vert_accuracy_m=v_acc,
             satellites_visible=e.num_sats or 0,
+            gps_id=self.cfg.output.gps_id,
         )
-        self.endpoint.send_gps_input(fix)
-        self.sent += 1
 
     def stats(self) -> dict[str, int]:
-        return {"gps_input_sent": self.sent, "no_date": self.no_date}
+        st = self._gps
+        commands = getattr(self.endpoint, "command_stats", None)  # a direct MavEndpoint's
+        extra = dict(commands) if isinstance(commands, dict) else {}
+        return {**extra, "gps_input_sent": self.sent, "no_date": self.no_date,
+                "date_from_clock": st.date_from_clock, "alt_held": st.alt_held,
+                "alt_unknown_2d": st.alt_unknown, "velocity_held": st.vel_held,
+                "velocity_from_positions": st.vel_from_positions,
+                "velocity_unknown": st.vel_unknown, "estimated_no_fix": st.estimated_no_fix}
 
     def close(self) -> None:
         self.endpoint.close()
+
+
+class _GpsInputState:
+    """What one GPS_INPUT stream remembers between epochs (altitude, Doppler, positions)."""
+
+    def __init__(self) -> None:
+        self.last_alt: tuple[float, float, float] | None = None  # (t, alt, v_acc)
+        self.last_doppler: tuple[float, float, float] | None = None  # (t, vn, ve)
+        self.positions: deque[tuple[float, float, float]] = deque(maxlen=64)  # (t, lat, lon)
+        self.date_from_clock = 0
+        self.alt_held = 0
+        self.alt_unknown = 0
+        self.vel_held = 0
+        self.vel_from_positions = 0
+        self.vel_unknown = 0
+        self.estimated_no_fix = 0
+
+    def forget(self) -> None:
+        """No fix: positions before the gap do not make a velocity after it."""
+        self.positions.clear()
+
+    def altitude(self, alt: float | None, v_acc: float, t: float,
+                 fix_type: int) -> tuple[float | None, float, int]:
+        if alt is not None:
+            self.last_alt = (t, alt, v_acc)
+            return alt, v_acc, fix_type
+        last = self.last_alt
+        if last is not None and 0.0 <= t - last[0] <= ALT_HOLD_S:
+            self.alt_held += 1
+            age = t - last[0]
+            return last[1], max(v_acc, last[2]) + ALT_DRIFT_MPS * age, fix_type
+        self.alt_unknown += 1
+        return None, v_acc, 2
+
+    def velocity(self, speed: float | None, course: float | None, lat: float, lon: float,
+                 h_acc: float, t: float, factor: float) -> tuple[float, float, float]:
+        positions = self.positions
+        while positions and positions[0][0] > t:  # time went backwards (a new day, a replay)
+            positions.popleft()
+        positions.append((t, lat, lon))
+        if speed is not None and course is not None:
+            c = math.radians(course)
+            vn, ve = speed * math.cos(c), speed * math.sin(c)
+            self.last_doppler = (t, vn, ve)
+            return vn, ve, DOPPLER_ACC_MPS * factor
+        last = self.last_doppler
+        if last is not None and 0.0 <= t - last[0] <= VEL_HOLD_S:
+            self.vel_held += 1
+            return last[1], last[2], (DOPPLER_ACC_MPS + ACCEL_MPS2 * (t - last[0])) * factor
+        lo, hi = VEL_BASELINE_S
+        for t0, lat0, lon0 in positions:
+            dt = t - t0
+            if lo <= dt <= hi:
+                north = math.radians(lat - lat0) * _EARTH_R
+                east = math.radians(lon - lon0) * _EARTH_R * math.cos(math.radians(lat))
+                self.vel_from_positions += 1
+                # Two position errors over the baseline, plus what an acceleration changes
+                # between the middle of the baseline (where the difference is exact) and now.
+                acc = math.sqrt(2.0) * h_acc / dt + ACCEL_MPS2 * dt / 2.0
+                return north / dt, east / dt, acc
+        self.vel_unknown += 1
+        return 0.0, 0.0, UNKNOWN_SPEED_ACC_MPS

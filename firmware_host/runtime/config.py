@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from drivers.configload import load_dataclass, raise_all, read_toml, toml_fields
+from drivers.mavlink.modes import alarm_mode
 from drivers.outland.framecodec import load_protocol
 from drivers.transport import SerialSettings
 from fdi.chi2 import threshold
@@ -139,9 +140,17 @@ class RoverOutputs:
     mavlink_component: int = field(default=191, metadata={"ge": 1, "le": 255})
     target_system: int = field(default=1, metadata={"ge": 1, "le": 255})
     hold_on_alarm: bool = True
-    vehicle: str = "rover"
+    vehicle: str = "rover"  # rover, boat, sub, copter, plane (ArduPilot's mode tables)
+    # Mode requested on an alarm; "" = the vehicle's default (rover HOLD, sub ALT_HOLD; copter
+    # and plane must name one). Checked at load (drivers.mavlink.modes.alarm_mode).
+    alarm_mode: str = ""
+    gps_id: int = field(default=0, metadata={"ge": 0, "le": 1, "doc": "GPS_INPUT gps_id: 1 = GPS2"})
     # Accuracy reported with a replaced fix is the prediction's, raised by this factor.
     replaced_accuracy_factor: float = field(default=3.0, metadata={"ge": 1.0})
+
+    def __post_init__(self) -> None:
+        if self.hold_on_alarm:
+            alarm_mode(self.vehicle, self.alarm_mode)  # ValueError names what is allowed
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from drivers.mavlink import io as mio
+
 
 @dataclass(frozen=True)
 class EndpointConfig:
@@ -15,8 +17,37 @@ class EndpointConfig:
 
     url: str
     baud: int = field(default=115200, metadata={"gt": 0, "doc": "serial links only"})
-    signing: bool = field(default=False, metadata={"doc": "require signed commands (GCS only)"})
+    signing: bool = field(
+        default=False, metadata={"doc": "GCS links: only correctly signed packets pass"}
+    )
     name: str = ""
+    # Unsigned messages a signing link still passes (they command nothing).
+    allow_unsigned: tuple[str, ...] = ("HEARTBEAT", "RADIO_STATUS")
+    peer_timeout_s: float = field(
+        default=0.0, metadata={"ge": 0.0, "doc": "udpin: forget a peer silent this long; 0 never"}
+    )
+    accept_any: bool = field(
+        default=False, metadata={"doc": "udpout: take datagrams from any sender"}
+    )
+    # Per-endpoint message filters (names): what it may send us, what we send it.
+    block_in: tuple[str, ...] = ()
+    allow_out: tuple[str, ...] = ()  # empty: everything not in block_out
+    block_out: tuple[str, ...] = ()
+    max_out_pps: float = field(
+        default=0.0, metadata={"ge": 0.0, "doc": "packets/s towards this endpoint; 0 = no cap"}
+    )
+
+    def __post_init__(self) -> None:
+        for key in ("allow_unsigned", "block_in", "allow_out", "block_out"):
+            for name in getattr(self, key):
+                try:
+                    mio.message_id(name)
+                except (KeyError, AttributeError):
+                    raise ValueError(f"{key}: {name!r} is not a message of the "
+                                     f"{mio.DIALECT} dialect") from None
+
+    def ids(self, key: str) -> frozenset[int]:
+        return frozenset(mio.message_id(n) for n in getattr(self, key))
 
 
 @dataclass(frozen=True)
@@ -37,8 +68,22 @@ class MavlinkConfig:
     read_burst: int = field(default=64, metadata={"ge": 1})
     tlog_dir: str = ""
     tlog_max_bytes: int = field(default=64 * 1024 * 1024, metadata={"ge": 4096})
+    tlog_dir_max_bytes: int = field(
+        default=1024 * 1024 * 1024, metadata={"ge": 4096, "doc": "oldest .tlog deleted beyond"}
+    )
+    tlog_min_free_bytes: int = field(
+        default=200 * 1024 * 1024, metadata={"ge": 0, "doc": "stop the tlog below this free"}
+    )
     param_file: str = ""
     signing_key_file: str = ""
+    signing_state_file: str = field(
+        default="", metadata={"doc": "last signing timestamps; default <signing_key_file>.state"}
+    )
+    command_retries: int = field(default=5, metadata={"ge": 1, "le": 20})
+    command_retry_s: float = field(default=1.0, metadata={"gt": 0.0})
+    report_stats_s: float = field(
+        default=0.0, metadata={"ge": 0.0, "doc": "log the counters this often; 0 = off"}
+    )
     reconnect_max_s: float = field(
         default=5.0, metadata={"gt": 0.0, "doc": "serial links: longest wait between reopens"}
     )
