@@ -217,7 +217,7 @@ def _epilog(key: str, extra: str = "") -> str:
     return (extra + "\n\n" if extra else "") + f"example:\n  {EXAMPLES[key]}"
 
 
-def _subparser(sub: argparse._SubParsersAction[argparse.ArgumentParser], name: str,
+def _subparser(sub: argparse._SubParsersAction[_Parser], name: str,
                help_text: str, key: str | None = None,
                extra: str = "") -> argparse.ArgumentParser:
     return sub.add_parser(name, help=help_text, description=help_text,

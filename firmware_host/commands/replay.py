@@ -267,7 +267,7 @@ def print_summary(s: dict[str, Any], stream: TextIO) -> None:
 
 def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
-    nmea_url, mav_url = output_urls(cfg, args.nmea_out, args.mavlink)
+    nmea_url, _mav_url = output_urls(cfg, args.nmea_out, args.mavlink)
     if nmea_url and not nmea_url.startswith("pty:"):  # a wrong port must not look like success
         check_port_opens(nmea_url, "--nmea-out", cfg.rover.output.nmea_baudrate)
     sinks = build_sinks(cfg, args.nmea_out, args.mavlink)
