@@ -219,7 +219,7 @@ def _epilog(key: str, extra: str = "") -> str:
 
 def _subparser(sub: argparse._SubParsersAction[_Parser], name: str,
                help_text: str, key: str | None = None,
-               extra: str = "") -> argparse.ArgumentParser:
+               extra: str = "") -> _Parser:
     return sub.add_parser(name, help=help_text, description=help_text,
                           epilog=_epilog(key or name, extra), formatter_class=_HelpFormatter)
 
