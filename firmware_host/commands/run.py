@@ -42,6 +42,12 @@ from drivers.mavlink.links import is_network_url
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port, open_port_nonblocking
 from firmware_host.commands import mavlink as mavlink_cmd
+from firmware_host.commands.checks import (
+    mavlink_url_arg,
+    output_dir_arg,
+    output_url_arg,
+    positive_float,
+)
 from firmware_host.rov.app import run_rov
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
@@ -286,12 +292,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True,
                         help="config file or preset name; [rover] -> rover, [rov] -> ROV, "
                              "[mavlink] -> the router (with [rover])")
-    parser.add_argument("--out", type=Path, default=None, help="write epochs.jsonl/summary.json")
-    parser.add_argument("--nmea-out", default=None, help="rover: corrected NMEA to this URL")
-    parser.add_argument("--mavlink", default=None, help="rover: GPS_INPUT to this MAVLink URL")
-    parser.add_argument("--record", type=Path, default=None,
+    parser.add_argument("--out", type=output_dir_arg, default=None,
+                        help="write epochs.jsonl/summary.json here (default: none)")
+    parser.add_argument("--nmea-out", type=output_url_arg, default=None,
+                        help="rover: corrected NMEA to this URL or pty:PATH "
+                             "(default: the config's)")
+    parser.add_argument("--mavlink", type=mavlink_url_arg, default=None,
+                        help="rover: GPS_INPUT to this MAVLink URL (default: the config's)")
+    parser.add_argument("--record", type=output_dir_arg, default=None,
                         help="flight recorder directory (overrides [recorder] dir)")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--duration", type=positive_float, default=None,
                         help="stop after this many seconds (default: until SIGTERM or ^C)")
 
 
