@@ -30,7 +30,6 @@ import time
 import traceback
 from collections import Counter
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,6 +51,7 @@ from drivers.outland.framecodec import Framer, checksum, decode, load_protocol
 from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, encode_telemetry
 from drivers.ratelog import RateLimitedLog
 from fdi.errors import DecodeError
+from firmware_host.commands.checks import output_file_arg, positive_float, positive_int
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.runtime.config import resolve_protocol
 
@@ -362,12 +362,15 @@ def run_fuzz(
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seconds", type=float, default=60.0, help="time per codec")
-    parser.add_argument("--inputs", type=int, default=None, help="stop after this many inputs")
+    parser.add_argument("--seconds", type=positive_float, default=60.0,
+                        help="time per codec, s")
+    parser.add_argument("--inputs", type=positive_int, default=None,
+                        help="stop after this many inputs per codec (overrides --seconds)")
     parser.add_argument("--codec", choices=CODECS, action="append", default=None,
                         help="codec to fuzz (repeatable; default: all three)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=None, help="write the report as JSON")
+    parser.add_argument("--seed", type=int, default=0, help="mutation seed")
+    parser.add_argument("--out", type=output_file_arg, default=None,
+                        help="write the report as JSON to this file")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -41,7 +41,10 @@ from drivers.gps.nmea import (
     format_time,
     with_checksum,
 )
+from fdi.errors import UsageError
 from fdi.geodesy import LocalFrame
+from firmware_host.commands.checks import output_dir_arg, positive_float
+from firmware_host.commands.tables import fields
 
 FaultKind = Literal["jump", "burst", "ramp", "frozen", "outage"]
 
@@ -337,23 +340,32 @@ def write_run(sc: RoverScenario, out_dir: Path) -> dict[str, object]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=10.0, choices=[1.0, 5.0, 10.0],
                         help="receiver rate in Hz (1, 5 or 10)")
-    parser.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--duration", type=positive_float, default=600.0,
+                        help="seconds of driving")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (faults and noise)")
     parser.add_argument("--gst", action="store_true", help="also send GST error estimates")
     parser.add_argument("--zda", action="store_true", help="also send ZDA")
     parser.add_argument("--kinds", default="jump,burst",
                         help="fault kinds, comma separated: jump,burst,ramp,frozen,outage")
-    parser.add_argument("--out", required=True, type=Path, help="output directory")
+    parser.add_argument("--out", required=True, type=output_dir_arg,
+                        help="output directory (rover.nmea, rover.cap, truth.jsonl, ...)")
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     kinds = tuple(k.strip() for k in args.kinds.split(",") if k.strip())
     bad = [k for k in kinds if k not in ("jump", "burst", "ramp", "frozen", "outage")]
     if bad:
-        print(f"fdi-bridge sim rover: unknown fault kind(s): {', '.join(bad)}")
-        return 2
+        raise UsageError(f"--kinds: unknown fault kind(s): {', '.join(bad)} (known: jump, "
+                         "burst, ramp, frozen, outage)")
+    if args.duration * args.rate < 1:
+        raise UsageError(f"--duration {args.duration:g}: shorter than one epoch at "
+                         f"{args.rate:g} Hz")
     sc = RoverScenario(rate_hz=args.rate, duration_s=args.duration, seed=args.seed,
                        gst=args.gst, zda=args.zda, kinds=kinds)
     summary = write_run(sc, args.out)
-    print(json.dumps(summary))
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(fields([(k.replace("_", " "), v, "") for k, v in summary.items()]))
     return 0
