@@ -214,7 +214,8 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter,
 
 
 def _epilog(key: str, extra: str = "") -> str:
-    return (extra + "\n\n" if extra else "") + f"example:\n  {EXAMPLES[key]}"
+    example = f"example:\n  {EXAMPLES[key]}" if key in EXAMPLES else ""
+    return "\n\n".join(x for x in (extra, example) if x)
 
 
 def _subparser(sub: argparse._SubParsersAction[_Parser], name: str,
@@ -312,6 +313,30 @@ def _setup_logging(level: int) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        return _main(argv)
+    except Exception as err:  # the last line of defence: one line, no traceback (issue 17)
+        verbose = _verbose_argv(argv)
+        hint = "" if verbose else " (run with -v for the traceback)"
+        print(f"fdi-bridge: internal error: {type(err).__name__}: {err}{hint}", file=sys.stderr)
+        if verbose:
+            traceback.print_exc(file=sys.stderr)
+        return 1
+
+
+def _verbose_argv(argv: Sequence[str]) -> bool:
+    """``-v`` (or ``--log-level info|debug``) anywhere on the command line."""
+    for i, a in enumerate(argv):
+        if a == "--verbose" or (a.startswith("-v") and set(a[1:]) == {"v"}):
+            return True
+        if a == "--log-level" and i + 1 < len(argv) and argv[i + 1] in ("debug", "info"):
+            return True
+        if a in ("--log-level=debug", "--log-level=info"):
+            return True
+    return False
+
+
+def _main(argv: list[str]) -> int:
     args = _demo_args(argv)
     if args is None:
         parser = build_parser(argv)
@@ -341,7 +366,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fdi-bridge: configuration error: {err}", file=sys.stderr)
         return 2
     except FdiBridgeError as err:
-        print(f"fdi-bridge {name}: {err}", file=sys.stderr)
+        print(f"fdi-bridge {name}: {str(err).removeprefix(f'{name}: ')}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("fdi-bridge: interrupted", file=sys.stderr)
@@ -353,13 +378,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as err:  # a file or device the checks could not foresee (disk full, EIO)
         where = f": {err.filename}" if err.filename else ""
         print(f"fdi-bridge {name}: {err.strerror or err}{where}", file=sys.stderr)
-        _traceback_if_verbose(level)
-        return 1
-    except Exception as err:  # the last line of defence: one line, no traceback (issue 17)
-        print(f"fdi-bridge: internal error: {type(err).__name__}: {err} (run with -v for the "
-              "traceback)" if level > logging.INFO else
-              f"fdi-bridge: internal error: {type(err).__name__}: {err}", file=sys.stderr)
-        _traceback_if_verbose(level)
+        if level <= logging.INFO:
+            traceback.print_exc(file=sys.stderr)
         return 1
 
 
@@ -368,12 +388,6 @@ def _command_name(args: argparse.Namespace) -> str:
     if args.command == "demo":
         sub = str(args._module).rsplit("_", 1)[-1]
     return " ".join(x for x in (args.command, sub) if x)
-
-
-def _traceback_if_verbose(level: int) -> None:
-    """The traceback of the exception being handled, with ``-v`` or ``--log-level debug``."""
-    if level <= logging.INFO:
-        traceback.print_exc(file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from fdi.errors import UsageError
 from firmware_host.commands.checks import (
     mavlink_url_arg,
     non_negative_float,
@@ -62,6 +63,9 @@ def run(args: argparse.Namespace) -> int:
                 print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
         return 0
     bf: BridgeFile | None = getattr(args, "bridge_file", None)  # already read by `run`
+    if bf is None and not (args.config or args.autopilot or args.gcs):
+        raise UsageError("give --config FILE, or --autopilot URL and --gcs URL (the defaults "
+                         "would route udpin:127.0.0.1:14555 <-> udpin:127.0.0.1:14550 silently)")
     if bf is None:
         bf = load_bridge_file(args.config) if args.config else BridgeFile()
     cfg = mavlink_config(bf)
