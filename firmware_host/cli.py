@@ -207,7 +207,8 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter,
     does not state it already."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        if (action.default in (None, False) or action.default is argparse.SUPPRESS
+        if (action.default is None or action.default is False
+                or action.default is argparse.SUPPRESS
                 or "default" in (action.help or "")):
             return action.help
         return super()._get_help_string(action)
@@ -264,6 +265,18 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def demo_parser(kind: str) -> argparse.ArgumentParser:
+    """``fdi-bridge demo KIND``'s own parser."""
+    dmod, dhelp = DEMO_COMMANDS[kind]
+    others = ", ".join(f"fdi-bridge demo {k}" for k in DEMO_COMMANDS if k != kind)
+    dparser = _Parser(prog=f"fdi-bridge demo {kind}", description=dhelp,
+                      epilog=_epilog(f"demo {kind}", f"other demos: {others}"),
+                      formatter_class=_HelpFormatter)
+    _logging_options(dparser, sub=True)
+    _load(_args_module(dmod)).add_arguments(dparser)
+    return dparser
+
+
 def _demo_args(argv: list[str]) -> argparse.Namespace | None:
     """``fdi-bridge [options] demo [KIND] [options]``: the KIND's own parser takes the options."""
     command, _ = _command_of(argv)
@@ -281,14 +294,8 @@ def _demo_args(argv: list[str]) -> argparse.Namespace | None:
         known = ", ".join(sorted(DEMO_COMMANDS))
         print(f"fdi-bridge demo: error: unknown demo {kind!r} (known: {known})", file=sys.stderr)
         raise SystemExit(2)
-    dmod, dhelp = DEMO_COMMANDS[kind]
-    others = ", ".join(f"fdi-bridge demo {k}" for k in DEMO_COMMANDS if k != kind)
-    dparser = _Parser(prog=f"fdi-bridge demo {kind}", description=dhelp,
-                      epilog=_epilog(f"demo {kind}", f"other demos: {others}"),
-                      formatter_class=_HelpFormatter)
-    _logging_options(dparser, sub=True)
-    _load(_args_module(dmod)).add_arguments(dparser)
-    args = dparser.parse_args(rest)
+    dmod = DEMO_COMMANDS[kind][0]
+    args = demo_parser(kind).parse_args(rest)
     for key, value in vars(glob).items():
         setattr(args, key, value)
     args.command = "demo"
