@@ -9,6 +9,7 @@ it off on a terminal too. A job reports its steps with :meth:`Progress.step`.
 from __future__ import annotations
 
 import logging
+import shutil
 import sys
 from types import TracebackType
 
@@ -24,8 +25,11 @@ class Progress:
     """A bar of ``total`` steps named ``desc``; a context manager that closes the bar."""
 
     def __init__(self, total: int | None, desc: str, unit: str = "step") -> None:
+        # The width from the terminal, else $COLUMNS, else 80 (a pty of size 0x0 would make
+        # tqdm draw nothing).
+        width = shutil.get_terminal_size((80, 24)).columns
         self.bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False,
-                        disable=True if quiet() else None, dynamic_ncols=True)
+                        disable=True if quiet() else None, ncols=width)
 
     @property
     def shown(self) -> bool:
