@@ -105,6 +105,23 @@ def test_replay_epochs_contract_unchanged_by_the_cli(run_dir: Path, tmp_path: Pa
         tmp_path / "lib" / "epochs.jsonl").read_bytes()
 
 
+def _sentence(body: str) -> bytes:
+    ck = 0
+    for ch in body.encode():
+        ck ^= ch
+    return f"${body}*{ck:02X}\r\n".encode()
+
+
+def test_nmea_without_a_position_is_said_not_an_error(tmp_path: Path) -> None:
+    """A heading-only log (an autopilot's HDM) is NMEA: exit 0, with a warning, 0 epochs."""
+    log = tmp_path / "heading.nmea"
+    log.write_bytes(b"".join(_sentence(f"APHDM,{h:.1f},M") for h in range(0, 50, 5)))
+    proc = _cli("replay", str(log), "--out", str(tmp_path / "o"), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "no position sentences (GGA, RMC, GLL), only APHDM 10" in proc.stderr
+    assert "no NMEA sentences found" not in proc.stderr
+
+
 def test_damaged_capture_is_reported_on_the_console(run_dir: Path, tmp_path: Path) -> None:
     data = bytearray((run_dir / "rover.cap").read_bytes())
     data[len(data) // 2] ^= 0x10  # one flipped bit in the middle

@@ -2,7 +2,8 @@
 
 :func:`replay_text` is ``fdi-bridge replay``'s end summary (an aligned table with units, see
 :mod:`firmware_host.commands.tables`); :func:`replay_problems` says what makes a replay useless
-or doubtful: no NMEA sentence at all (exit 1), a damaged capture, an output that lost bytes.
+or doubtful: no NMEA sentence at all (exit 1); NMEA without a position, a damaged capture, an
+output that lost bytes (warnings).
 """
 
 from __future__ import annotations
@@ -60,6 +61,11 @@ def replay_problems(s: dict[str, Any]) -> tuple[str | None, list[str]]:
     if s.get("output_errors"):
         warnings.append(f"{s['output_errors']} output errors (see the log)")
     if not inp.get("sentences") and not s.get("partial"):
-        what = "empty" if not inp.get("bytes_in") else f"{inp.get('bytes_in')} bytes"
-        return f"no NMEA sentences found in {inp.get('file', 'the input')} ({what})", warnings
+        ignored = inp.get("ignored") or {}
+        if not ignored:
+            what = "empty" if not inp.get("bytes_in") else f"{inp.get('bytes_in')} bytes"
+            return f"no NMEA sentences found in {inp.get('file', 'the input')} ({what})", warnings
+        # NMEA, but nothing with a position (a heading or autopilot log): said, not an error.
+        warnings.append(f"{inp.get('file', 'input')}: no position sentences (GGA, RMC, GLL), "
+                        f"only {_counts(ignored)}: 0 epochs")
     return None, warnings

@@ -371,6 +371,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="mutation seed")
     parser.add_argument("--out", type=output_file_arg, default=None,
                         help="write the report as JSON to this file")
+    parser.add_argument("--json", action="store_true",
+                        help="print the reports as JSON (one object per codec) instead of text")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -379,6 +381,9 @@ def run(args: argparse.Namespace) -> int:
         rep = run_fuzz(codec, seconds=None if args.inputs else args.seconds,
                        max_inputs=args.inputs, seed=args.seed)
         reports.append(rep)
+        if args.json:
+            print(json.dumps(rep))
+            continue
         print(f"{codec}: {rep['inputs']} inputs ({rep['bytes']} bytes) in {rep['seconds']} s, "
               f"{rep['failures']} failures")
         for ex in rep["examples"]:
