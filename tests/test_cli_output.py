@@ -23,7 +23,7 @@ import pytest
 
 from firmware_host.commands import doctor
 from firmware_host.commands.replay import run_replay
-from firmware_host.commands.tables import fields, fmt, table
+from firmware_host.commands.tables import fields, fmt, summary_rows, table
 from firmware_host.devtools import bench
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 from firmware_host.runtime.config import load_config
@@ -69,6 +69,25 @@ def test_table_aligns_columns_numbers_right() -> None:
 def test_fields_puts_units_after_values() -> None:
     out = fields([("epochs", 200, ""), ("p99", 0.1483, "ms/epoch")])
     assert out.splitlines() == ["epochs    200", "p99     0.148 ms/epoch"]
+
+
+def test_summary_rows_take_the_unit_from_the_key() -> None:
+    assert summary_rows({"first_fault_t": 70.6, "max_abs_err_after_fault_deg": 0.6202000000000112,
+                         "epochs": 651}) == [("first fault", 70.6, "s"),
+                                             ("max abs err after fault", 0.6202000000000112,
+                                              "deg"), ("epochs", 651, "")]
+
+
+@pytest.mark.parametrize("kind", ["rover", "rov"])
+def test_sim_prints_a_table_or_json(kind: str, tmp_path: Path) -> None:
+    extra = ["--duration", "20"]
+    text = _cli("sim", kind, *extra, "--out", str(tmp_path / "t"), cwd=tmp_path)
+    js = _cli("sim", kind, *extra, "--out", str(tmp_path / "j"), "--json", cwd=tmp_path)
+    assert text.returncode == 0 and js.returncode == 0, text.stderr + js.stderr
+    doc = json.loads(js.stdout)
+    first = text.stdout.splitlines()[0].split()
+    assert first == ["epochs", str(doc["epochs"])]
+    assert "{" not in text.stdout
 
 
 # --------------------------------------------------------------------------- replay

@@ -79,3 +79,22 @@ def fields(rows: Sequence[tuple[str, Any, str]], *, digits: int = 3, indent: str
         cell = text.rjust(width) if _is_number(value) or value is None else text
         out.append(f"{indent}{label.ljust(labels)}  {cell} {unit}".rstrip())
     return "\n".join(out)
+
+
+# Key suffixes that carry the unit (``duration_s``, ``max_abs_err_deg``, ``first_fault_t``).
+_UNITS = (("_deg", "deg"), ("_ms", "ms"), ("_s", "s"), ("_t", "s"), ("_m", "m"), ("_hz", "Hz"),
+          ("_pct", "%"))
+
+
+def summary_rows(summary: Mapping[str, Any]) -> list[tuple[str, Any, str]]:
+    """A flat summary dictionary as :func:`fields` rows: ``first_fault_t`` ->
+    ``("first fault", 70.6, "s")``; nested dictionaries as ``key value, ...``."""
+    rows = []
+    for key, value in summary.items():
+        unit = ""
+        for suffix, name in _UNITS:
+            if key.endswith(suffix):
+                key, unit = key[: -len(suffix)], name
+                break
+        rows.append((key.replace("_", " "), value, unit))
+    return rows

@@ -44,7 +44,7 @@ from drivers.gps.nmea import (
 from fdi.errors import UsageError
 from fdi.geodesy import LocalFrame
 from firmware_host.commands.checks import output_dir_arg, positive_float
-from firmware_host.commands.tables import fields
+from firmware_host.commands.tables import fields, summary_rows
 
 FaultKind = Literal["jump", "burst", "ramp", "frozen", "outage"]
 
@@ -367,5 +367,5 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary))
     else:
-        print(fields([(k.replace("_", " "), v, "") for k, v in summary.items()]))
+        print(fields(summary_rows(summary)))
     return 0

@@ -24,7 +24,7 @@ from drivers.outland.link import OutlandLink, Telemetry
 from drivers.transport import SerialSettings, open_port
 from fdi.errors import UsageError
 from firmware_host.commands.checks import output_dir_arg, positive_float
-from firmware_host.commands.tables import fields
+from firmware_host.commands.tables import fields, summary_rows
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import RovPlant, parse_fault
 from firmware_host.rov.config import RovConfig, load_rov_config, protocol_path
@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary))
     else:
-        print(fields([(k.replace("_", " "), v, "") for k, v in summary.items()]))
+        print(fields(summary_rows(summary)))
         print(f"wrote {out / 'epochs.jsonl'} and {out / 'summary.json'}")
     return 0
 
