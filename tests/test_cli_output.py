@@ -5,7 +5,6 @@ goals with a verdict, progress bars on a terminal only (a real pty), ^C keeping 
 
 from __future__ import annotations
 
-import argparse
 import fcntl
 import json
 import os
@@ -21,6 +20,7 @@ from typing import Any
 
 import pytest
 
+from firmware_host import cli
 from firmware_host.commands import doctor
 from firmware_host.commands.replay import run_replay
 from firmware_host.commands.tables import fields, fmt, summary_rows, table
@@ -236,8 +236,8 @@ def test_bench_strict_fails_on_a_miss(monkeypatch: pytest.MonkeyPatch, tmp_path:
         return into
 
     monkeypatch.setattr(bench, "run_bench", fake)
-    args = argparse.Namespace(duration=1.0, replay_duration=1.0, e2e_epochs=1,
-                              json=tmp_path / "b.json", strict=strict)
+    argv = ["bench", "--json", str(tmp_path / "b.json"), *(["--strict"] if strict else [])]
+    args = cli.build_parser(argv).parse_args(argv)
     assert bench.run(args) == status
     assert "1 of 4 goals missed" in capsys.readouterr().out
     doc = json.loads((tmp_path / "b.json").read_text())
