@@ -65,3 +65,8 @@ class CaptureFormatError(FdiBridgeError):
 
 class EstimatorError(FdiBridgeError):
     """An estimator was given input it cannot use (for example an IMU rate too low)."""
+
+
+class UsageError(FdiBridgeError):
+    """A command-line argument is wrong (a path, URL or number): the command exits 2 before its
+    work starts. The message names the option, what was expected and what was found."""

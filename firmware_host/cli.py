@@ -19,15 +19,18 @@ of the job, 2 bad configuration or usage.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import importlib.metadata
 import logging
+import os
 import sys
+import traceback
 from collections.abc import Sequence
-from typing import Protocol
+from typing import NoReturn, Protocol
 
 import firmware_host
-from fdi.errors import ConfigError, ConfigErrors, FdiBridgeError
+from fdi.errors import ConfigError, ConfigErrors, FdiBridgeError, UsageError
 
 log = logging.getLogger("fdi_bridge")
 
@@ -115,6 +118,34 @@ DEMO_COMMANDS: dict[str, tuple[str, str]] = {
     "rov": ("firmware_host.commands.demo_rov", "ROV compass drift 30 deg with and without FT"),
 }
 
+# One example per command, shown at the end of its --help (issue 17).
+EXAMPLES: dict[str, str] = {
+    "demo": "fdi-bridge demo --duration 120 --out demo-out",
+    "demo rover": "fdi-bridge demo rover --duration 120 --out demo-out",
+    "demo rov": "fdi-bridge demo rov --drift 20 --out rov-demo",
+    "replay": "fdi-bridge replay --config rover run/rover.nmea --out replayed",
+    "record": "fdi-bridge record /dev/ttyUSB0 --baud 115200 --duration 600 --out gps.cap",
+    "run": "fdi-bridge run --config rover --out run-out --record rec",
+    "eval": "fdi-bridge eval replayed --truth run/truth.jsonl   (or: fdi-bridge eval --suite "
+            "--quick)",
+    "bench": "fdi-bridge bench --duration 10 --json bench.json",
+    "doctor": "fdi-bridge doctor --config rover",
+    "fuzz": "fdi-bridge fuzz --seconds 5 --codec nmea --out fuzz.json",
+    "soak": "fdi-bridge soak --minutes 10 --out soak.json",
+    "fleet": "fdi-bridge fleet logs/ --workers 2 --sweep rover.detector.gate_sigmas=4,6,8 "
+             "--out fleet-out",
+    "mavlink": "fdi-bridge mavlink --autopilot udpin:127.0.0.1:14555 --gcs "
+               "udpout:127.0.0.1:14550 --seconds 60",
+    "presets": "fdi-bridge presets --json",
+    "config": "fdi-bridge config check rover   (or: fdi-bridge config show my-rover.toml)",
+    "sim": "fdi-bridge sim rover --duration 60 --out run",
+    "sim rover": "fdi-bridge sim rover --duration 60 --kinds jump,ramp --out run",
+    "sim rover-harness": "fdi-bridge sim rover-harness --seeds 1,2 --rates 10 --duration 600",
+    "sim rov": "fdi-bridge sim rov --fault drift:30@70 --out rov-run",
+    "sim insgnss": "fdi-bridge sim insgnss --scenario paper-single --out ins-run",
+    "sim insgnss-report": "fdi-bridge sim insgnss-report --seeds 1-2 --out insgnss.md",
+}
+
 LOG_LEVELS = ("debug", "info", "warning", "error", "critical")
 _VALUE_OPTIONS = ("--log-level",)  # global options that take a value
 
@@ -168,21 +199,36 @@ def _command_of(argv: Sequence[str]) -> tuple[str | None, str | None]:
     return command, kind
 
 
-class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+class _Parser(argparse.ArgumentParser):
+    """A usage error is one line (what was wrong, and where the help is), exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see: {self.prog} --help)\n")
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter,
+                     argparse.ArgumentDefaultsHelpFormatter):
     """Defaults shown where there is one to show (not ``None`` or ``False``) and the help text
     does not state it already."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        if (action.default in (None, False) or action.default is argparse.SUPPRESS
+        if (action.default is None or action.default is False
+                or action.default is argparse.SUPPRESS
                 or "default" in (action.help or "")):
             return action.help
         return super()._get_help_string(action)
 
 
-def _subparser(sub: argparse._SubParsersAction[argparse.ArgumentParser], name: str,
-               help_text: str) -> argparse.ArgumentParser:
+def _epilog(key: str, extra: str = "") -> str:
+    example = f"example:\n  {EXAMPLES[key]}" if key in EXAMPLES else ""
+    return "\n\n".join(x for x in (extra, example) if x)
+
+
+def _subparser(sub: argparse._SubParsersAction[_Parser], name: str,
+               help_text: str, key: str | None = None,
+               extra: str = "") -> _Parser:
     return sub.add_parser(name, help=help_text, description=help_text,
-                          formatter_class=_HelpFormatter)
+                          epilog=_epilog(key or name, extra), formatter_class=_HelpFormatter)
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
@@ -190,7 +236,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     ``argv=None``: every command's (imports all of them; for documentation tools)."""
     command, kind = _command_of(argv) if argv is not None else (None, None)
     everything = argv is None
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fdi-bridge",
         description="Fault detection and isolation between navigation sensors and a controller.",
         allow_abbrev=False,  # _command_of skips the global options by their full names
@@ -199,7 +245,9 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     _logging_options(parser, sub=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_text) in COMMANDS.items():
-        p = _subparser(sub, name, help_text)
+        others = "other demos: " + ", ".join(f"fdi-bridge demo {k}" for k in DEMO_COMMANDS
+                                             if k != "rover") if name == "demo" else ""
+        p = _subparser(sub, name, help_text, extra=others)
         if name == "demo":  # parsed by _demo_args; here for the list of commands and -h
             p.add_argument("kind", nargs="?", default="rover", choices=sorted(DEMO_COMMANDS),
                            help="which demo: " + "; ".join(
@@ -214,12 +262,24 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     sim = _subparser(sub, "sim", "simulate a vehicle and its sensors")
     ssub = sim.add_subparsers(dest="sim_kind", metavar="KIND", required=True)
     for skind, (smod, shelp) in SIM_COMMANDS.items():
-        sp = _subparser(ssub, skind, shelp)
+        sp = _subparser(ssub, skind, shelp, key=f"sim {skind}")
         if everything or (command == "sim" and skind == kind):
             _logging_options(sp, sub=True)
             sp.set_defaults(_module=_run_module(smod))
             _load(_args_module(smod)).add_arguments(sp)
     return parser
+
+
+def demo_parser(kind: str) -> argparse.ArgumentParser:
+    """``fdi-bridge demo KIND``'s own parser."""
+    dmod, dhelp = DEMO_COMMANDS[kind]
+    others = ", ".join(f"fdi-bridge demo {k}" for k in DEMO_COMMANDS if k != kind)
+    dparser = _Parser(prog=f"fdi-bridge demo {kind}", description=dhelp,
+                      epilog=_epilog(f"demo {kind}", f"other demos: {others}"),
+                      formatter_class=_HelpFormatter)
+    _logging_options(dparser, sub=True)
+    _load(_args_module(dmod)).add_arguments(dparser)
+    return dparser
 
 
 def _demo_args(argv: list[str]) -> argparse.Namespace | None:
@@ -228,7 +288,7 @@ def _demo_args(argv: list[str]) -> argparse.Namespace | None:
     if command != "demo":
         return None
     head = argv[: argv.index("demo")]
-    top = argparse.ArgumentParser(prog="fdi-bridge", add_help=False)
+    top = _Parser(prog="fdi-bridge", add_help=False)
     _logging_options(top, sub=False)
     glob = top.parse_args(head)
     rest = argv[argv.index("demo") + 1:]
@@ -237,15 +297,10 @@ def _demo_args(argv: list[str]) -> argparse.Namespace | None:
         kind = rest.pop(0)
     if kind not in DEMO_COMMANDS:
         known = ", ".join(sorted(DEMO_COMMANDS))
-        raise SystemExit(f"fdi-bridge demo: unknown demo {kind!r} (known: {known})")
-    dmod, dhelp = DEMO_COMMANDS[kind]
-    others = ", ".join(f"fdi-bridge demo {k}" for k in DEMO_COMMANDS if k != kind)
-    dparser = argparse.ArgumentParser(prog=f"fdi-bridge demo {kind}", description=dhelp,
-                                      epilog=f"other demos: {others}",
-                                      formatter_class=_HelpFormatter)
-    _logging_options(dparser, sub=True)
-    _load(_args_module(dmod)).add_arguments(dparser)
-    args = dparser.parse_args(rest)
+        print(f"fdi-bridge demo: error: unknown demo {kind!r} (known: {known})", file=sys.stderr)
+        raise SystemExit(2)
+    dmod = DEMO_COMMANDS[kind][0]
+    args = demo_parser(kind).parse_args(rest)
     for key, value in vars(glob).items():
         setattr(args, key, value)
     args.command = "demo"
@@ -270,6 +325,30 @@ def _setup_logging(level: int) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        return _main(argv)
+    except Exception as err:  # the last line of defence: one line, no traceback (issue 17)
+        verbose = _verbose_argv(argv)
+        hint = "" if verbose else " (run with -v for the traceback)"
+        print(f"fdi-bridge: internal error: {type(err).__name__}: {err}{hint}", file=sys.stderr)
+        if verbose:
+            traceback.print_exc(file=sys.stderr)
+        return 1
+
+
+def _verbose_argv(argv: Sequence[str]) -> bool:
+    """``-v`` (or ``--log-level info|debug``) anywhere on the command line."""
+    for i, a in enumerate(argv):
+        if a == "--verbose" or (a.startswith("-v") and set(a[1:]) == {"v"}):
+            return True
+        if a == "--log-level" and i + 1 < len(argv) and argv[i + 1] in ("debug", "info"):
+            return True
+        if a in ("--log-level=debug", "--log-level=info"):
+            return True
+    return False
+
+
+def _main(argv: list[str]) -> int:
     args = _demo_args(argv)
     if args is None:
         parser = build_parser(argv)
@@ -280,10 +359,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command is None:
             parser.print_help()
             return 2
-    _setup_logging(_log_level(args))
+    level = _log_level(args)
+    _setup_logging(level)
+    name = _command_name(args)
     try:
         module = _load(args._module)
         return int(module.run(args))
+    except UsageError as err:
+        print(f"fdi-bridge {name}: error: {err}", file=sys.stderr)
+        return 2
     except ConfigErrors as err:
         print(f"fdi-bridge: configuration error: {len(err.errors)} errors in {err.file}:",
               file=sys.stderr)
@@ -294,11 +378,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fdi-bridge: configuration error: {err}", file=sys.stderr)
         return 2
     except FdiBridgeError as err:
-        print(f"fdi-bridge: {err}", file=sys.stderr)
+        print(f"fdi-bridge {name}: {str(err).removeprefix(f'{name}: ')}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("fdi-bridge: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `fdi-bridge ... | head`: the reader has gone, nothing to say
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - no flush error at exit
+        return 1
+    except OSError as err:  # a file or device the checks could not foresee (disk full, EIO)
+        where = f": {err.filename}" if err.filename else ""
+        print(f"fdi-bridge {name}: {err.strerror or err}{where}", file=sys.stderr)
+        if level <= logging.INFO:
+            traceback.print_exc(file=sys.stderr)
+        return 1
+
+
+def _command_name(args: argparse.Namespace) -> str:
+    sub = getattr(args, "sim_kind", None) if args.command == "sim" else None
+    if args.command == "demo":
+        sub = str(args._module).rsplit("_", 1)[-1]
+    return " ".join(x for x in (args.command, sub) if x)
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@ options on either side of the command, ``presets`` and ``config check|show``."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import logging
 import os
@@ -49,8 +50,11 @@ def test_top_level_help_imports_no_command() -> None:
     assert "numpy" not in mods
 
 
-def test_running_replay_imports_only_what_replay_needs() -> None:
-    mods = _modules_after(["replay", "--config", "rover", "/nonexistent", "--out", "/x"])
+def test_running_replay_imports_only_what_replay_needs(tmp_path: Path) -> None:
+    # A real (empty) input: a missing one is refused while parsing, before replay is imported.
+    (tmp_path / "empty.nmea").write_bytes(b"")
+    mods = _modules_after(["replay", "--config", "rover", str(tmp_path / "empty.nmea"), "--out",
+                           str(tmp_path / "out")])
     assert "firmware_host.commands.replay" in mods
     for other in ("firmware_host.devtools.insgnss_sim", "firmware_host.devtools.bench",
                   "firmware_host.commands.mavlink", "firmware_host.mavlink.router"):
@@ -73,6 +77,62 @@ def test_help_of_every_command(command: list[str], capsys: pytest.CaptureFixture
     assert out.startswith("usage: fdi-bridge")
     if command != ["sim"]:  # "sim" only lists its kinds
         assert "--log-level" in out  # the logging options, on every command's parser
+
+
+def _every_parser() -> list[tuple[str, argparse.ArgumentParser]]:
+    """(command, parser) for every command, sim kind and demo kind."""
+    top = cli.build_parser(None)
+    out: list[tuple[str, argparse.ArgumentParser]] = []
+    subs = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
+    for name, p in subs.choices.items():
+        if name == "sim":
+            ssubs = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
+            out += [(f"sim {k}", sp) for k, sp in ssubs.choices.items()]
+        elif name != "demo":
+            out.append((name, p))
+    out += [(f"demo {k}", cli.demo_parser(k)) for k in cli.DEMO_COMMANDS]
+    return out
+
+
+def test_every_option_has_help_and_every_command_an_example() -> None:
+    parsers = _every_parser()
+    assert len(parsers) == len(cli.COMMANDS) - 1 + len(cli.SIM_COMMANDS) + len(cli.DEMO_COMMANDS)
+    for name, parser in parsers:
+        for action in parser._actions:
+            assert action.help, f"{name}: {action.option_strings or action.dest} has no help"
+        assert parser.epilog and "example:\n  fdi-bridge " + name.split()[0] in parser.epilog, name
+        formatter = cli._HelpFormatter(parser.prog)
+        for action in parser._actions:  # a default worth stating is stated
+            if action.default is None or action.default is False or action.default in (
+                    argparse.SUPPRESS, []):
+                continue
+            shown = formatter._get_help_string(action) or ""
+            assert "default" in shown, (name, action.dest, shown)
+
+
+@pytest.mark.parametrize(("command", "option", "shown"), [
+    (["replay"], "--speed", "(default: 0.0)"),
+    (["record"], "--baud", "(default: 9600)"),
+    (["record"], "--parity", "(default: N)"),
+    (["bench"], "--duration", "(default: 60.0)"),
+    (["sim", "rov"], "--duration", "(default: 130.0)"),
+    (["demo", "rover"], "--duration", "(default: 600.0)"),
+])
+def test_help_shows_defaults(command: list[str], option: str, shown: str,
+                             capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        cli.main([*command, "--help"])
+    out = " ".join(capsys.readouterr().out.split())  # argparse wraps the help text
+    options = out[out.index("options:"):]
+    after = options[options.index(option + " "):]
+    assert shown in after[:200]
+
+
+def test_record_has_the_line_settings() -> None:
+    args = cli.build_parser(["record"]).parse_args(
+        ["record", "loop://", "--out", "x.cap", "--parity", "E", "--bytesize", "7",
+         "--stopbits", "2"])
+    assert (args.parity, args.bytesize, args.stopbits) == ("E", 7, 2.0)
 
 
 def test_demo_help_names_the_other_demo(capsys: pytest.CaptureFixture[str]) -> None:

@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from firmware_host.commands.checks import output_dir_arg
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import parse_fault
 from firmware_host.rov.config import load_rov_config
@@ -17,9 +18,12 @@ from firmware_host.rov.config import load_rov_config
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default=None, help="ROV preset (default: built-in)")
-    parser.add_argument("--drift", type=float, default=30.0, help="drift fault, deg")
-    parser.add_argument("--out", default="rov-demo", help="directory for the PNGs")
-    parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument("--drift", type=float, default=30.0,
+                        help="compass drift fault from t = 70 s, deg")
+    parser.add_argument("--out", type=output_dir_arg, default=Path("rov-demo"),
+                        help="directory for the PNGs")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="simulation seed (default: the config's sim.seed)")
 
 
 def _err(e: dict[str, Any]) -> float:

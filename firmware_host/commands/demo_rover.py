@@ -15,21 +15,27 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from fdi.errors import UsageError
+from firmware_host.commands.checks import output_dir_arg, positive_float
 from firmware_host.commands.replay import run_replay
 from firmware_host.devtools.plots import HAVE_MATPLOTLIB, plot_rover
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 from firmware_host.devtools.score import read_jsonl, score_rover
 from firmware_host.runtime.config import load_config
 
+MIN_DURATION_S = 10.0
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--rate", type=float, default=10.0, choices=[1.0, 5.0, 10.0])
-    parser.add_argument("--duration", type=float, default=600.0)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--out", type=Path, default=None,
+    parser.add_argument("--rate", type=float, default=10.0, choices=[1.0, 5.0, 10.0],
+                        help="receiver rate, Hz")
+    parser.add_argument("--duration", type=positive_float, default=600.0,
+                        help="seconds of generated driving (at least 10)")
+    parser.add_argument("--seed", type=int, default=1, help="random seed of the generated run")
+    parser.add_argument("--out", type=output_dir_arg, default=None,
                         help="output directory (default: a temporary directory)")
     parser.add_argument("--presets", default="rover,rover-paper",
-                        help="comma-separated presets to compare (default: rover,rover-paper)")
+                        help="comma-separated presets to compare")
 
 
 def _fmt(x: float, nd: int = 3) -> str:
@@ -37,6 +43,9 @@ def _fmt(x: float, nd: int = 3) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.duration < MIN_DURATION_S:  # the scoring needs fixes before and after the faults
+        raise UsageError(f"--duration {args.duration:g}: expected at least "
+                         f"{MIN_DURATION_S:g} s")
     out = args.out or Path(tempfile.mkdtemp(prefix="fdi-bridge-demo-"))
     sc = RoverScenario(rate_hz=args.rate, duration_s=args.duration, seed=args.seed)
     gen = write_run(sc, out / "run")

@@ -29,20 +29,24 @@ from __future__ import annotations
 import argparse
 import grp
 import itertools
+import json
 import os
 import shutil
 import socket
 import stat
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from serial.tools import list_ports
 
 from drivers.gps.stream import NmeaStream
 from drivers.mavlink.links import is_network_url
 from drivers.transport import SerialSettings, open_port
 from fdi.errors import ConfigError, FdiBridgeError
+from firmware_host.commands.tables import table
 from firmware_host.runtime.config import load_bridge_file, run_mode
 from firmware_host.runtime.config_mavlink import MavlinkConfig
 
@@ -54,11 +58,31 @@ class Report:
     ok: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
-    ports: list[str] = field(default_factory=list)
+    ports: list[str | dict[str, str]] = field(default_factory=list)
+
+    def port_rows(self) -> list[dict[str, str]]:
+        """Each system port as device / description / hwid (``-`` where pyserial has n/a)."""
+        rows = []
+        for p in self.ports:
+            d = p if isinstance(p, dict) else {"device": p}
+            rows.append({k: (d.get(k) or "-").replace("n/a", "-")
+                         for k in ("device", "description", "hwid")})
+        return rows
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"ports": self.port_rows(), "ok": self.ok, "warnings": self.warnings,
+                "problems": self.problems}
 
     def lines(self) -> list[str]:
         out = ["serial ports on this system:"]
-        out += [f"  {p}" for p in self.ports] or ["  (none found)"]
+        rows = self.port_rows()
+        if rows:
+            out.append(table(["DEVICE", "DESCRIPTION", "HWID"],
+                             [[r["device"], r["description"], r["hwid"]] for r in rows],
+                             indent="  "))
+        else:
+            out.append("  (none found)")
+        out.append("")
         out += [f"ok       {m}" for m in self.ok]
         out += [f"warning  {m}" for m in self.warnings]
         out += [f"PROBLEM  {m}" for m in self.problems]
@@ -69,10 +93,9 @@ class Report:
         return out
 
 
-def _system_ports() -> list[str]:
-    from serial.tools import list_ports
-
-    return [f"{p.device}  {p.description or ''}  {p.hwid or ''}".rstrip()
+def _system_ports() -> list[str | dict[str, str]]:
+    """The system's serial ports as ``python -m serial.tools.list_ports -v`` lists them."""
+    return [{"device": p.device, "description": p.description or "", "hwid": p.hwid or ""}
             for p in sorted(list_ports.comports(), key=lambda p: p.device)]
 
 
@@ -255,13 +278,13 @@ def diagnose(
     *,
     mavlink_url: str | None = None,
     record_dir: str | None = None,
-    list_ports: Callable[[], list[str]] = _system_ports,
+    list_ports: Callable[[], Sequence[str | dict[str, str]]] = _system_ports,
     access: Callable[[str, int], bool] = os.access,
     gps_probe_s: float = 0.0,
 ) -> Report:
     rep = Report()
     try:
-        rep.ports = list_ports()
+        rep.ports = list(list_ports())
     except Exception as err:  # a broken sysfs must not hide the other checks
         rep.warnings.append(f"could not list serial ports: {err}")
     try:
@@ -306,13 +329,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gps-probe-s", type=float, default=3.0,
                         help="with a MAVLink output, read the GPS this long to check its rate "
                              "(0: do not)")
-    parser.add_argument("--mavlink", default=None, help="the MAVLink URL `run` will be given")
-    parser.add_argument("--record", default=None, help="the recorder directory `run` will use")
+    parser.add_argument("--mavlink", default=None,
+                        help="the MAVLink URL `run` will be given (default: the config's)")
+    parser.add_argument("--record", default=None,
+                        help="the recorder directory `run` will use (default: the config's)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the ports and the checks as one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:
     rep = diagnose(args.config, mavlink_url=args.mavlink, record_dir=args.record,
                    gps_probe_s=args.gps_probe_s)
-    for line in rep.lines():
-        print(line)
+    if args.json:
+        print(json.dumps(rep.as_dict()))
+    else:
+        for line in rep.lines():
+            print(line)
     return 1 if rep.problems else 0

@@ -20,6 +20,14 @@ import logging
 import time
 from typing import Any
 
+from fdi.errors import UsageError
+from firmware_host.commands.checks import (
+    mavlink_url_arg,
+    non_negative_float,
+    output_dir_arg,
+    positive_float,
+    positive_int,
+)
 from firmware_host.commands.launch import run_file
 from firmware_host.devtools.router_bench import bench_forwarding
 from firmware_host.mavlink.params import ParamStore
@@ -31,18 +39,23 @@ log = logging.getLogger("fdi_bridge.router")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", help="vehicle TOML file with a [mavlink] table")
-    parser.add_argument("--autopilot", help="override [mavlink].autopilot.url")
-    parser.add_argument("--baud", type=int, help="override the autopilot's baud rate")
-    parser.add_argument("--gcs", action="append", help="GCS endpoint URL (repeatable)")
-    parser.add_argument("--tlog-dir", help="record a .tlog here")
-    parser.add_argument("--seconds", type=float, default=0.0, help="stop after this long")
+    parser.add_argument("--config", help="vehicle TOML file or preset with a [mavlink] table")
+    parser.add_argument("--autopilot", type=mavlink_url_arg,
+                        help="override [mavlink].autopilot.url, e.g. udpin:127.0.0.1:14555")
+    parser.add_argument("--baud", type=positive_int, help="override the autopilot's baud rate")
+    parser.add_argument("--gcs", type=mavlink_url_arg, action="append",
+                        help="GCS endpoint URL, e.g. udpout:127.0.0.1:14550 (repeatable)")
+    parser.add_argument("--tlog-dir", type=output_dir_arg, help="record a .tlog here")
+    parser.add_argument("--seconds", type=non_negative_float, default=0.0,
+                        help="stop after this long, s (0: until ^C)")
     parser.add_argument(
         "--bench", action="store_true", help="measure forwarding latency at 1 000 and 10 000 pkt/s"
     )
-    parser.add_argument("--bench-rate", type=int, action="append", help="packets/s (repeatable)")
-    parser.add_argument("--bench-seconds", type=float, default=5.0, help="seconds per run")
-    parser.add_argument("--bench-runs", type=int, default=1, help="runs per rate")
+    parser.add_argument("--bench-rate", type=positive_int, action="append",
+                        help="packets/s (repeatable)")
+    parser.add_argument("--bench-seconds", type=positive_float, default=5.0,
+                        help="seconds per run")
+    parser.add_argument("--bench-runs", type=positive_int, default=1, help="runs per rate")
 
 
 def config_from_args(args: argparse.Namespace, bf: BridgeFile) -> MavlinkConfig:
@@ -69,6 +82,9 @@ def run(args: argparse.Namespace) -> int:
                 print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
         return 0
     bf: BridgeFile | None = getattr(args, "bridge_file", None)  # already read by `run`
+    if bf is None and not (args.config or args.autopilot or args.gcs):
+        raise UsageError("give --config FILE, or --autopilot URL and --gcs URL (the defaults "
+                         "would route udpin:127.0.0.1:14555 <-> udpin:127.0.0.1:14550 silently)")
     if bf is None:
         bf = load_bridge_file(args.config) if args.config else BridgeFile()
     cfg = config_from_args(args, bf)

@@ -18,6 +18,13 @@ from pathlib import Path
 from drivers.capture import CaptureWriter, Channel
 from drivers.transport import SerialSettings, open_port, read_some
 from fdi.errors import PortError
+from firmware_host.commands.checks import (
+    output_file_arg,
+    positive_float,
+    positive_int,
+    serial_url_arg,
+)
+from firmware_host.commands.port_checks import check_port_opens
 
 log = logging.getLogger("fdi_bridge.record")
 
@@ -83,15 +90,31 @@ def record(
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("url", help="port URL: /dev/ttyUSB0, a pty path, socket://host:port ...")
-    parser.add_argument("--baud", type=int, default=9600)
-    parser.add_argument("--out", type=Path, required=True, help="capture file to write")
-    parser.add_argument("--duration", type=float, default=None, help="seconds (default: until ^C)")
-    parser.add_argument("--max-bytes", type=int, default=None)
+    parser.add_argument("url", type=serial_url_arg,
+                        help="port URL: /dev/ttyUSB0, a pty path, socket://host:port ...")
+    parser.add_argument("--baud", type=positive_int, default=9600, help="baud rate")
+    parser.add_argument("--bytesize", type=int, choices=(5, 6, 7, 8), default=8,
+                        help="data bits")
+    parser.add_argument("--parity", choices=("N", "E", "O", "M", "S"), default="N",
+                        help="parity: None, Even, Odd, Mark, Space")
+    parser.add_argument("--stopbits", type=float, choices=(1.0, 1.5, 2.0), default=1.0,
+                        help="stop bits")
+    parser.add_argument("--out", type=output_file_arg, required=True,
+                        help="capture file to write (its directory must exist)")
+    parser.add_argument("--duration", type=positive_float, default=None,
+                        help="seconds to record (default: until ^C)")
+    parser.add_argument("--max-bytes", type=positive_int, default=None,
+                        help="stop after this many bytes (default: no limit)")
+    parser.add_argument("--wait", action="store_true",
+                        help="wait for a missing port to appear (default: fail at once)")
 
 
 def run(args: argparse.Namespace) -> int:
-    settings = SerialSettings(url=args.url, baudrate=args.baud, timeout_s=0.1)
+    settings = SerialSettings(url=args.url, baudrate=args.baud, bytesize=args.bytesize,
+                              parity=args.parity, stopbits=args.stopbits, timeout_s=0.1)
+    if not args.wait:  # a missing or forbidden port must not give an empty capture and exit 0
+        check_port_opens(args.url, "port", args.baud, bytesize=args.bytesize,
+                         parity=args.parity, stopbits=args.stopbits)
     try:
         counts = record(settings, args.out, duration_s=args.duration, max_bytes=args.max_bytes)
     except KeyboardInterrupt:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -28,7 +29,9 @@ from drivers.capture import CaptureReader, is_capture
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port, read_some
 from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
+from firmware_host.commands.port_checks import check_port_opens, output_urls
 from firmware_host.commands.replay_args import add_arguments as add_arguments
+from firmware_host.commands.summaries import replay_problems, replay_text
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
@@ -271,12 +274,20 @@ def run_replay(
     with open(out_dir / "epochs.jsonl", "w", encoding="utf-8") as jsonl:
         pipeline = RoverPipeline(cfg.rover, jsonl=jsonl, sinks=sinks)
         t0 = time.perf_counter()
-        if use_pty:
-            transport = replay_through_pty(inp, pipeline, speed=speed)
-        else:
-            transport = replay_direct(inp, pipeline)
+        partial = False
+        try:
+            if use_pty:
+                transport = replay_through_pty(inp, pipeline, speed=speed)
+            else:
+                transport = replay_direct(inp, pipeline)
+        except KeyboardInterrupt:  # ^C: keep what was read (summary marked partial)
+            partial = True
+            pipeline.finish()
+            transport = {"bytes_total": inp.total_bytes, "pty": use_pty}
         wall = time.perf_counter() - t0
     summary = pipeline.summary()
+    if partial:
+        summary["partial"] = True
     summary["config"] = cfg.name
     summary["input"]["file"] = str(capture)
     summary["input"]["kind"] = inp.kind
@@ -293,26 +304,33 @@ def _write_json(path: Path, obj: Any) -> None:
 
 
 def print_summary(s: dict[str, Any], stream: TextIO) -> None:
-    inp = s["input"]
-    stream.write(
-        f"epochs {s['epochs']}  faults {s['faults']}  alarms {s['alarms']}  "
-        f"actions {s['actions']}\n"
-        f"rejected lines {inp['rejected_total']} {inp['rejected']}  ignored {inp['ignored']}\n"
-        f"processing p50 {s['processing_ms']['p50']} ms  p99 {s['processing_ms']['p99']} ms  "
-        f"overruns {s['overruns']}  ({s['epochs_per_s']} epochs/s)\n"
-    )
+    stream.write(replay_text(s) + "\n")
 
 
 # --------------------------------------------------------------------------- CLI
 
 
 def run(args: argparse.Namespace) -> int:
-    import sys
-
     cfg = load_config(args.config)
+    nmea_url, _mav_url = output_urls(cfg, args.nmea_out, args.mavlink)
+    if nmea_url and not nmea_url.startswith("pty:"):  # a wrong port must not look like success
+        check_port_opens(nmea_url, "--nmea-out", cfg.rover.output.nmea_baudrate)
     sinks = build_sinks(cfg, args.nmea_out, args.mavlink)
     summary = run_replay(cfg, args.capture, args.out, speed=args.speed,
                          use_pty=not args.no_pty, sinks=sinks)
-    print_summary(summary, sys.stdout)
-    print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
+    useless, warnings = replay_problems(summary)
+    for w in warnings:
+        print(f"fdi-bridge replay: warning: {w}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(replay_text(summary))
+        print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
+    if summary.get("partial"):
+        print(f"fdi-bridge replay: interrupted after {summary['epochs']} epochs: "
+              "summary.json is partial", file=sys.stderr)
+        return 130
+    if useless is not None:
+        print(f"fdi-bridge replay: {useless}", file=sys.stderr)
+        return 1
     return 0

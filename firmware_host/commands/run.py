@@ -39,6 +39,12 @@ from typing import Any, TextIO
 
 from drivers.resilient import Opener, ResilientPort
 from firmware_host.commands import mavlink as mavlink_cmd
+from firmware_host.commands.checks import (
+    mavlink_url_arg,
+    output_dir_arg,
+    output_url_arg,
+    positive_float,
+)
 from firmware_host.commands.launch import run_file
 from firmware_host.rov.vehicle import OutlandRovVehicle
 from firmware_host.rover.pipeline import RoverPipeline
@@ -149,12 +155,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True,
                         help="config file or preset name; [rover] -> rover, [rov] -> ROV; "
                              "[mavlink] attaches the router")
-    parser.add_argument("--out", type=Path, default=None, help="write epochs.jsonl/summary.json")
-    parser.add_argument("--nmea-out", default=None, help="rover: corrected NMEA to this URL")
-    parser.add_argument("--mavlink", default=None, help="rover: GPS_INPUT to this MAVLink URL")
-    parser.add_argument("--record", type=Path, default=None,
+    parser.add_argument("--out", type=output_dir_arg, default=None,
+                        help="write epochs.jsonl/summary.json here (default: none)")
+    parser.add_argument("--nmea-out", type=output_url_arg, default=None,
+                        help="rover: corrected NMEA to this URL or pty:PATH "
+                             "(default: the config's)")
+    parser.add_argument("--mavlink", type=mavlink_url_arg, default=None,
+                        help="rover: GPS_INPUT to this MAVLink URL (default: the config's)")
+    parser.add_argument("--record", type=output_dir_arg, default=None,
                         help="flight recorder directory (overrides [recorder] dir)")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--duration", type=positive_float, default=None,
                         help="stop after this many seconds (default: until SIGTERM or ^C)")
 
 

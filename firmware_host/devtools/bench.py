@@ -31,6 +31,7 @@ import argparse
 import contextlib
 import io
 import json
+import logging
 import os
 import platform
 import shutil
@@ -39,6 +40,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -48,6 +50,14 @@ import numpy as np
 from drivers.mavlink.io import MavEndpoint
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port, read_some
+from firmware_host.commands import tables
+from firmware_host.commands.checks import (
+    check_output_file,
+    output_file_arg,
+    positive_float,
+    positive_int,
+)
+from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import (
     ReplayInput,
     load_input,
@@ -338,60 +348,121 @@ def _machine() -> dict[str, Any]:
             "numpy": np.__version__}
 
 
+BENCH_STEPS = ("rover pipeline", "ROV step", "INS/GNSS step", "end to end", "loop 5 Hz",
+               "loop 10 Hz", "MAVLink forwarding", "replay memory")
+
+
 def run_bench(duration_s: float = 60.0, replay_s: float = 600.0, e2e_epochs: int = 200,
-              fwd_seconds: float = 5.0, fwd_rate: int = 200) -> dict[str, Any]:
+              fwd_seconds: float = 5.0, fwd_rate: int = 200, *,
+              step: Callable[[str], None] | None = None,
+              into: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Every figure; ``step(name)`` after each of :data:`BENCH_STEPS` (a progress bar);
+    ``into`` is filled as the figures come (what a ^C keeps)."""
+    done = step or (lambda name: None)
     t0 = time.perf_counter()
-    res: dict[str, Any] = {"machine": _machine(), "rover": bench_rover(replay_s)}
+    res: dict[str, Any] = into if into is not None else {}
+    res["machine"] = _machine()
+    res["rover"] = bench_rover(replay_s)
+    done(BENCH_STEPS[0])
     res["rov_step"] = bench_rov_step(5000)
+    done(BENCH_STEPS[1])
     res["insgnss_step"] = bench_insgnss_step(10000)
+    done(BENCH_STEPS[2])
     res["end_to_end"] = bench_end_to_end(e2e_epochs)
-    res["loop"] = {f"{r:g}hz": bench_loop(r, duration_s) for r in (5.0, 10.0)}
+    done(BENCH_STEPS[3])
+    res["loop"] = {}
+    for r, name in ((5.0, BENCH_STEPS[4]), (10.0, BENCH_STEPS[5])):
+        res["loop"][f"{r:g}hz"] = bench_loop(r, duration_s)
+        done(name)
     res["mavlink_forwarding"] = bench_forwarding_figures(fwd_rate, fwd_seconds)
+    done(BENCH_STEPS[6])
     res["replay_memory"] = bench_replay_memory()
+    done(BENCH_STEPS[7])
     res["seconds"] = round(time.perf_counter() - t0, 1)
     return res
 
 
-def table(res: dict[str, Any]) -> str:
-    def f(x: Any, nd: int = 3) -> str:
-        return "–" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:.{nd}f}"
+def _nan(x: Any) -> float | None:
+    return None if x is None or (isinstance(x, float) and np.isnan(x)) else float(x)
 
-    r = res["rover"]
-    rows = ["| figure | p50 | p99 | max | goal |", "|---|---|---|---|---|"]
-    for strat, v in r["strategies"].items():
-        e = v["epoch_ms"]
-        rows.append(f"| rover per-epoch, {strat} (ms) | {f(e['p50'])} | {f(e['p99'])} "
-                    f"| {f(e['max'])} | p99 < 0.5 |")
-    rov, ins = res["rov_step"], res["insgnss_step"]
-    rows.append(f"| ROV step (ms) | {f(rov['p50_ms'])} | {f(rov['p99_ms'])} "
-                f"| {f(rov.get('max_ms'))} | |")
-    rows.append(f"| INS/GNSS IMU step (ms) | {f(ins['p50_ms'])} | {f(ins['p99_ms'])} | – | |")
-    if "update_p50_ms" in ins:
-        rows.append(f"| INS/GNSS GNSS update (ms) | {f(ins['update_p50_ms'])} "
-                    f"| {f(ins['update_p99_ms'])} | – | |")
-    e2e = res["end_to_end"]["latency_ms"]
-    rows.append(f"| GGA last byte into pty -> GPS_INPUT on UDP (ms) | {f(e2e['p50'])} "
-                f"| {f(e2e['p99'])} | {f(e2e['max'])} | p99 < 2 |")
-    for name, lp in res["loop"].items():
+
+def figures(res: dict[str, Any]) -> list[dict[str, Any]]:
+    """Each figure with its goal and verdict: ``ok`` True (pass), False (miss) or None (no
+    goal). Goals from issue 6: per-epoch p99 < 0.5 ms, end-to-end p99 < 2 ms, loop jitter
+    p99 < 2 ms with no overruns, throughput without a pty >= 20 000 epochs/s."""
+    rows: list[dict[str, Any]] = []
+
+    def add(name: str, unit: str, p50: Any = None, p99: Any = None, mx: Any = None,
+            goal: str = "", ok: bool | None = None, value: Any = None) -> None:
+        rows.append({"figure": name, "unit": unit, "p50": _nan(p50), "p99": _nan(p99),
+                     "max": _nan(mx), "value": _nan(value), "goal": goal, "ok": ok})
+
+    def below(x: Any, limit: float) -> bool | None:
+        v = _nan(x)
+        return None if v is None else v < limit
+
+    r = res.get("rover")
+    if r:
+        for strat, v in r["strategies"].items():
+            e = v["epoch_ms"]
+            add(f"rover per-epoch, {strat}", "ms", e["p50"], e["p99"], e["max"], "p99 < 0.5",
+                below(e["p99"], 0.5))
+    if "rov_step" in res:
+        rov = res["rov_step"]
+        add("ROV step", "ms", rov["p50_ms"], rov["p99_ms"], rov.get("max_ms"))
+    if "insgnss_step" in res:
+        ins = res["insgnss_step"]
+        add("INS/GNSS IMU step", "ms", ins["p50_ms"], ins["p99_ms"])
+        if "update_p50_ms" in ins:
+            add("INS/GNSS GNSS update", "ms", ins["update_p50_ms"], ins["update_p99_ms"])
+    if "end_to_end" in res:
+        e2e = res["end_to_end"]["latency_ms"]
+        add("GGA into pty -> GPS_INPUT on UDP", "ms", e2e["p50"], e2e["p99"], e2e["max"],
+            "p99 < 2", below(e2e["p99"], 2.0))
+    for name, lp in (res.get("loop") or {}).items():
         j = lp["jitter_ms"]
-        rows.append(f"| loop {name} jitter (ms), {lp['steps']} steps, {lp['overruns']} overruns "
-                    f"| {f(j['p50'])} | {f(j['p99'])} | {f(j['max'])} | p99 < 2, no overruns |")
-    fw = res["mavlink_forwarding"]
+        ok = below(j["p99"], 2.0)
+        add(f"loop {name} jitter ({lp['steps']} steps, {lp['overruns']} overruns)", "ms",
+            j["p50"], j["p99"], j["max"], "p99 < 2, no overruns",
+            None if ok is None else ok and lp["overruns"] == 0)
+    fw = res.get("mavlink_forwarding") or {}
     if "p50_ms" in fw:
-        rows.append(f"| MAVLink forwarding latency, {fw['rate_pps']} pkt/s (ms) | "
-                    f"{f(fw['p50_ms'])} | {f(fw['p99_ms'])} | {f(fw['max_ms'])} | |")
-        rows.append(f"| ... added by the router over direct UDP (ms) | {f(fw['added_p50_ms'])} "
-                    f"| {f(fw['added_p99_ms'])} | – | |")
-    rows.append("")
-    rows.append("| throughput (epochs/s, parse included) | value | goal |")
-    rows.append("|---|---|---|")
-    for strat, v in r["strategies"].items():
-        rows.append(f"| no pty, {strat} | {v['throughput_eps_no_pty']:.0f} | >= 20000 |")
-    rows.append(f"| no pty, JSON Lines written | {r['throughput_eps_no_pty_jsonl']:.0f} | |")
-    rows.append(f"| through a pty | {r['throughput_eps_pty']:.0f} | |")
-    rows.append(f"| through a pty, JSON Lines written | {r['throughput_eps_pty_jsonl']:.0f} | |")
-    rows += replay_memory_rows(res["replay_memory"])
-    return "\n".join(rows)
+        add(f"MAVLink forwarding, {fw['rate_pps']} pkt/s", "ms", fw["p50_ms"], fw["p99_ms"],
+            fw["max_ms"])
+        add("... added by the router over direct UDP", "ms", fw["added_p50_ms"],
+            fw["added_p99_ms"])
+    if r:
+        for strat, v in r["strategies"].items():
+            x = v["throughput_eps_no_pty"]
+            add(f"throughput, no pty, {strat}", "epochs/s", value=x, goal=">= 20000",
+                ok=None if _nan(x) is None else x >= 20000)
+        add("throughput, no pty, JSON Lines written", "epochs/s",
+            value=r["throughput_eps_no_pty_jsonl"])
+        add("throughput through a pty", "epochs/s", value=r["throughput_eps_pty"])
+        add("throughput through a pty, JSON Lines written", "epochs/s",
+            value=r["throughput_eps_pty_jsonl"])
+    for kind, v in (res.get("replay_memory") or {}).items():
+        if isinstance(v, dict):
+            add(f"replay peak RSS, {kind}: {v['long_mib']:.1f} MiB on a 24 h log", "x the 1 min",
+                value=v["ratio"], goal="<= 1.10", ok=v["ratio"] <= 1.10)
+    return rows
+
+
+def _verdict(ok: bool | None) -> str:
+    return "-" if ok is None else ("pass" if ok else "MISS")
+
+
+def table(res: dict[str, Any]) -> str:
+    """The figures against their goals, aligned: timings, then throughput."""
+    rows = figures(res)
+    timed = [[f["figure"], f["p50"], f["p99"], f["max"], f["unit"], f["goal"] or "-",
+              _verdict(f["ok"])] for f in rows if f["value"] is None]
+    rates = [[f["figure"], f["value"], f["unit"], f["goal"] or "-", _verdict(f["ok"])]
+             for f in rows if f["value"] is not None]
+    out = [tables.table(["figure", "p50", "p99", "max", "unit", "goal", "result"], timed)]
+    if rates:
+        out += ["", tables.table(["figure", "value", "unit", "goal", "result"], rates)]
+    return "\n".join(out)
 
 
 def replay_memory_rows(mem: dict[str, Any]) -> list[str]:
@@ -405,20 +476,22 @@ def replay_memory_rows(mem: dict[str, Any]) -> list[str]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--duration", type=float, default=60.0,
-                        help="seconds of each fixed-rate loop run, 5 Hz and 10 Hz (default 60)")
-    parser.add_argument("--replay-duration", type=float, default=600.0,
-                        help="simulated seconds of rover data for timing/throughput (default 600)")
-    parser.add_argument("--e2e-epochs", type=int, default=200,
-                        help="epochs for the end-to-end latency (default 200, at 10 Hz)")
-    parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    parser.add_argument("--duration", type=positive_float, default=60.0,
+                        help="seconds of each fixed-rate loop run, 5 Hz and 10 Hz")
+    parser.add_argument("--replay-duration", type=positive_float, default=600.0,
+                        help="simulated seconds of rover data for timing/throughput")
+    parser.add_argument("--e2e-epochs", type=positive_int, default=200,
+                        help="epochs for the end-to-end latency, at 10 Hz")
+    parser.add_argument("--json", type=output_file_arg, default=None,
+                        help="write the figures here (default: fdi-bridge-bench.json in the "
+                             "temporary directory)")
+    parser.add_argument("--strict", action="store_true",
+                        help="exit 1 when a figure misses its goal (default: exit 0 either way)")
     parser.add_argument("--only", choices=("replay-memory",), default=None,
                         help="measure just this figure (replay-memory: about a minute)")
 
 
 def run(args: argparse.Namespace) -> int:
-    import logging
-
     logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)  # gate-health notes etc.
     if args.only == "replay-memory":
         mem = bench_replay_memory()
@@ -426,12 +499,27 @@ def run(args: argparse.Namespace) -> int:
         if args.json is not None:
             args.json.write_text(json.dumps({"replay_memory": mem}, indent=2) + "\n")
         return 0
-    res = run_bench(args.duration, args.replay_duration, args.e2e_epochs)
+    out = args.json or Path(tempfile.gettempdir()) / "fdi-bridge-bench.json"
+    check_output_file(out, "--json")  # before 160 s of work, not after
+    res: dict[str, Any] = {}
+    try:
+        with Progress(len(BENCH_STEPS), "bench") as bar:
+            run_bench(args.duration, args.replay_duration, args.e2e_epochs, step=bar.step,
+                      into=res)
+    except KeyboardInterrupt:
+        res["partial"] = True
+        res["figures"] = figures(res)
+        out.write_text(json.dumps(res, indent=2) + "\n", encoding="utf-8")
+        print(f"fdi-bridge bench: interrupted; the figures so far are in {out} (partial)",
+              file=sys.stderr)
+        return 130
+    res["figures"] = figures(res)
     m = res["machine"]
     print(f"machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}, {m['system']}")
     print(table(res))
-    print(f"({res['seconds']} s)")
-    out = args.json or Path(tempfile.gettempdir()) / "fdi-bridge-bench.json"
+    misses = [f["figure"] for f in res["figures"] if f["ok"] is False]
+    print(f"({res['seconds']} s; {len(misses)} of "
+          f"{sum(f['ok'] is not None for f in res['figures'])} goals missed)")
     out.write_text(json.dumps(res, indent=2) + "\n", encoding="utf-8")
     print(f"wrote {out}")
-    return 0
+    return 1 if args.strict and misses else 0

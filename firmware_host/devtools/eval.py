@@ -29,13 +29,22 @@ import io
 import json
 import math
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from fdi.baselines import BASELINES, BaselineParams, make_baseline
+from fdi.errors import UsageError
 from fdi.geodesy import LocalFrame
+from firmware_host.commands.checks import (
+    check_input_file,
+    input_file_arg,
+    input_path_arg,
+    output_dir_arg,
+    positive_float,
+)
+from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import load_input
 from firmware_host.devtools.insgnss_sim import SCENARIOS, load_setup, run_scenario
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
@@ -449,8 +458,12 @@ def run_suite(
     cfg: BridgeConfig | None = None,
     include_rov: bool = True,
     include_insgnss: bool = True,
+    progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
-    """The whole suite; returns the JSON document (also written under ``out``)."""
+    """The whole suite; returns the JSON document (also written under ``out``).
+    ``progress(label)`` after each rover case, the ROV and the INS/GNSS part (a progress bar:
+    :func:`suite_steps` of them)."""
+    done = progress or (lambda label: None)
     cfg = cfg or load_config("rover")
     t0 = time.perf_counter()
     comps: list[RoverComparison] = []
@@ -466,6 +479,7 @@ def run_suite(
             p = plot_comparison(comp, recs, truth, out / f"{case.name}.png")
             if p is not None:
                 figures.append(str(p))
+        done(case.name)
     doc: dict[str, Any] = {
         "config": cfg.name,
         "duration_s": duration_s,
@@ -478,10 +492,12 @@ def run_suite(
           rover_table(comps), ""]
     if include_rov:
         rov = rov_suite()
+        done("rov")
         doc["rov"] = rov
         md += ["## ROV compass (issue 3 faults)", "", rov_table(rov), ""]
     if include_insgnss:
         ins = insgnss_suite(seed, ["paper-single"] if quick else None)
+        done("insgnss")
         doc["insgnss"] = ins
         md += ["## INS/GNSS (paper scenarios)", "", insgnss_table(ins), ""]
     if doc["losses"]:
@@ -494,6 +510,11 @@ def run_suite(
                                        encoding="utf-8")
         (out / "eval.md").write_text(doc["markdown"] + "\n", encoding="utf-8")
     return doc
+
+
+def suite_steps(quick: bool, include_rov: bool = True, include_insgnss: bool = True) -> int:
+    """How many times :func:`run_suite` calls ``progress``."""
+    return len(list(rover_cases(quick))) + int(include_rov) + int(include_insgnss)
 
 
 def _clean(x: Any) -> Any:
@@ -538,20 +559,23 @@ def evaluate_run(
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("epochs", nargs="?", type=Path, default=None,
+    parser.add_argument("epochs", nargs="?", type=input_path_arg, default=None,
                         help="epochs.jsonl of a replay/sim, or its directory")
-    parser.add_argument("--truth", type=Path, default=None,
+    parser.add_argument("--truth", type=input_file_arg, default=None,
                         help="truth.jsonl (default: next to --input, or beside EPOCHS)")
-    parser.add_argument("--input", type=Path, default=None,
+    parser.add_argument("--input", type=input_file_arg, default=None,
                         help="the capture or NMEA log it came from: also re-run our strategies")
-    parser.add_argument("--config", default="rover", help="config or preset (default: rover)")
+    parser.add_argument("--config", default="rover", help="config or preset")
     parser.add_argument("--suite", action="store_true", help="run the whole scenario suite")
     parser.add_argument("--quick", action="store_true", help="suite: the 10 Hz jump case only")
-    parser.add_argument("--duration", type=float, default=600.0,
-                        help="suite: seconds per rover scenario (default 600)")
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--duration", type=positive_float, default=600.0,
+                        help="suite: seconds per rover scenario")
+    parser.add_argument("--seed", type=int, default=1, help="suite: random seed of the runs")
     parser.add_argument("--no-plots", action="store_true", help="suite: no figures")
-    parser.add_argument("--out", type=Path, default=None, help="write eval.json/eval.md here")
+    parser.add_argument("--out", type=output_dir_arg, default=None,
+                        help="write eval.json/eval.md here (checked before the work)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the results as JSON instead of tables")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -562,17 +586,22 @@ def run(args: argparse.Namespace) -> int:
         logging.getLogger(name).setLevel(logging.ERROR)
     cfg = load_config(args.config)
     if args.suite:
-        doc = run_suite(args.out, quick=args.quick, plots=not args.no_plots,
-                        duration_s=args.duration, seed=args.seed, cfg=cfg)
+        with Progress(suite_steps(args.quick), "eval --suite", unit="case") as bar:
+            doc = run_suite(args.out, quick=args.quick, plots=not args.no_plots,
+                            duration_s=args.duration, seed=args.seed, cfg=cfg,
+                            progress=bar.step)
+        if args.json:
+            print(json.dumps(_clean({k: v for k, v in doc.items() if k != "markdown"})))
+            return 0
         print(doc["markdown"])
         print(f"\n{len(doc['rover'])} rover scenarios in {doc['seconds']} s")
         if args.out is not None:
             print(f"wrote {args.out / 'eval.json'} and {args.out / 'eval.md'}")
         return 0
     if args.epochs is None:
-        print("fdi-bridge eval: give EPOCHS (and --truth), or --suite")
-        return 2
+        raise UsageError("give EPOCHS (and --truth), or --suite")
     epochs = args.epochs / "epochs.jsonl" if args.epochs.is_dir() else args.epochs
+    check_input_file(epochs, "EPOCHS")
     truth = args.truth
     if truth is None:
         for cand in ([args.input.parent / "truth.jsonl"] if args.input else []) + [
@@ -581,13 +610,15 @@ def run(args: argparse.Namespace) -> int:
                 truth = cand
                 break
     if truth is None or not truth.exists():
-        print("fdi-bridge eval: no truth file (give --truth)")
-        return 2
+        raise UsageError(f"no truth file beside {epochs} (give --truth)")
     comp = evaluate_run(epochs, truth, capture=args.input, cfg=cfg)
     table = rover_table([comp])
-    print(table)
-    for loss in comp.losses():
-        print(f"- {loss}")
+    if args.json:
+        print(json.dumps(_clean(comp.as_dict())))
+    else:
+        print(table)
+        for loss in comp.losses():
+            print(f"- {loss}")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "eval.json").write_text(

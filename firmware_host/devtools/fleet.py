@@ -31,7 +31,6 @@ import json
 import logging
 import math
 import os
-import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Sequence
@@ -42,6 +41,8 @@ from typing import Any, Literal
 from drivers.capture import is_capture
 from drivers.configload import read_toml
 from fdi.errors import ConfigError, FdiBridgeError
+from firmware_host.commands.checks import output_dir_arg, positive_int
+from firmware_host.commands.progress import Progress as Bar
 from firmware_host.commands.replay import load_input
 from firmware_host.devtools.eval import run_ours
 from firmware_host.devtools.score import score_rover
@@ -505,23 +506,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sweep", action="append", default=[], metavar="KEY=V1,V2,...",
                         help="a config key and its values (repeatable: all combinations), "
                              "e.g. rover.detector.gate_sigmas=4,6,8")
-    parser.add_argument("--workers", type=int, default=None,
+    parser.add_argument("--workers", type=positive_int, default=None,
                         help="Dask LocalCluster worker processes (default: the cores); "
                              "1 = serial, in this process, no Dask")
     parser.add_argument("--scheduler", default=None,
                         help="an existing Dask scheduler, e.g. tcp://127.0.0.1:8786")
     parser.add_argument("--compare-serial", action="store_true",
                         help="also run serially, check the rows are identical, print the ratio")
-    parser.add_argument("--out", type=Path, default=None,
+    parser.add_argument("--out", type=output_dir_arg, default=None,
                         help="write fleet.md, fleet.json and fleet.png here")
 
 
-def _progress(stream: Any) -> Progress:
+def _progress(bar: Bar) -> Progress:
+    """``run_fleet``'s ``progress(done, total)`` drawn as a tqdm bar (only on a terminal)."""
     def show(done: int, total: int) -> None:
-        end = "\n" if done == total or not stream.isatty() else ""
-        if stream.isatty() or done == total or done % max(1, total // 10) == 0:
-            stream.write(f"\rfleet: {done}/{total} logs done{end}")
-            stream.flush()
+        if bar.bar.total != total:
+            bar.total(total)
+        bar.step(n=done - bar.bar.n)
     return show
 
 
@@ -537,12 +538,14 @@ def run(args: argparse.Namespace) -> int:
     if not logs:
         raise FdiBridgeError("fleet: no logs found (captures, .nmea/.log/.txt, .tlog)")
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
-    result = run_fleet(logs, configs, rov, workers=workers, scheduler=args.scheduler,
-                       progress=_progress(sys.stderr))
+    with Bar(len(logs), "fleet", unit="job") as bar:
+        result = run_fleet(logs, configs, rov, workers=workers, scheduler=args.scheduler,
+                           progress=_progress(bar))
     print(markdown(result, os.path.commonpath([lg.path for lg in logs]) if len(logs) > 1
                    else ""))
     if args.compare_serial and result.executor != "serial":
-        serial = run_fleet(logs, configs, rov, workers=1, progress=_progress(sys.stderr))
+        with Bar(len(logs), "fleet, serial", unit="job") as bar:
+            serial = run_fleet(logs, configs, rov, workers=1, progress=_progress(bar))
         same = serial.rows == result.rows
         print(f"serial {serial.seconds:.2f} s, {result.executor} {result.seconds:.2f} s: "
               f"ratio {result.seconds / serial.seconds:.3f}; rows identical: {same}")

@@ -36,7 +36,6 @@ import time
 import traceback
 from collections import Counter
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -67,6 +66,7 @@ from drivers.outland.framecodec import Framer, checksum, decode, load_protocol
 from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, encode_telemetry
 from drivers.ratelog import RateLimitedLog
 from fdi.errors import CaptureFormatError, DecodeError
+from firmware_host.commands.checks import output_file_arg, positive_float, positive_int
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.runtime.config import resolve_protocol
 
@@ -572,12 +572,17 @@ def run_fuzz(
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seconds", type=float, default=60.0, help="time per codec")
-    parser.add_argument("--inputs", type=int, default=None, help="stop after this many inputs")
+    parser.add_argument("--seconds", type=positive_float, default=60.0,
+                        help="time per codec, s")
+    parser.add_argument("--inputs", type=positive_int, default=None,
+                        help="stop after this many inputs per codec (overrides --seconds)")
     parser.add_argument("--codec", choices=CODECS, action="append", default=None,
                         help="codec to fuzz (repeatable; default: all four)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=None, help="write the report as JSON")
+    parser.add_argument("--seed", type=int, default=0, help="mutation seed")
+    parser.add_argument("--out", type=output_file_arg, default=None,
+                        help="write the report as JSON to this file")
+    parser.add_argument("--json", action="store_true",
+                        help="print the reports as JSON (one object per codec) instead of text")
     parser.add_argument("--checksums", action="store_true",
                         help="measure undetected corrupt Outland frames per checksum instead "
                              "(--inputs per error model, default 200 000)")
@@ -601,6 +606,9 @@ def run(args: argparse.Namespace) -> int:
         rep = run_fuzz(codec, seconds=None if args.inputs else args.seconds,
                        max_inputs=args.inputs, seed=args.seed)
         reports.append(rep)
+        if args.json:
+            print(json.dumps(rep))
+            continue
         print(f"{codec}: {rep['inputs']} inputs ({rep['bytes']} bytes) in {rep['seconds']} s, "
               f"{rep['failures']} failures")
         for ex in rep["examples"]:

@@ -16,10 +16,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from firmware_host.commands.checks import input_file_arg, output_file_arg
+from firmware_host.commands.progress import Progress
 from firmware_host.devtools.insgnss_sim import (
     CONFIG_DIR,
     SCENARIOS,
@@ -78,12 +80,16 @@ def range_verdict(pos: dict[str, dict[str, float]], axis: str) -> str:
 
 
 def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
-           sweep: Sequence[float], scenarios: Sequence[Scenario] = PAPER_SCENARIOS) -> str:
+           sweep: Sequence[float], scenarios: Sequence[Scenario] = PAPER_SCENARIOS,
+           progress: Callable[[str], None] | None = None) -> str:
+    """The Markdown; ``progress(label)`` after each run (a progress bar)."""
+    done = progress or (lambda label: None)
     rows: list[tuple[str, str, int, dict[str, Any]]] = []
     for name, setup in presets:
         for scenario in scenarios:
             for seed in seeds:
                 summary, _data, _runs = run_scenario(setup, scenario, seed)
+                done(f"{name} {scenario} seed {seed}")
                 rows.append((name, scenario, seed, summary["methods"]))
     out = ["### 3-D position RMS (m), every seed", "",
            "| preset | scenario | seed | none | downweight | replace | three_zone "
@@ -126,6 +132,7 @@ def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
             for seed in seeds:
                 summary, _d, _r = run_scenario(with_sigma_v(setup, sv), "paper-deviation", seed,
                                                ("none", "three_zone"))
+                done(f"sigma_v {sv:g} seed {seed}")
                 tz = summary["methods"]["three_zone"]["position_m"]
                 none = summary["methods"]["none"]["position_m"]
                 out.append(f"| {sv:g} | {seed} | {range_verdict(tz, 'up')} "
@@ -138,7 +145,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=_seeds, default=_seeds("1-5"),
                         help="seeds, like 1-5 or 1,3 (default 1-5)")
     parser.add_argument(
-        "--config", type=Path, action="append", default=None,
+        "--config", type=input_file_arg, action="append", default=None,
         help="preset TOML, repeatable (default: config/insgnss-paper.toml and "
              "config/insgnss.toml)")
     parser.add_argument("--sweep-sigma-v", type=_floats, default=[],
@@ -146,15 +153,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "GNSS noises, m (like 1.15,2,3,5)")
     parser.add_argument("--scenario", choices=PAPER_SCENARIOS, action="append", default=None,
                         help="only these scenarios, repeatable (default: the four paper ones)")
-    parser.add_argument("--out", type=Path, default=None, help="write the Markdown here")
+    parser.add_argument("--out", type=output_file_arg, default=None,
+                        help="also write the Markdown to this file")
 
 
 def run(args: argparse.Namespace) -> int:
     paths: list[Path] = args.config or [CONFIG_DIR / "insgnss-paper.toml",
                                         CONFIG_DIR / "insgnss.toml"]
     presets = [(p.stem, load_setup(p)) for p in paths]
-    text = report(presets, args.seeds, args.sweep_sigma_v,
-                  tuple(args.scenario) if args.scenario else PAPER_SCENARIOS)
+    scenarios = tuple(args.scenario) if args.scenario else PAPER_SCENARIOS
+    runs = len(presets) * len(scenarios) * len(args.seeds) + len(args.sweep_sigma_v) * len(
+        args.seeds)
+    with Progress(runs, "insgnss-report", unit="run") as bar:
+        text = report(presets, args.seeds, args.sweep_sigma_v, scenarios, progress=bar.step)
     if args.out is not None:
         args.out.write_text(text, encoding="utf-8")
     sys.stdout.write(text)

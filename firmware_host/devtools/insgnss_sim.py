@@ -48,6 +48,7 @@ from fdi.insgnss import (
     invert_mechanization,
 )
 from fdi.three_zone import STRATEGIES, Action, Strategy, Zone
+from firmware_host.commands.checks import input_file_arg, output_dir_arg
 from firmware_host.runtime.config import CONFIG_DIR as CONFIG_DIR
 from firmware_host.runtime.config import insgnss_setup, load_bridge_file
 from firmware_host.runtime.config_insgnss import InsGnssSetup as InsGnssSetup
@@ -414,11 +415,13 @@ def bench_insgnss_step(n: int) -> dict[str, float]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", choices=SCENARIOS, default="paper-random")
+    parser.add_argument("--scenario", choices=SCENARIOS, default="paper-random",
+                        help="which scenario of the paper (faults and their times)")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--out", type=output_dir_arg, required=True,
+                        help="output directory (summary.json, PNGs)")
     parser.add_argument(
-        "--config", type=Path, default=None,
+        "--config", type=input_file_arg, default=None,
         help=f"preset TOML (default {PAPER_PRESET.relative_to(CONFIG_DIR.parent)})",
     )
     parser.add_argument("--no-plots", action="store_true", help="do not write PNGs")

@@ -34,6 +34,7 @@ from typing import Any
 
 from fdi.drift import calibrate
 from fdi.geodesy import LocalFrame
+from firmware_host.commands.checks import output_file_arg, positive_float
 from firmware_host.devtools.rover_sim import ERROR_MODELS, RoverScenario, generate
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
@@ -326,13 +327,16 @@ def _clean(x: Any) -> Any:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", default="rover", help="config or preset (default: rover)")
+    parser.add_argument("--config", default="rover", help="config file or preset name")
     parser.add_argument("--seeds", default=",".join(map(str, REPORT_SEEDS)),
-                        help="comma separated (default: the report seeds 1-5)")
-    parser.add_argument("--models", default=",".join(ERROR_MODELS))
-    parser.add_argument("--rates", default="1,5,10")
-    parser.add_argument("--duration", type=float, default=1200.0, help="seconds per run")
-    parser.add_argument("--json", default=None, help="write every number here")
+                        help="seeds, comma separated (the report seeds; tuning used 101-103)")
+    parser.add_argument("--models", default=",".join(ERROR_MODELS),
+                        help="receiver error models, comma separated")
+    parser.add_argument("--rates", default="1,5,10", help="fix rates in Hz, comma separated")
+    parser.add_argument("--duration", type=positive_float, default=1200.0,
+                        help="seconds per run")
+    parser.add_argument("--json", default=None, type=output_file_arg,
+                        help="also write every number to this JSON file")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -63,7 +63,10 @@ from drivers.gps.nmea import (
     format_time,
     with_checksum,
 )
+from fdi.errors import UsageError
 from fdi.geodesy import LocalFrame
+from firmware_host.commands.checks import output_dir_arg, positive_float
+from firmware_host.commands.tables import fields, summary_rows
 
 FaultKind = Literal["jump", "burst", "ramp", "frozen", "outage", "multipath"]
 FAULT_KINDS: tuple[str, ...] = ("jump", "burst", "ramp", "frozen", "outage", "multipath")
@@ -604,15 +607,18 @@ def write_run(sc: RoverScenario, out_dir: Path) -> dict[str, object]:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=10.0, choices=[1.0, 5.0, 10.0],
                         help="receiver rate in Hz (1, 5 or 10)")
-    parser.add_argument("--duration", type=float, default=600.0, help="seconds (default 600)")
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--duration", type=positive_float, default=600.0,
+                        help="seconds of driving")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (faults and noise)")
     parser.add_argument("--gst", action="store_true", help="also send GST error estimates")
     parser.add_argument("--zda", action="store_true", help="also send ZDA")
     parser.add_argument("--kinds", default="jump,burst",
                         help="fault kinds, comma separated: " + ",".join(FAULT_KINDS))
     parser.add_argument("--error-model", default="gm", choices=list(ERROR_MODELS),
-                        help="receiver error model (default gm; see the module docstring)")
-    parser.add_argument("--out", required=True, type=Path, help="output directory")
+                        help="receiver error model (see the module docstring)")
+    parser.add_argument("--out", required=True, type=output_dir_arg,
+                        help="output directory (rover.nmea, rover.cap, truth.jsonl, ...)")
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -621,10 +627,16 @@ def run(args: argparse.Namespace) -> int:
     if "multipath" in kinds and args.error_model == "gm":
         bad.append("multipath (a field error model only)")
     if bad:
-        print(f"fdi-bridge sim rover: unknown fault kind(s): {', '.join(bad)}")
-        return 2
+        raise UsageError(f"--kinds: unknown fault kind(s): {', '.join(bad)} (known: jump, "
+                         "burst, ramp, frozen, outage)")
+    if args.duration * args.rate < 1:
+        raise UsageError(f"--duration {args.duration:g}: shorter than one epoch at "
+                         f"{args.rate:g} Hz")
     sc = RoverScenario(rate_hz=args.rate, duration_s=args.duration, seed=args.seed,
                        gst=args.gst, zda=args.zda, kinds=kinds, error_model=args.error_model)
     summary = write_run(sc, args.out)
-    print(json.dumps(summary))
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(fields(summary_rows(summary)))
     return 0

@@ -47,6 +47,7 @@ from drivers.capture import Channel
 from drivers.outland.framecodec import load_protocol
 from drivers.transport import SerialSettings
 from fdi.errors import PortError
+from firmware_host.commands.checks import output_dir_arg, output_file_arg, positive_float
 from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.rov.config import load_rov_config, protocol_path
@@ -397,11 +398,13 @@ def run_soak(
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--minutes", type=float, default=60.0, help="simulated minutes")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--record-dir", type=Path, default=None,
+    parser.add_argument("--minutes", type=positive_float, default=60.0,
+                        help="simulated minutes")
+    parser.add_argument("--seed", type=int, default=1, help="random seed of faults and drops")
+    parser.add_argument("--record-dir", type=output_dir_arg, default=None,
                         help="keep the flight recordings here (default: a temporary directory)")
-    parser.add_argument("--out", type=Path, default=None, help="write the figures as JSON")
+    parser.add_argument("--out", type=output_file_arg, default=None,
+                        help="write the figures as JSON to this file")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -20,6 +20,9 @@ from typing import Any
 import numpy as np
 
 from drivers.resilient import Opener
+from fdi.errors import UsageError
+from firmware_host.commands.checks import output_dir_arg, positive_float
+from firmware_host.commands.tables import fields, summary_rows
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import RovPlant, parse_fault
 from firmware_host.rov.config import RovConfig, load_rov_config
@@ -32,24 +35,30 @@ EpochSink = Callable[[dict[str, Any]], None]
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default=None, help="ROV preset (default: built-in defaults)")
-    parser.add_argument("--duration", type=float, default=130.0, help="simulated seconds")
+    parser.add_argument("--duration", type=positive_float, default=130.0,
+                        help="simulated seconds")
     parser.add_argument("--fault", action="append", default=[], metavar="SPEC",
                         help="KIND:MAGNITUDE@START[-END], e.g. drift:30@70 (repeatable)")
-    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument("--out", required=True, type=output_dir_arg,
+                        help="output directory (epochs.jsonl, summary.json)")
     parser.add_argument("--no-ft", action="store_true", help="detect but never substitute")
     parser.add_argument("--setpoint", type=float, default=None, help="heading setpoint, deg")
     parser.add_argument("--seed", type=int, default=None, help="simulation seed")
+    parser.add_argument("--json", action="store_true",
+                        help="print the summary as JSON (default: a table)")
 
 
 def run(args: argparse.Namespace) -> int:
     cfg, _ = load_rov_config(args.config)
+    if args.duration < cfg.period_s:
+        raise UsageError(f"--duration {args.duration:g}: shorter than one control period "
+                         f"({cfg.period_s:g} s)")
     if args.setpoint is not None:
         cfg = replace(cfg, setpoint_deg=args.setpoint % 360.0)
     try:
         faults = [parse_fault(s) for s in args.fault]
     except ValueError as err:
-        print(f"fdi-bridge sim rov: {err}")
-        return 2
+        raise UsageError(f"--fault: {err}") from err
     epochs = run_experiment(cfg, faults, args.duration, ft=not args.no_ft, seed=args.seed)
     summary = summarize(epochs, faults)
     summary.update({"ft": not args.no_ft, "config": args.config, "duration_s": args.duration,
@@ -60,7 +69,11 @@ def run(args: argparse.Namespace) -> int:
         for e in epochs:
             fh.write(json.dumps(e) + "\n")
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    print(json.dumps(summary, indent=2))
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(fields(summary_rows(summary)))
+        print(f"wrote {out / 'epochs.jsonl'} and {out / 'summary.json'}")
     return 0
 
 

@@ -1,0 +1,259 @@
+"""Checks of command-line arguments, made before a command's work starts.
+
+Each ``check_*`` function returns its (converted) value or raises
+:class:`~fdi.errors.UsageError` with one line naming the option, what was expected and what was
+found; :func:`firmware_host.cli.main` turns that into exit status 2. The ``*_arg`` names are the
+same checks as ``argparse`` ``type=`` functions, so a bad value is refused while the command line
+is parsed (``fdi-bridge replay: error: argument --out: ...``, exit 2) and a 30-second job never
+starts with an output it cannot write.
+
+Ports are checked in two steps: the spelling here (:func:`check_mavlink_url`,
+:func:`check_serial_url`), and whether a port opens (:func:`check_port_opens`) where a command
+must not start without it (``record`` without ``--wait``, ``replay --nmea-out``): that is a
+runtime failure (:class:`~fdi.errors.PortError`, exit 1).
+
+This module imports only the standard library and :mod:`fdi.errors` (the argument modules that
+use it must stay light for ``--help``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import TypeVar
+
+from fdi.errors import UsageError
+
+T = TypeVar("T")
+
+# The mavutil / MAVProxy network spellings (drivers.mavlink.links.NETWORK_SCHEMES; repeated here
+# so that this module stays free of the drivers for a light --help).
+MAVLINK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
+_LISTENING = ("udpin", "udp", "tcpin")
+# pyserial's URL handlers (serial.urlhandler.protocol_*).
+SERIAL_SCHEMES = ("loop", "socket", "rfc2217", "spy", "alt", "hwgrep", "cp2110")
+_URL_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*)://(.*)$")
+
+
+# --------------------------------------------------------------------------- paths
+
+
+def _nearest_existing(path: Path) -> Path:
+    probe = path.absolute()
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    return probe
+
+
+def check_input_file(path: str | Path, option: str = "input") -> Path:
+    """A file that must exist, be a regular file (not a directory) and be readable."""
+    p = Path(path)
+    if not p.exists():
+        raise UsageError(f"{option} {p}: no such file")
+    if p.is_dir():
+        raise UsageError(f"{option} {p}: is a directory, expected a file")
+    if not os.access(p, os.R_OK):
+        raise UsageError(f"{option} {p}: not readable by this user")
+    return p
+
+
+def check_input_path(path: str | Path, option: str = "input") -> Path:
+    """A file or a directory that must exist and be readable."""
+    p = Path(path)
+    if not p.exists():
+        raise UsageError(f"{option} {p}: no such file or directory")
+    if not os.access(p, os.R_OK):
+        raise UsageError(f"{option} {p}: not readable by this user")
+    return p
+
+
+def check_output_dir(path: str | Path, option: str = "--out") -> Path:
+    """A directory to write into: an existing writable directory, or one that can be created
+    (its nearest existing ancestor is a writable directory). Nothing is created here."""
+    p = Path(path)
+    if p.exists():
+        if not p.is_dir():
+            raise UsageError(f"{option} {p}: exists and is not a directory")
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise UsageError(f"{option} {p}: directory not writable by this user")
+        return p
+    probe = _nearest_existing(p)
+    if not probe.is_dir():
+        raise UsageError(f"{option} {p}: cannot be created, {probe} is not a directory")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise UsageError(f"{option} {p}: cannot be created, {probe} is not writable")
+    return p
+
+
+def check_output_file(path: str | Path, option: str = "--out") -> Path:
+    """A file to write: not a directory, in an existing writable directory."""
+    p = Path(path)
+    if p.is_dir():
+        raise UsageError(f"{option} {p}: is a directory, expected a file name")
+    parent = p.absolute().parent
+    if not parent.exists():
+        raise UsageError(f"{option} {p}: directory {parent} does not exist")
+    if not parent.is_dir():
+        raise UsageError(f"{option} {p}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UsageError(f"{option} {p}: directory {parent} not writable by this user")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise UsageError(f"{option} {p}: exists and is not writable by this user")
+    return p
+
+
+# --------------------------------------------------------------------------- URLs
+
+
+def _port_number(text: str, url: str, option: str, *, allow_zero: bool) -> int:
+    try:
+        port = int(text)
+    except ValueError:
+        raise UsageError(f"{option} {url}: port {text!r} is not a number") from None
+    low = 0 if allow_zero else 1
+    if not low <= port <= 65535:
+        raise UsageError(f"{option} {url}: port {port} out of range {low}-65535")
+    return port
+
+
+def check_mavlink_url(url: str, option: str = "--mavlink") -> str:
+    """A MAVLink URL as mavutil and MAVProxy spell it: ``udpout:HOST:PORT``, ``udpin:[HOST:]PORT``,
+    ``tcp:HOST:PORT``, ``tcpin:[HOST:]PORT`` (port 1-65535; 0 = any free port for a server), or
+    a serial device / pyserial URL (:func:`check_serial_url`) for an autopilot on a wire."""
+    scheme, sep, rest = url.partition(":")
+    if sep and scheme in MAVLINK_SCHEMES and not rest.startswith("//"):
+        host, hsep, port_text = rest.rpartition(":")
+        listening = scheme in _LISTENING
+        if not hsep:
+            host, port_text = "", rest
+        if not host and not listening:
+            raise UsageError(f"{option} {url}: expected {scheme}:HOST:PORT")
+        _port_number(port_text, url, option, allow_zero=listening)
+        return url
+    if sep and scheme in MAVLINK_SCHEMES:
+        raise UsageError(f"{option} {url}: expected {scheme}:HOST:PORT (no //)")
+    try:
+        return check_serial_url(url, option, pty=False)
+    except UsageError as err:
+        known = ", ".join(f"{s}:" for s in MAVLINK_SCHEMES)
+        raise UsageError(f"{err} (a MAVLink URL is one of {known} HOST:PORT, or a serial "
+                         "device)") from None
+
+
+def check_serial_url(url: str, option: str = "port", *, pty: bool = True) -> str:
+    """A pyserial URL (``socket://HOST:PORT``, ``loop://``, ``rfc2217://`` ...), a device path,
+    or (``pty=True``, outputs) ``pty:PATH`` whose directory exists and is writable."""
+    if not url:
+        raise UsageError(f"{option}: empty URL")
+    if url.startswith("pty:"):
+        if not pty:
+            raise UsageError(f"{option} {url}: pty: is for NMEA outputs only")
+        link = url[4:]
+        if link:
+            parent = Path(link).absolute().parent
+            if not parent.is_dir():
+                raise UsageError(f"{option} {url}: directory {parent} does not exist")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise UsageError(f"{option} {url}: directory {parent} not writable")
+            if Path(link).is_dir():
+                raise UsageError(f"{option} {url}: {link} is a directory")
+        return url
+    m = _URL_SCHEME.match(url)
+    if m:
+        scheme, rest = m.group(1).lower(), m.group(2)
+        if scheme not in SERIAL_SCHEMES:
+            known = ", ".join(f"{s}://" for s in SERIAL_SCHEMES)
+            raise UsageError(f"{option} {url}: unknown URL scheme {scheme!r} (known: {known}, "
+                             "a device path" + (", pty:PATH" if pty else "") + ")")
+        if scheme in ("socket", "rfc2217"):
+            hostport = rest.split("?", 1)[0].rstrip("/")
+            host, hsep, port_text = hostport.rpartition(":")
+            if not hsep or not host:
+                raise UsageError(f"{option} {url}: expected {scheme}://HOST:PORT")
+            _port_number(port_text, url, option, allow_zero=False)
+        return url
+    # A device path (/dev/ttyUSB0, /dev/serial/by-path/...:1.0-port0, COM3): not opened here.
+    return url
+
+
+# --------------------------------------------------------------------------- numbers
+
+
+def check_number(value: float, option: str, *, minimum: float | None = None,
+                 above: float | None = None) -> float:
+    """A finite number, ``>= minimum`` and/or ``> above``."""
+    if not math.isfinite(value):
+        raise UsageError(f"{option}: expected a finite number, found {value}")
+    if minimum is not None and value < minimum:
+        raise UsageError(f"{option}: expected a number >= {minimum:g}, found {value:g}")
+    if above is not None and value <= above:
+        raise UsageError(f"{option}: expected a number > {above:g}, found {value:g}")
+    return value
+
+
+# --------------------------------------------------------------------------- argparse types
+
+
+def _as_type(check: Callable[[str], T], name: str) -> Callable[[str], T]:
+    """A check as an ``argparse`` ``type=``: its message becomes argparse's (exit 2)."""
+
+    def convert(text: str) -> T:
+        try:
+            return check(text)
+        except UsageError as err:
+            text = str(err).removeprefix("value").lstrip(": ")
+            raise argparse.ArgumentTypeError(text) from None
+
+    convert.__name__ = name  # argparse names the type in "invalid NAME value"
+    return convert
+
+
+def _float(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise UsageError(f"value: expected a number, found {text!r}") from None
+
+
+def _int(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise UsageError(f"value: expected a whole number, found {text!r}") from None
+
+
+def _positive_float(text: str) -> float:
+    return check_number(_float(text), "value", above=0.0)
+
+
+def _non_negative_float(text: str) -> float:
+    return check_number(_float(text), "value", minimum=0.0)
+
+
+def _positive_int(text: str) -> int:
+    n = _int(text)
+    check_number(n, "value", minimum=1)
+    return n
+
+
+def _non_negative_int(text: str) -> int:
+    n = _int(text)
+    check_number(n, "value", minimum=0)
+    return n
+
+
+positive_float = _as_type(_positive_float, "positive_float")
+non_negative_float = _as_type(_non_negative_float, "non_negative_float")
+positive_int = _as_type(_positive_int, "positive_int")
+non_negative_int = _as_type(_non_negative_int, "non_negative_int")
+input_file_arg = _as_type(lambda s: check_input_file(s, "value"), "input_file")
+input_path_arg = _as_type(lambda s: check_input_path(s, "value"), "input_path")
+output_dir_arg = _as_type(lambda s: check_output_dir(s, "value"), "output_dir")
+output_file_arg = _as_type(lambda s: check_output_file(s, "value"), "output_file")
+mavlink_url_arg = _as_type(lambda s: check_mavlink_url(s, "value"), "mavlink_url")
+serial_url_arg = _as_type(lambda s: check_serial_url(s, "value", pty=False), "serial_url")
+output_url_arg = _as_type(lambda s: check_serial_url(s, "value", pty=True), "output_url")

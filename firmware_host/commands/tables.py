@@ -1,0 +1,100 @@
+"""One output style for humans: aligned tables with units and sensible rounding.
+
+Commands print results through these helpers (machines use ``--json``):
+
+* :func:`fmt` rounds a number to three significant digits, never in exponent form, with no
+  trailing noise (``0.6202000000000112`` -> ``0.62``, ``1714.7`` -> ``1715``); ``None`` and NaN
+  print as ``-``;
+* :func:`table` aligns columns under their labels, numbers to the right;
+* :func:`fields` is a two-column table of labelled values with their units (a summary).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+DASH = "-"
+
+
+def fmt(value: Any, digits: int = 3) -> str:
+    """``value`` for a human: numbers to ``digits`` significant digits (integers as they are)."""
+    if value is None:
+        return DASH
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return DASH
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        if value == 0.0:
+            return "0"
+        decimals = max(0, digits - 1 - math.floor(math.log10(abs(value))))
+        text = f"{value:.{decimals}f}"
+        if "." in text:
+            text = text.rstrip("0").rstrip(".")
+        return "0" if text in ("-0", "") else text
+    if isinstance(value, Mapping):
+        return ", ".join(f"{k} {fmt(v, digits)}" for k, v in value.items()) or DASH
+    if isinstance(value, list | tuple):
+        return ", ".join(fmt(v, digits) for v in value) or DASH
+    return str(value)
+
+
+def _is_number(cell: Any) -> bool:
+    return isinstance(cell, int | float) and not isinstance(cell, bool)
+
+
+def table(headers: Sequence[str], rows: Sequence[Sequence[Any]], *, digits: int = 3,
+          indent: str = "") -> str:
+    """Rows under their column labels, each column as wide as its widest cell; numbers are
+    right-aligned, text left-aligned. Cells are formatted with :func:`fmt`."""
+    cells = [[fmt(c, digits) for c in row] for row in rows]
+    numeric = [bool(rows) and all(_is_number(r[i]) or r[i] is None for r in rows)
+               for i in range(len(headers))]
+    widths = [max([len(h), *(len(r[i]) for r in cells)]) for i, h in enumerate(headers)]
+
+    def line(items: Sequence[str], label: bool = False) -> str:
+        parts = [it.rjust(w) if numeric[i] and not (label and i == 0) else it.ljust(w)
+                 for i, (it, w) in enumerate(zip(items, widths, strict=True))]
+        return (indent + "  ".join(parts)).rstrip()
+
+    return "\n".join([line(list(headers), label=True), *(line(r) for r in cells)])
+
+
+def fields(rows: Sequence[tuple[str, Any, str]], *, digits: int = 3, indent: str = "") -> str:
+    """A summary: ``label  value unit`` per row; labels aligned, numbers right-aligned in one
+    column, text values starting where that column starts."""
+    if not rows:
+        return ""
+    labels = max(len(r[0]) for r in rows)
+    values = [fmt(r[1], digits) for r in rows]
+    width = max([1, *(len(v) for r, v in zip(rows, values, strict=True) if _is_number(r[1]))])
+    out = []
+    for (label, value, unit), text in zip(rows, values, strict=True):
+        cell = text.rjust(width) if _is_number(value) or value is None else text
+        out.append(f"{indent}{label.ljust(labels)}  {cell} {unit}".rstrip())
+    return "\n".join(out)
+
+
+# Key suffixes that carry the unit (``duration_s``, ``max_abs_err_deg``, ``first_fault_t``).
+_UNITS = (("_deg", "deg"), ("_ms", "ms"), ("_s", "s"), ("_t", "s"), ("_m", "m"), ("_hz", "Hz"),
+          ("_pct", "%"))
+
+
+def summary_rows(summary: Mapping[str, Any]) -> list[tuple[str, Any, str]]:
+    """A flat summary dictionary as :func:`fields` rows: ``first_fault_t`` ->
+    ``("first fault", 70.6, "s")``; nested dictionaries as ``key value, ...``."""
+    rows = []
+    for key, value in summary.items():
+        unit = ""
+        for suffix, name in _UNITS:
+            if key.endswith(suffix):
+                key, unit = key[: -len(suffix)], name
+                break
+        rows.append((key.replace("_", " "), value, unit))
+    return rows
