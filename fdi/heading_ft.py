@@ -24,7 +24,7 @@ returned are in [0, 360) degrees; the internal state is unwrapped.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 from fdi.gyro_witness import GyroWitness, WitnessParams
@@ -51,15 +51,24 @@ class FtConfig:
         "doc": "no gyro: a stuck compass is taken back once its increments fit the FIR again"})
     # The gyro witness (fdi.gyro_witness), used when the controller is given a yaw rate.
     gyro_enabled: bool = True
-    gyro_omega_min: float = field(default=0.02, metadata={"gt": 0.0, "le": 1.0})
+    gyro_heading_tau_s: float = field(default=10.0, metadata={"gt": 0.0})
+    gyro_test_tau_s: float = field(default=30.0, metadata={"gt": 0.0})
+    gyro_bias_tau_s: float = field(default=600.0, metadata={"gt": 0.0})
+    gyro_bias_delay_s: float = field(default=15.0, metadata={"ge": 0.0})
+    gyro_ref_tau_s: float = field(default=60.0, metadata={"gt": 0.0})
+    gyro_sigma0_deg: float = field(default=1.0, metadata={"gt": 0.0})
     gyro_sigma_min_deg: float = field(default=0.2, metadata={"gt": 0.0})
     gyro_sigma_samples: int = field(default=150, metadata={"ge": 1})
-    gyro_clip: float = field(default=4.0, metadata={"gt": 0.0})
-    gyro_kappa: float = field(default=1.0, metadata={"ge": 0.0})
+    gyro_clip: float = field(default=4.5, metadata={"gt": 0.0})
+    gyro_kappa: float = field(default=1.5, metadata={"ge": 0.0})
     gyro_h: float = field(default=11.0, metadata={"gt": 0.0})
+    gyro_slow_clip: float = field(default=2.5, metadata={"gt": 0.0})
+    gyro_slow_kappa: float = field(default=0.75, metadata={"ge": 0.0})
+    gyro_slow_h: float = field(default=20.0, metadata={"gt": 0.0})
     gyro_h_suspect: float = field(default=3.0, metadata={"gt": 0.0})
     gyro_jump_sigmas: float = field(default=4.0, metadata={"gt": 0.0})
     gyro_burst_ratio: float = field(default=2.5, metadata={"gt": 1.0})
+    gyro_spread_ratio: float = field(default=1.6, metadata={"gt": 0.0})
     gyro_warmup_samples: int = field(default=100, metadata={"ge": 0})
     gyro_recover_gate_deg: float = field(default=1.5, metadata={"gt": 0.0})
     gyro_recover_samples: int = field(default=10, metadata={"ge": 1})
@@ -67,13 +76,9 @@ class FtConfig:
     gyro_hold_samples: int = field(default=5, metadata={"ge": 0, "doc": "last rate kept"})
 
     def witness_params(self) -> WitnessParams:
-        return WitnessParams(
-            omega_min=self.gyro_omega_min, sigma_min_deg=self.gyro_sigma_min_deg,
-            sigma_samples=self.gyro_sigma_samples, clip=self.gyro_clip, kappa=self.gyro_kappa,
-            h=self.gyro_h, h_suspect=self.gyro_h_suspect, jump_sigmas=self.gyro_jump_sigmas,
-            burst_ratio=self.gyro_burst_ratio, warmup_samples=self.gyro_warmup_samples,
-            recover_gate_deg=self.gyro_recover_gate_deg,
-            recover_samples=self.gyro_recover_samples)
+        """The witness's parameters: each ``gyro_X`` key is ``WitnessParams.X``."""
+        return WitnessParams(**{f.name: getattr(self, "gyro_" + f.name)
+                                for f in fields(WitnessParams)})
 
 
 @dataclass(frozen=True)
@@ -237,7 +242,7 @@ class FaultTolerantHeading:
             self._gyro_mode = True
             if self._gyro_stale and w.ready:
                 w.fault = w.suspect = False
-                w.g_pos = w.g_neg = 0.0
+                w.clear()
                 w.var.frozen = False
                 w.psi = None
                 self.state, self.kind = "normal", ""
@@ -283,8 +288,7 @@ class FaultTolerantHeading:
             det.freeze()
             event = "confirmed"
         elif cfg.stuck_samples and self._run >= cfg.stuck_samples and not w.fault:
-            w.fault = w.suspect = True
-            w.var.frozen = True
+            w.force_fault(self._run)
             self.state, self.kind = "fault_gyro", "stuck"
             det.freeze()
             event = "stuck"

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import ClassVar
 
 import numpy as np
 
@@ -54,7 +55,7 @@ def _trim_bias(window: int, trim: int) -> float:
 class TrimmedScale:
     """Short-window noise sigma from the first differences of a signal (see module doc)."""
 
-    _bias_cache: dict[tuple[int, int], float] = {}
+    _bias_cache: ClassVar[dict[tuple[int, int], float]] = {}
 
     def __init__(self, window: int = 10, trim: int = 2) -> None:
         if not 0 <= trim < window:

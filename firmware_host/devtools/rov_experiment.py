@@ -7,9 +7,8 @@ here the plant is advanced one period per step, so a 30-minute run takes about a
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
-
 from dataclasses import replace
+from typing import Any
 
 from firmware_host.devtools.rov_sim import FaultSpec, make_plant
 from firmware_host.rov.config import RovConfig

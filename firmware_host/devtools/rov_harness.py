@@ -125,7 +125,7 @@ def measure(
                     w["step.delay_samples"].add(round((tc - onset) / dt), where)
                     w["step.err_after_deg"].add(max(abs(_err(e)) for e in ep if e["t"] >= tc),
                                                 where)
-        for key, rates, limit_s in (("ramp", RAMP_DPS, 15.0), ("ramp_slow", (0.1,), 40.0)):
+        for key, rates in (("ramp", RAMP_DPS), ("ramp_slow", (0.1,))):
             if key not in which or (key == "ramp_slow" and not gyro):
                 continue
             for rate in rates:
@@ -189,7 +189,7 @@ def run_all(
     for plant in ("nomoto", "nonlinear"):
         for gyro in (True, False):
             out[f"{plant}/{'gyro' if gyro else 'no gyro'}"] = measure(
-                cfg, plant, seeds, gyro=gyro, long_s=long_s)  # type: ignore[arg-type]
+                cfg, plant, seeds, gyro=gyro, long_s=long_s)
     return out
 
 

@@ -67,7 +67,7 @@ class SimConfig:
     wave_period_s: float = field(default=7.0, metadata={"gt": 0.0})
     turn_every_s: float = field(default=0.0, metadata={"ge": 0.0, "doc": "0: no turns"})
     turn_deg: float = 30.0
-    gyro_noise_dps: float = field(default=0.1, metadata={"ge": 0.0})
+    gyro_noise_dps: float = field(default=0.05, metadata={"ge": 0.0})
     gyro_bias_max_dps: float = field(default=0.2, metadata={"ge": 0.0})
 
 
