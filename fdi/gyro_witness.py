@@ -23,8 +23,9 @@ whose drift is the gyro's bias error (~0.01 deg/s once estimated). Per period (`
   :class:`fdi.noise_scale.RobustVariance`); both frozen while a fault is suspected. Two
   two-sided CUSUMs (Page) on ``s = (nu - nu_ref) / sigma``, each clipped,
   ``g+ = max(0, g+ + min(s, clip) - kappa)`` and the mirror ``g-``: a *fast* one (``kappa``,
-  ``clip``, ``h``) for a level of several sigmas, confirmed in a few samples, and a *slow* one (``slow_kappa``, ``slow_clip``, ``slow_h``) for a
-  small level or a ramp, which needs many samples, so that a noise burst that looks like a
+  ``clip``, ``h``) for a level of several sigmas, confirmed in a few samples, and a *slow*
+  one (``slow_kappa``, ``slow_clip``, ``slow_h``) for a small level or a ramp, which needs
+  many samples, so that a noise burst that looks like a
   small offset for a second is not taken for one. A fault is *suspected* when either exceeds
   ``h_suspect`` or ``|s| >= jump_sigmas`` (the loop, the bias and sigma are then frozen, and
   ``psi`` is pure gyro dead reckoning; for the slow one: above ``slow_h / 2``), *confirmed* when
