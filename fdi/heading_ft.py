@@ -214,7 +214,7 @@ class FaultTolerantHeading:
                 event = "dismissed"
         else:
             self._psi += r.d_deg  # frozen detector = stored model
-            event = self._fault_step(r.exceed)
+            event = self._fault_step(r.exceed, r.e2)
         stuck = self.cfg.stuck_samples and self._run >= self.cfg.stuck_samples
         if stuck and self.state in ("normal", "suspect"):
             if det.suspect_open:
@@ -390,9 +390,24 @@ class FaultTolerantHeading:
         self._offset = []
         self._ok = 0
 
-    def _fault_step(self, jump: bool) -> str:
+    def _fault_step(self, jump: bool, e2: float = 0.0) -> str:
         cfg = self.cfg
         resid = wrap180(self._y - self._psi)
+        if self.kind == "stuck" and cfg.stuck_recover_increments and self.state == "fault_fir":
+            # A stuck compass that moves again, with increments the FIR predicts, is healthy:
+            # take it back (the dead reckoning, not the compass, carries the error by then).
+            if self._run == 0 and e2 <= self.det.theta:
+                self._ok += 1
+                if self._ok >= cfg.recover_samples:
+                    self.det.recover()
+                    self.state = "normal"
+                    self._psi = self._y
+                    self._hf = self._y
+                    self.kind = ""
+                    return "recovered"
+            else:
+                self._ok = 0
+            return ""
         if self.state == "fault_comp":
             if jump or (cfg.stuck_samples and self._run >= cfg.stuck_samples):
                 self.state = "fault_fir"
