@@ -30,7 +30,7 @@ whose drift is the gyro's bias error (~0.01 deg/s once estimated). Per period (`
   ``h_suspect`` or ``|s| >= jump_sigmas`` (the loop, the bias and sigma are then frozen, and
   ``psi`` is pure gyro dead reckoning; for the slow one: above ``slow_h / 2``), *confirmed* when
   either reaches its ``h``, *dismissed* when the fast one is back at 0 and the slow one under
-  ``slow_h / 4``. Because ``h > 3 (clip - kappa)`` (and likewise for the slow one), a
+  ``slow_h / 4`` (or after ``max_suspect_s``). Because ``h > 3 (clip - kappa)`` (and likewise for the slow one), a
   spike of 1 to 3 samples cannot confirm, whatever its size;
 * a noise burst: the short trimmed scale of the innovation's first differences
   (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` times sigma blocks confirmation
@@ -86,6 +86,7 @@ class WitnessParams:
     bias_tau_s: float = 600.0  # forgetting of the bias fit
     bias_delay_s: float = 15.0  # the bias fit uses trusted samples this old
     ref_tau_s: float = 60.0  # the slow mean of the innovation
+    max_suspect_s: float = 20.0  # a suspect not confirmed by then is dismissed
     sigma0_deg: float = 1.0  # initial innovation sigma
     sigma_min_deg: float = 0.2  # floor of sigma
     sigma_samples: int = 150  # EWMA length of sigma^2
@@ -134,7 +135,7 @@ class GyroWitness:
         self._delayed: deque[tuple[float, float, bool]] = deque()  # (t, z, trusted)
         self._dt = 0.2
         self.var = RobustVariance(p.sigma0_deg**2, p.sigma_samples, 3.0, p.sigma_min_deg**2)
-        self.short = TrimmedScale(6, 2)
+        self.short = TrimmedScale(8, 2)
         self.g_pos = 0.0
         self.g_neg = 0.0
         self.gs_pos = 0.0
@@ -145,8 +146,9 @@ class GyroWitness:
         self.fault = False
         # innovations (output, test) while the compass agrees again after a fault
         self._agree: deque[tuple[float, float]] = deque(maxlen=p.recover_samples)
-        self._run: deque[float] = deque(maxlen=10)  # innovations since the suspect opened
+        self._run: deque[tuple[int, float]] = deque(maxlen=10)  # the last innovations
         self.nu_ref = 0.0
+        self._suspect_k = 0
         # Page's change-time estimate: the last step at which each CUSUM side was 0, and the
         # output loop's corrections since, undone at a confirmation.
         self._zero_at = [0, 0, 0, 0]  # fast +, fast -, slow +, slow -
@@ -230,8 +232,7 @@ class GyroWitness:
         slow = max(self.gs_pos, self.gs_neg)
         level = max(fast / p.h, slow / p.slow_h)
         was = self.suspect
-        if was:
-            self._run.append(nu)
+        self._run.append((self.k, nu))
         for i, g_i in enumerate((self.g_pos, self.g_neg, self.gs_pos, self.gs_neg)):
             if g_i == 0.0:
                 self._zero_at[i] = self.k
@@ -241,11 +242,16 @@ class GyroWitness:
             self.suspect = True
             self._agree.clear()
             self._rollback()
+        elif was and self.k - self._suspect_k > p.max_suspect_s / dt:
+            # A suspect that neither confirms nor fades within max_suspect_s is a steady offset
+            # that the frozen loops cannot follow (their own dead-reckoning drift): dismissed.
+            self.suspect = False
+            dismissed = True
+            self.clear()
         elif (fast > p.h_suspect or slow > 0.5 * p.slow_h or abs(s) >= p.jump_sigmas
               or burst):
             if not was:
-                self._run.clear()
-                self._run.append(nu)
+                self._suspect_k = self.k
             self.suspect = True
         elif was and fast == 0.0 and slow <= 0.25 * p.slow_h:
             self.suspect = False
@@ -264,10 +270,11 @@ class GyroWitness:
         self.g_pos = self.g_neg = self.gs_pos = self.gs_neg = 0.0
 
     def _spread_ok(self, sigma: float) -> bool:
-        """The innovations since the suspect are a level or a ramp, not a burst: about a line
-        fitted to them (without the sample farthest from it), their spread is within
-        ``spread_ratio`` sigmas."""
-        r = list(self._run)
+        """The innovations since the change began (Page's estimate) are a level or a ramp, not
+        a burst: about a line fitted to them (without the sample farthest from it), their
+        spread is within ``spread_ratio`` sigmas."""
+        k0 = self._zero_at[self._confirming_side()]
+        r = [x for k, x in self._run if k > k0]
         if len(r) < 4:
             return True
         res = _line_residuals(r)
@@ -330,6 +337,13 @@ class GyroWitness:
         self.psi_t += a_t * c_t
         self._corr.append((self.k, a_o * c_o))
 
+    def _confirming_side(self) -> int:
+        """Which CUSUM side is nearest its confirmation level (index into ``_zero_at``)."""
+        p = self.p
+        gs = ((self.g_pos / p.h, 0), (self.g_neg / p.h, 1),
+              (self.gs_pos / p.slow_h, 2), (self.gs_neg / p.slow_h, 3))
+        return max(gs)[1]
+
     def force_fault(self, samples_back: int) -> None:
         """A fault found by another test (a stuck compass) that began ``samples_back`` ago."""
         self.fault = self.suspect = True
@@ -342,9 +356,7 @@ class GyroWitness:
         last time the CUSUM that confirmed was 0): they followed the faulty compass."""
         p = self.p
         if k0 is None:
-            gs = ((self.g_pos / p.h, 0), (self.g_neg / p.h, 1),
-                  (self.gs_pos / p.slow_h, 2), (self.gs_neg / p.slow_h, 3))
-            k0 = self._zero_at[max(gs)[1]]
+            k0 = self._zero_at[self._confirming_side()]
         undo = sum(c for k, c in self._corr if k > k0)
         if self.psi is not None:
             self.psi -= undo

@@ -56,6 +56,7 @@ class FtConfig:
     gyro_bias_tau_s: float = field(default=600.0, metadata={"gt": 0.0})
     gyro_bias_delay_s: float = field(default=15.0, metadata={"ge": 0.0})
     gyro_ref_tau_s: float = field(default=60.0, metadata={"gt": 0.0})
+    gyro_max_suspect_s: float = field(default=20.0, metadata={"gt": 0.0})
     gyro_sigma0_deg: float = field(default=1.0, metadata={"gt": 0.0})
     gyro_sigma_min_deg: float = field(default=0.2, metadata={"gt": 0.0})
     gyro_sigma_samples: int = field(default=150, metadata={"ge": 1})
