@@ -2,49 +2,41 @@
 
 Zhu, Chen & Liu (2009) detect a compass fault from the command FIR alone (eq. (3)-(12)); the FIR
 sees a drift's onset only, and its dead reckoning drifts (~0.7 deg/s, ``FINDINGS.md``). With a
-yaw-rate gyro the compass's heading increments can be checked against the integrated rate,
-whose drift is the gyro's bias error (~0.01 deg/s once estimated). Per period (``dt`` s):
+yaw-rate gyro the compass's heading increments are checked against the integrated rate, whose
+drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg/s):
 
-* propagation: ``psi^-(k) = psi(k-1) + (r(k) - b(k-1)) dt`` (r the gyro, deg/s; b its bias);
-* innovation: ``nu(k) = wrap(y(k) - psi^-(k))`` (y the compass, deg);
-* while the compass is trusted: the gyro bias ``b`` is the least-squares slope of
-  ``z = y - sum(r dt)`` (compass minus raw integrated rate: ``z = const - b t + noise``) with
-  exponential forgetting over ``bias_tau_s``, fed after the warm-up with the samples of
-  ``bias_delay_s`` ago that were trusted (so that a slow drift has that long to be detected
-  before the bias starts to absorb it), and the heading is a first-order complementary
-  loop on the innovation clipped at ``clip`` sigmas, ``psi = psi^- + alpha nu`` with
-  ``alpha = max(1 / n, dt / heading_tau_s)`` (the running mean of the offset while warming up);
-  the change test runs on a second such heading ``psi_t`` with the slower ``test_tau_s``, whose
-  innovation a slow compass drift moves by ``rate * test_tau_s`` (the output keeps the shorter
-  loop, whose error from a residual bias error is ``b_err * heading_tau_s``);
-* the change test, on the innovation minus its own slow mean ``nu_ref`` (an EWMA over
-  ``ref_tau_s``: it holds the steady offset ``b_err * test_tau_s`` that a residual bias error
-  leaves, so that only a *change* is tested), in sigmas (``sigma`` a robust running estimate,
-  :class:`fdi.noise_scale.RobustVariance`); both frozen while a fault is suspected. Two
-  two-sided CUSUMs (Page) on ``s = (nu - nu_ref) / sigma``, each clipped,
-  ``g+ = max(0, g+ + min(s, clip) - kappa)`` and the mirror ``g-``: a *fast* one (``kappa``,
-  ``clip``, ``h``) for a level of several sigmas, confirmed in a few samples, and a *slow*
-  one (``slow_kappa``, ``slow_clip``, ``slow_h``) for a small level or a ramp, which needs
-  many samples, so that a noise burst that looks like a
-  small offset for a second is not taken for one. A fault is *suspected* when either exceeds
-  ``h_suspect`` or ``|s| >= jump_sigmas`` (the loop, the bias and sigma are then frozen, and
-  ``psi`` is pure gyro dead reckoning; for the slow one: above ``slow_h / 2``), *confirmed* when
-  either reaches its ``h``, *dismissed* when the fast one is back at 0 and the slow one under
-  ``slow_h / 4`` (or after ``max_suspect_s``). Because ``h > 3 (clip - kappa)`` (and likewise for the slow one), a
-  spike of 1 to 3 samples cannot confirm, whatever its size;
-* a noise burst: the short trimmed scale of the innovation's first differences
-  (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` times sigma blocks confirmation
-  and resets the CUSUM (the compass is noisy, not biased; ``psi`` carries the heading meanwhile),
-  and a confirmation also needs the innovations since the suspect opened to be a level or a
-  ramp: their spread about a fitted line (without the sample farthest from it) within
-  ``spread_ratio`` sigmas;
-* at a confirmation the output loop's corrections since the change began (Page's estimate:
-  the last step at which the confirming CUSUM was 0) are undone: they followed the fault;
-* after a confirmed fault, the compass is taken back when ``|nu| <= max(recover_gate, 3 sigma)``
-  for ``recover_samples`` periods in a row while it is not repeating itself (the caller says
-  so), and the mean of those innovations is within ``recover_gate`` (a slow drift that passes
-  near the dead reckoning is not taken back); both headings are then re-aligned to the compass
-  by that mean.
+* propagation: ``psi^-(k) = psi(k-1) + (r(k) - b) dt`` (r the gyro, b its estimated bias);
+  innovation ``nu(k) = wrap(y(k) - psi^-(k))`` (y the compass).
+* Bias: the least-squares slope of ``z = y - sum(r dt)`` (``z = const - b t + noise``): a fit
+  over the warm-up, and one with forgetting (``bias_tau_s``) fed with the trusted samples of
+  ``bias_delay_s`` ago, combined by their slope information ``sum (t - mean t)^2``. The delay
+  gives a slow drift that long to be detected before the bias absorbs it; the samples of a
+  fault (from its estimated start minus ``test_tau_s``) are never fed.
+* Headings: ``psi = psi^- + alpha nu`` (nu clipped at ``clip`` sigmas), ``alpha =
+  max(1/n, dt/heading_tau_s)``: the output. The test uses a second one, ``psi_t``, with the
+  slower ``test_tau_s``, whose innovation a drift of rate rho moves by ``rho * test_tau_s``.
+* Change test on ``s = (nu - nu_ref) / sigma``: ``nu_ref`` is the innovation's own slow mean
+  (a running mean after the warm-up, then an EWMA over ``ref_tau_s``; it holds the steady
+  offset a residual bias error leaves), ``sigma`` a robust running scale
+  (:class:`fdi.noise_scale.RobustVariance`, from first differences during the warm-up); both
+  frozen while a fault is suspected. Two two-sided CUSUMs (Page), each clipped,
+  ``g+ = max(0, g+ + min(s, clip) - kappa)`` and the mirror ``g-``: a fast one (``kappa``,
+  ``clip``, ``h``) for a level of several sigmas, and a slow one (``slow_*``) for a small level
+  or a ramp. Since ``h > 3 (clip - kappa)`` (likewise for the slow one), a spike of 1 to 3
+  samples cannot confirm, whatever its size.
+* Suspect (the loops, the bias and sigma frozen; ``psi`` is gyro dead reckoning): fast CUSUM
+  above ``h_suspect``, slow above ``slow_h / 2``, or ``|s| >= jump_sigmas``. Confirmed: either
+  reaches its ``h`` and the innovations since the change began (Page's estimate: the last step
+  the confirming CUSUM was 0; the newest 6) are a level or a ramp, their spread about a fitted
+  line (without the farthest sample) within ``spread_ratio`` sigmas. Dismissed: the fast CUSUM
+  back at 0 and the slow one under ``slow_h / 4``, or ``max_suspect_s`` elapsed.
+* Noise burst: the trimmed short scale of the innovation's first differences
+  (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` sigmas resets the CUSUMs.
+* At a confirmation the output loop's corrections since the change began are undone.
+* Recovery: ``|nu| <= max(recover_gate, 3 sigma)`` for ``recover_samples`` periods with the
+  compass alive (not repeating; the caller says so) and their mean within ``recover_gate``
+  (a slow drift passing near the dead reckoning is not taken back); both headings are then
+  re-aligned to the compass by that mean.
 
 The heading to use is ``psi`` at every step: the filtered compass when it is trusted, the gyro
 dead reckoning from the last trusted state when it is not, so switching is bumpless.
@@ -134,8 +126,9 @@ class GyroWitness:
         self._Sp = [0.0, 0.0, 0.0, 0.0, 0.0]  # after the warm-up (delayed), with forgetting
         self._delayed: deque[tuple[float, float, bool]] = deque()  # (t, z, trusted)
         self._dt = 0.2
-        self.var = RobustVariance(p.sigma0_deg**2, p.sigma_samples, 3.0, p.sigma_min_deg**2)
-        self.short = TrimmedScale(8, 2)
+        self.var = RobustVariance(p.sigma0_deg**2, p.sigma_samples, 3.0, p.sigma_min_deg**2,
+                                  reject_sigmas=4.0)
+        self.short = TrimmedScale(8, 3)  # a step with an outlier in it: 3 large differences
         self.g_pos = 0.0
         self.g_neg = 0.0
         self.gs_pos = 0.0
@@ -149,6 +142,8 @@ class GyroWitness:
         self._run: deque[tuple[int, float]] = deque(maxlen=10)  # the last innovations
         self.nu_ref = 0.0
         self._suspect_k = 0
+        self._nu_prev: float | None = None
+        self._ref_n = 0
         # Page's change-time estimate: the last step at which each CUSUM side was 0, and the
         # output loop's corrections since, undone at a confirmation.
         self._zero_at = [0, 0, 0, 0]  # fast +, fast -, slow +, slow -
@@ -195,7 +190,12 @@ class GyroWitness:
         self.k += 1
         if self.k <= p.warmup_samples:
             self._correct(nu_o, nu, dt, self.k)
-            self.var.update(nu, alpha=max(self.var.alpha, 1.0 / self.k))
+            # sigma from the first differences while the loops converge (a transient of the
+            # heading or the bias does not inflate it; white noise: var(d nu) = 2 sigma^2)
+            if self._nu_prev is not None:
+                self.var.update((nu - self._nu_prev) / math.sqrt(2.0),
+                                alpha=max(self.var.alpha, 1.0 / self.k))
+            self._nu_prev = nu
             return WitnessStep(self.psi, nu, 0.0, sigma, False, False, False, False, False)
         x = (nu - self.nu_ref) / sigma
         s = max(-p.clip, min(p.clip, x))
@@ -226,7 +226,7 @@ class GyroWitness:
         self.gs_neg = max(0.0, self.gs_neg - xs - p.slow_kappa)
         ss = self.short.sigma
         if self.short.full and ss > p.burst_ratio * sigma:
-            burst = True
+            burst = True  # the compass is noisy, not biased
             self.clear()
         fast = max(self.g_pos, self.g_neg)
         slow = max(self.gs_pos, self.gs_neg)
@@ -261,7 +261,9 @@ class GyroWitness:
             self._correct(nu_o, nu, dt, 0)
             self.var.update(nu - self.nu_ref)
             d = max(-p.clip * sigma, min(p.clip * sigma, nu - self.nu_ref))
-            self.nu_ref += dt / p.ref_tau_s * d
+            # a running mean at first (the offset is learned as fast as the data allow)
+            self._ref_n += 1
+            self.nu_ref += max(dt / p.ref_tau_s, 1.0 / (self._ref_n + 25)) * d
         return WitnessStep(self.psi, nu, level, sigma, self.suspect, confirmed, dismissed, False,
                            burst)
 
@@ -270,15 +272,16 @@ class GyroWitness:
         self.g_pos = self.g_neg = self.gs_pos = self.gs_neg = 0.0
 
     def _spread_ok(self, sigma: float) -> bool:
-        """The innovations since the change began (Page's estimate) are a level or a ramp, not
-        a burst: about a line fitted to them (without the sample farthest from it), their
-        spread is within ``spread_ratio`` sigmas."""
+        """The innovations since the change began (Page's estimate; the newest 6) are a level
+        or a ramp, not a burst: about a line fitted to them (without the sample farthest from
+        it), their spread is within ``spread_ratio`` sigmas."""
         k0 = self._zero_at[self._confirming_side()]
-        r = [x for k, x in self._run if k > k0]
+        r = [x for k, x in self._run if k > k0][-6:]  # the newest: a step's first samples
+        #                                              may straddle it
         if len(r) < 4:
             return True
         res = _line_residuals(r)
-        if len(r) >= 5:
+        if len(r) >= 4:
             worst = max(range(len(r)), key=lambda i: abs(res[i]))
             ts = [float(i) for i in range(len(r)) if i != worst]
             r = [x for i, x in enumerate(r) if i != worst]

@@ -5,8 +5,9 @@ Used by both compass witnesses (:mod:`fdi.gyro_witness` and the FIR detector of
 (an extension of Zhu, Chen & Liu 2009, whose theta of eq. (7) is a fixed number in deg^2).
 
 * :class:`RobustVariance`: an exponentially weighted mean of ``min(x^2, c^2 var)`` (each sample
-  clipped at ``c`` sigmas, so a fault or an outlier moves it by a bounded amount), frozen by the
-  caller while a fault is suspected, with a floor ``var_min``.
+  clipped at ``c`` sigmas, so a fault or an outlier moves it by a bounded amount; optionally a
+  sample beyond ``reject_sigmas`` is left out altogether), frozen by the caller while a fault
+  is suspected, with a floor ``var_min``.
 * :class:`TrimmedScale`: over the last ``window`` values of a *differenced* signal, the RMS
   without the ``trim`` largest, divided by sqrt(2). A step in the signal shows once in its first
   difference and a ramp only as a small mean, so this scale follows noise (a burst) within a few
@@ -26,10 +27,12 @@ import numpy as np
 class RobustVariance:
     """EWMA of clipped squares; ``update(x)`` unless :attr:`frozen`."""
 
-    def __init__(self, var0: float, samples: int, clip_sigmas: float, var_min: float) -> None:
+    def __init__(self, var0: float, samples: int, clip_sigmas: float, var_min: float,
+                 reject_sigmas: float = 0.0) -> None:
         self.var = max(var0, var_min)
         self.alpha = 1.0 / samples
         self.c2 = clip_sigmas * clip_sigmas
+        self.r2 = reject_sigmas * reject_sigmas
         self.var_min = var_min
         self.frozen = False
 
@@ -41,7 +44,10 @@ class RobustVariance:
         if self.frozen:
             return
         a = self.alpha if alpha is None else alpha
-        x2 = min(x * x, self.c2 * self.var)
+        x2 = x * x
+        if self.r2 and x2 > self.r2 * self.var:  # an outlier: not noise, left out
+            return
+        x2 = min(x2, self.c2 * self.var)
         self.var = max(self.var + a * (x2 - self.var), self.var_min)
 
 
