@@ -357,7 +357,6 @@ class GyroWitness:
     def _rollback(self, k0: int | None = None) -> None:
         """Undo the output loop's corrections since the change began (Page's estimate: the
         last time the CUSUM that confirmed was 0): they followed the faulty compass."""
-        p = self.p
         if k0 is None:
             k0 = self._zero_at[self._confirming_side()]
         undo = sum(c for k, c in self._corr if k > k0)
