@@ -181,6 +181,18 @@ def measure(
     return {k: v.as_dict() for k, v in w.items() if v.runs}
 
 
+def hold_floor(cfg: RovConfig, plant: Plant, seeds: Sequence[int], *, gyro: bool
+               ) -> dict[str, Any]:
+    """No fault: the worst |heading error| after 25 s over 100 s (what the plant and the PID
+    achieve with a healthy compass: the floor under the "heading error" criteria)."""
+    c = plant_config(cfg, plant)
+    w = Worst()
+    for seed in seeds:
+        ep = run_experiment(c, [], 100.0, ft=True, seed=seed, gyro=gyro)
+        w.add(max(abs(_err(e)) for e in ep if e["t"] >= 25.0), f"seed {seed}")
+    return w.as_dict()
+
+
 def run_all(
     cfg: RovConfig, seeds: Sequence[int], long_s: float = 3600.0
 ) -> dict[str, dict[str, dict[str, Any]]]:
