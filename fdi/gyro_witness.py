@@ -142,6 +142,7 @@ class GyroWitness:
         self._run: deque[tuple[int, float]] = deque(maxlen=10)  # the last innovations
         self.nu_ref = 0.0
         self._suspect_k = 0
+        self.confirmed_fast = False  # the last confirmation came from the fast CUSUM
         self._nu_prev: float | None = None
         self._ref_n = 0
         # Page's change-time estimate: the last step at which each CUSUM side was 0, and the
@@ -238,6 +239,7 @@ class GyroWitness:
                 self._zero_at[i] = self.k
         if level >= 1.0 and self._spread_ok(sigma):
             confirmed = True
+            self.confirmed_fast = fast / p.h >= slow / p.slow_h
             self.fault = True
             self.suspect = True
             self._agree.clear()

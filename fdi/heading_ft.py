@@ -24,6 +24,7 @@ returned are in [0, 360) degrees; the internal state is unwrapped.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field, fields
 from typing import Literal
 
@@ -73,7 +74,9 @@ class FtConfig:
     gyro_warmup_samples: int = field(default=100, metadata={"ge": 0})
     gyro_recover_gate_deg: float = field(default=1.5, metadata={"gt": 0.0})
     gyro_recover_samples: int = field(default=10, metadata={"ge": 1})
-    gyro_vote_gate_deg: float = field(default=3.0, metadata={"gt": 0.0})
+    gyro_vote: bool = field(default=False, metadata={
+        "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
+    gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})
     gyro_hold_samples: int = field(default=5, metadata={"ge": 0, "doc": "last rate kept"})
 
     def witness_params(self) -> WitnessParams:
@@ -127,7 +130,10 @@ class FaultTolerantHeading:
         self._last_rate: float | None = None
         self._rate_age = 0
         self._vote_C: list[float] = []
-        self._vote = [0.0, 0.0, 0.0]  # sums over the suspect: compass, gyro, stored FIR
+        # at the suspect: compass minus gyro heading (mean of 5); then the sums since of the
+        # gyro's and the stored FIR's increments
+        self._vote = [0.0, 0.0, 0.0]
+        self._nu_o: deque[float] = deque(maxlen=5)  # compass minus gyro heading, newest
 
     def step(
         self,
@@ -276,14 +282,15 @@ class FaultTolerantHeading:
         event = ""
         if ws.suspect and not was_suspect:  # open the vote: weights and sums from here
             self._vote_C = list(det.fir.C_avg if det.fir.avg_alpha else det.fir.C)
-            self._vote = [0.0, 0.0, 0.0]
+            self._vote = [sum(self._nu_o) / len(self._nu_o) if self._nu_o else 0.0, 0.0, 0.0]
             d_stored = 0.0
         if w.suspect and dy is not None:
-            self._vote[0] += dy
             self._vote[1] += (rate - w.bias) * dt
             self._vote[2] += d_stored
+        if w.psi is not None:
+            self._nu_o.append(wrap180(heading_meas - w.psi))
         if ws.confirmed:
-            if self._vote_blames_gyro():
+            if cfg.gyro_vote and w.confirmed_fast and self._vote_blames_gyro():
                 return self._gyro_blamed(heading_meas, r.d_deg, r.e2, r.snr, r.V)
             self.state, self.kind = "fault_gyro", "sensor"
             det.freeze()
@@ -309,10 +316,19 @@ class FaultTolerantHeading:
         return self.det.fir.predict(C) * self.det.cfg.y_scale
 
     def _vote_blames_gyro(self) -> bool:
-        """Third vote: the stored FIR's increments agree with the compass, not with the gyro."""
-        dy, dg, dd = self._vote
-        gate = self.cfg.gyro_vote_gate_deg
-        return abs(dd - dy) <= gate and abs(dd - dg) > 2.0 * gate
+        """Third vote, from when the suspect opened: the gyro moved by ``dg`` since (the
+        witness's dead reckoning), the stored FIR predicts ``dd``, the compass moved ``d_cg``
+        from the gyro heading (mean of its last 5 innovations minus the same at the open). The
+        gyro is blamed only if the FIR is closer to the compass than to the gyro by
+        ``gyro_vote_gate_deg`` sigmas of the innovation; otherwise the compass is (the gyro is
+        the better witness, and the FIR's model is the least exact of the three). Asked only
+        for a fast confirmation: the FIR's bias tap learns a slow drift as a current, so for a
+        ramp it would side with the drifting compass."""
+        base, dg, dd = self._vote
+        d_fg = dd - dg  # FIR heading minus gyro heading, moved since the suspect opened
+        d_cg = (sum(self._nu_o) / len(self._nu_o) if self._nu_o else 0.0) - base
+        margin = self.cfg.gyro_vote_gate_deg * self.witness.var.sigma
+        return abs(d_cg - d_fg) + margin < abs(d_fg)
 
     def _gyro_blamed(
         self, heading_meas: float, d: float, e2: float, snr: float, V: float
