@@ -63,7 +63,7 @@ class DetectorConfig:
     sigma_samples: int = field(default=150, metadata={"ge": 1, "doc": "EWMA length of sigma_e^2"})
     mean_sigmas: float = field(default=3.0, metadata={
         "ge": 0.0, "doc": "confirm only if |mean e| since the suspect >= this * sigma_e/sqrt(n)"})
-    burst_ratio: float = field(default=2.5, metadata={
+    burst_ratio: float = field(default=0.0, metadata={
         "ge": 0.0, "doc": "no confirmation while the short scale of e > this * sigma_e"})
 
     def __post_init__(self) -> None:
