@@ -24,13 +24,15 @@ returned are in [0, 360) degrees; the internal state is unwrapped.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections import deque
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
+from fdi.gyro_witness import GyroWitness, WitnessParams
 from fdi.lms_fir import DetectorConfig, DualCriterionDetector, wrap180
 
-Source = Literal["sensor", "fir", "compensated", "none"]
-State = Literal["normal", "suspect", "fault_fir", "fault_comp"]
+Source = Literal["sensor", "fir", "compensated", "fused", "gyro", "none"]
+State = Literal["normal", "suspect", "fault_fir", "fault_comp", "fault_gyro"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +48,41 @@ class FtConfig:
     stuck_samples: int = field(default=10, metadata={"ge": 0, "doc": "0 disables"})
     stuck_eps_deg: float = field(default=1e-6, metadata={"ge": 0.0})
     smooth_gain: float = field(default=0.2, metadata={"gt": 0.0, "le": 1.0})
+    stuck_recover_increments: bool = field(default=True, metadata={
+        "doc": "no gyro: a stuck compass is taken back once its increments fit the FIR again"})
+    # The gyro witness (fdi.gyro_witness), used when the controller is given a yaw rate.
+    gyro_enabled: bool = True
+    gyro_heading_tau_s: float = field(default=10.0, metadata={"gt": 0.0})
+    gyro_test_tau_s: float = field(default=30.0, metadata={"gt": 0.0})
+    gyro_bias_tau_s: float = field(default=600.0, metadata={"gt": 0.0})
+    gyro_bias_delay_s: float = field(default=15.0, metadata={"ge": 0.0})
+    gyro_ref_tau_s: float = field(default=60.0, metadata={"gt": 0.0})
+    gyro_max_suspect_s: float = field(default=20.0, metadata={"gt": 0.0})
+    gyro_sigma0_deg: float = field(default=1.0, metadata={"gt": 0.0})
+    gyro_sigma_min_deg: float = field(default=0.2, metadata={"gt": 0.0})
+    gyro_sigma_samples: int = field(default=150, metadata={"ge": 1})
+    gyro_clip: float = field(default=4.5, metadata={"gt": 0.0})
+    gyro_kappa: float = field(default=1.5, metadata={"ge": 0.0})
+    gyro_h: float = field(default=11.0, metadata={"gt": 0.0})
+    gyro_slow_clip: float = field(default=2.5, metadata={"gt": 0.0})
+    gyro_slow_kappa: float = field(default=0.75, metadata={"ge": 0.0})
+    gyro_slow_h: float = field(default=20.0, metadata={"gt": 0.0})
+    gyro_h_suspect: float = field(default=3.0, metadata={"gt": 0.0})
+    gyro_jump_sigmas: float = field(default=4.0, metadata={"gt": 0.0})
+    gyro_burst_ratio: float = field(default=2.5, metadata={"gt": 1.0})
+    gyro_spread_ratio: float = field(default=1.6, metadata={"gt": 0.0})
+    gyro_warmup_samples: int = field(default=100, metadata={"ge": 0})
+    gyro_recover_gate_deg: float = field(default=1.5, metadata={"gt": 0.0})
+    gyro_recover_samples: int = field(default=10, metadata={"ge": 1})
+    gyro_vote: bool = field(default=False, metadata={
+        "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
+    gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})
+    gyro_hold_samples: int = field(default=5, metadata={"ge": 0, "doc": "last rate kept"})
+
+    def witness_params(self) -> WitnessParams:
+        """The witness's parameters: each ``gyro_X`` key is ``WitnessParams.X``."""
+        return WitnessParams(**{f.name: getattr(self, "gyro_" + f.name)
+                                for f in fields(WitnessParams)})
 
 
 @dataclass(frozen=True)
@@ -85,8 +122,44 @@ class FaultTolerantHeading:
         self._run_start_y = 0.0
         self._run_pred = 0.0
         self._hf: float | None = None  # model-aided smoothed heading (unwrapped), deg
+        # The gyro witness (used while a yaw rate arrives) and the FIR's third vote.
+        self.witness = GyroWitness(ft_cfg.witness_params())
+        self._gyro_mode = False
+        self._gyro_stale = False  # the gyro was lost: restart the witness on its return
+        self.gyro_failed = False  # the vote blamed the gyro: no witness from then on
+        self._last_rate: float | None = None
+        self._rate_age = 0
+        self._vote_C: list[float] = []
+        # at the suspect: compass minus gyro heading (mean of 5); then the sums since of the
+        # gyro's and the stored FIR's increments
+        self._vote = [0.0, 0.0, 0.0]
+        self._nu_o: deque[float] = deque(maxlen=5)  # compass minus gyro heading, newest
 
-    def step(self, u_prev: float, heading_meas: float | None) -> HeadingDecision:
+    def step(
+        self,
+        u_prev: float,
+        heading_meas: float | None,
+        yaw_rate_dps: float | None = None,
+        dt: float = 0.2,
+    ) -> HeadingDecision:
+        """One period: the command sent in the last one (%), the compass (deg or None) and,
+        when the vehicle has one, its yaw-rate gyro (deg/s or None)."""
+        rate = yaw_rate_dps
+        if rate is not None and not math.isfinite(rate):
+            rate = None
+        if self.cfg.gyro_enabled and not self.gyro_failed:
+            if rate is not None:
+                self._last_rate, self._rate_age = rate, 0
+            elif self._last_rate is not None and self._rate_age < self.cfg.gyro_hold_samples:
+                self._rate_age += 1
+                rate = self._last_rate
+            if rate is not None:
+                return self._step_gyro(u_prev, heading_meas, rate, dt)
+            if self._gyro_mode:
+                self._leave_gyro()
+        return self._step_fir(u_prev, heading_meas)
+
+    def _step_fir(self, u_prev: float, heading_meas: float | None) -> HeadingDecision:
         det = self.det
         det.push_command(u_prev)
         substituting = self.state != "normal"
@@ -148,7 +221,7 @@ class FaultTolerantHeading:
                 event = "dismissed"
         else:
             self._psi += r.d_deg  # frozen detector = stored model
-            event = self._fault_step(r.exceed)
+            event = self._fault_step(r.exceed, r.e2)
         stuck = self.cfg.stuck_samples and self._run >= self.cfg.stuck_samples
         if stuck and self.state in ("normal", "suspect"):
             if det.suspect_open:
@@ -164,6 +237,162 @@ class FaultTolerantHeading:
             event = "stuck"
         return self._decide(self._y, r.d_deg, r.e2, r.snr, r.V, event)
 
+    # ------------------------------------------------------------------ with a yaw gyro
+
+    def _step_gyro(
+        self, u_prev: float, heading_meas: float | None, rate: float, dt: float
+    ) -> HeadingDecision:
+        """The gyro witness decides; the FIR keeps learning and gives the third vote."""
+        det, w, cfg = self.det, self.witness, self.cfg
+        det.push_command(u_prev)
+        if not self._gyro_mode:  # first rate, or back after a loss: restart the witness
+            self._gyro_mode = True
+            if self._gyro_stale and w.ready:
+                w.fault = w.suspect = False
+                w.clear()
+                w.var.frozen = False
+                w.psi = None
+                self.state, self.kind = "normal", ""
+                det.recover()
+            self._gyro_stale = False
+        w.propagate(rate, dt)
+        if heading_meas is None or not math.isfinite(heading_meas):
+            r = det.step(None)
+            self._y_raw = None
+            w.short.restart()
+            return self._decide_gyro(None, r.d_deg, 0.0, 0.0, 0.0, "")
+        dy: float | None = None
+        if self._y_raw is not None:
+            dy = wrap180(heading_meas - self._y_raw)
+            self._y += dy
+        else:
+            ref = w.psi if w.psi is not None else self._used
+            self._y = heading_meas if ref is None else ref + wrap180(heading_meas - ref)
+        self._y_raw = heading_meas
+        if cfg.stuck_samples and dy is not None and abs(dy) <= cfg.stuck_eps_deg:
+            self._run += 1
+        else:
+            self._run = 0
+        d_stored = self._stored_pred_deg_from(self._vote_C) if self._vote_C else 0.0
+        r = det.step(dy)
+        if det.suspect_open and (w.suspect or w.fault):
+            det.dismiss()  # the FIR's own criterion is not the judge here
+        was_suspect = w.suspect
+        ws = w.update(heading_meas, dt, repeating=self._run > 0)
+        event = ""
+        if ws.suspect and not was_suspect:  # open the vote: weights and sums from here
+            self._vote_C = list(det.fir.C_avg if det.fir.avg_alpha else det.fir.C)
+            self._vote = [sum(self._nu_o) / len(self._nu_o) if self._nu_o else 0.0, 0.0, 0.0]
+            d_stored = 0.0
+        if w.suspect and dy is not None:
+            self._vote[1] += (rate - w.bias) * dt
+            self._vote[2] += d_stored
+        if w.psi is not None:
+            self._nu_o.append(wrap180(heading_meas - w.psi))
+        if ws.confirmed:
+            if cfg.gyro_vote and w.confirmed_fast and self._vote_blames_gyro():
+                return self._gyro_blamed(heading_meas, r.d_deg, r.e2, r.snr, r.V)
+            self.state, self.kind = "fault_gyro", "sensor"
+            det.freeze()
+            event = "confirmed"
+        elif cfg.stuck_samples and self._run >= cfg.stuck_samples and not w.fault:
+            w.force_fault(self._run)
+            self.state, self.kind = "fault_gyro", "stuck"
+            det.freeze()
+            event = "stuck"
+        elif ws.recovered:
+            self.state, self.kind = "normal", ""
+            det.recover()
+            event = "recovered"
+        elif ws.dismissed:
+            self.state = "normal"
+            event = "dismissed"
+        elif ws.suspect and not was_suspect:
+            self.state = "suspect"
+            event = "suspect"
+        return self._decide_gyro(self._y, r.d_deg, r.e2, ws.score, r.V, event)
+
+    def _stored_pred_deg_from(self, C: list[float]) -> float:
+        return self.det.fir.predict(C) * self.det.cfg.y_scale
+
+    def _vote_blames_gyro(self) -> bool:
+        """Third vote, from when the suspect opened: the gyro moved by ``dg`` since (the
+        witness's dead reckoning), the stored FIR predicts ``dd``, the compass moved ``d_cg``
+        from the gyro heading (mean of its last 5 innovations minus the same at the open). The
+        gyro is blamed only if the FIR is closer to the compass than to the gyro by
+        ``gyro_vote_gate_deg`` sigmas of the innovation; otherwise the compass is (the gyro is
+        the better witness, and the FIR's model is the least exact of the three). Asked only
+        for a fast confirmation: the FIR's bias tap learns a slow drift as a current, so for a
+        ramp it would side with the drifting compass."""
+        base, dg, dd = self._vote
+        d_fg = dd - dg  # FIR heading minus gyro heading, moved since the suspect opened
+        d_cg = (sum(self._nu_o) / len(self._nu_o) if self._nu_o else 0.0) - base
+        margin = self.cfg.gyro_vote_gate_deg * self.witness.var.sigma
+        return abs(d_cg - d_fg) + margin < abs(d_fg)
+
+    def _gyro_blamed(
+        self, heading_meas: float, d: float, e2: float, snr: float, V: float
+    ) -> HeadingDecision:
+        """The gyro is the odd one out: keep the compass, stop using the witness."""
+        self.gyro_failed = True
+        self._gyro_mode = False
+        self.state, self.kind = "normal", ""
+        self._hf = self._y
+        self.det.recover()
+        dec = self._decide(self._y, d, e2, snr, V, "gyro_fault")
+        return dec
+
+    def _leave_gyro(self) -> None:
+        """The yaw rate stopped arriving: hand over to the FIR alone."""
+        w = self.witness
+        self._gyro_mode = False
+        self._gyro_stale = True
+        if w.psi is not None and (w.fault or w.suspect):
+            self._psi = w.psi
+            if self.det.stored is None:
+                self.det.stored = list(self.det.fir.C_avg if self.det.fir.avg_alpha
+                                       else self.det.fir.C)
+            self.det.freeze()
+            self.state = "fault_fir"
+            self.kind = self.kind or "sensor"
+        else:
+            self.state, self.kind = "normal", ""
+        if w.psi is not None:
+            self._hf = w.psi
+
+    def _decide_gyro(
+        self, y: float | None, d: float, e2: float, score: float, V: float, event: str
+    ) -> HeadingDecision:
+        w = self.witness
+        fault = self.state == "fault_gyro"
+        used: float | None
+        source: Source
+        if not self.enabled:
+            used, source = (y, "sensor") if y is not None else (None, "none")
+        elif w.psi is not None:
+            used, source = w.psi, ("fused" if self.state == "normal" else "gyro")
+        elif y is not None:
+            used, source = y, "sensor"
+        else:
+            used, source = None, "none"
+        if used is not None:
+            self._used = used
+        return HeadingDecision(
+            heading_used=None if used is None else used % 360.0,
+            source=source,
+            state=self.state,
+            d_deg=d,
+            e2=e2,
+            snr=score,
+            V=V,
+            suspect=self.state == "suspect" or event == "suspect",
+            fault=fault,
+            kind=self.kind if fault else "",
+            event=event,
+        )
+
+    # ------------------------------------------------------------------ FIR only
+
     def _stored_pred_deg(self) -> float:
         assert self.det.stored is not None
         return self.det.fir.predict(self.det.stored) * self.det.cfg.y_scale
@@ -178,9 +407,24 @@ class FaultTolerantHeading:
         self._offset = []
         self._ok = 0
 
-    def _fault_step(self, jump: bool) -> str:
+    def _fault_step(self, jump: bool, e2: float = 0.0) -> str:
         cfg = self.cfg
         resid = wrap180(self._y - self._psi)
+        if self.kind == "stuck" and cfg.stuck_recover_increments and self.state == "fault_fir":
+            # A stuck compass that moves again, with increments the FIR predicts, is healthy:
+            # take it back (the dead reckoning, not the compass, carries the error by then).
+            if self._run == 0 and e2 <= self.det.theta:
+                self._ok += 1
+                if self._ok >= cfg.recover_samples:
+                    self.det.recover()
+                    self.state = "normal"
+                    self._psi = self._y
+                    self._hf = self._y
+                    self.kind = ""
+                    return "recovered"
+            else:
+                self._ok = 0
+            return ""
         if self.state == "fault_comp":
             if jump or (cfg.stuck_samples and self._run >= cfg.stuck_samples):
                 self.state = "fault_fir"
@@ -230,7 +474,7 @@ class FaultTolerantHeading:
             used, source = None, "none"
         if used is not None:
             self._used = used
-        fault = self.state in ("fault_fir", "fault_comp")
+        fault = self.state in ("fault_fir", "fault_comp", "fault_gyro")
         return HeadingDecision(
             heading_used=None if used is None else used % 360.0,
             source=source,

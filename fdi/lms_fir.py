@@ -16,6 +16,14 @@ an optional bias tap (constant input 1) that absorbs a steady current. Inputs ar
 of deg / y_scale (an FIR cannot represent the yaw integrator when asked for absolute heading).
 e^2 is reported in deg^2. The weight vector C_k has shape (M,) or (M + 1,) with the bias last.
 
+Extensions in the default preset (each off in ``config/rov-paper.toml``): theta of eq. (7) is
+raised to ``(theta_sigmas * sigma_e)^2`` with sigma_e a robust running scale of e
+(:class:`fdi.noise_scale.RobustVariance`, frozen while a suspect is open), so that a noisier
+compass does not raise suspects; and criterion 2 confirms only if the residual mean since the
+suspect is ``mean_sigmas`` standard errors from 0 and the short scale of e shows no noise burst
+(R(k) of eq. (11) is scale-free: any persisting weight change fires it, e.g. the LMS adapting to
+a turn on a non-linear plant).
+
 Measured traps this design avoids are listed in ``../shared/FINDINGS.md`` ("Adaptive FIR with
 LMS"). Plain Python floats with a doubled ring buffer and running sums: one step costs a few
 microseconds (see ``firmware_host.rov.app.bench_rov_step``).
@@ -27,6 +35,8 @@ import math
 import operator
 from collections import deque
 from dataclasses import dataclass, field
+
+from fdi.noise_scale import RobustVariance, TrimmedScale
 
 
 @dataclass(frozen=True)
@@ -47,6 +57,14 @@ class DetectorConfig:
     confirm_window: int = field(default=5, metadata={"ge": 1, "doc": "samples after suspect"})
     warmup_samples: int = field(default=100, metadata={"ge": 0, "doc": "train only, no check"})
     store_average_samples: int = field(default=50, metadata={"ge": 0, "doc": "0: C_k itself"})
+    # Thresholds that follow the noise (extensions; 0 disables each, as in the paper preset).
+    theta_sigmas: float = field(default=4.0, metadata={
+        "ge": 0.0, "doc": "theta = max(theta_deg2, (theta_sigmas * sigma_e)^2)"})
+    sigma_samples: int = field(default=150, metadata={"ge": 1, "doc": "EWMA length of sigma_e^2"})
+    mean_sigmas: float = field(default=3.0, metadata={
+        "ge": 0.0, "doc": "confirm only if |mean e| since the suspect >= this * sigma_e/sqrt(n)"})
+    burst_ratio: float = field(default=0.0, metadata={
+        "ge": 0.0, "doc": "no confirmation while the short scale of e > this * sigma_e"})
 
     def __post_init__(self) -> None:
         if self.persist > self.confirm_window:
@@ -241,6 +259,21 @@ class DualCriterionDetector:
         self._over = 0
         self._stored_sum = 0.0
         self._trained = 0
+        # sigma_e: robust running scale of the residual e (deg), frozen while suspect/frozen.
+        ts = cfg.theta_sigmas if cfg.theta_sigmas > 0 else 1.0
+        self.var = RobustVariance(cfg.theta_deg2 / (ts * ts), cfg.sigma_samples, 3.0, 1e-6)
+        self.short = TrimmedScale(6, 2)
+        self._cum_e = 0.0
+        self._sum_e = 0.0
+        self._n_e = 0
+
+    @property
+    def theta(self) -> float:
+        """The e^2 threshold in force, deg^2 (theta of eq. (7), raised with the noise)."""
+        c = self.cfg
+        if c.theta_sigmas <= 0.0:
+            return c.theta_deg2
+        return max(c.theta_deg2, c.theta_sigmas * c.theta_sigmas * self.var.var)
 
     @property
     def suspect_open(self) -> bool:
@@ -261,9 +294,12 @@ class DualCriterionDetector:
             return DetectorStep(d * cfg.y_scale, 0.0, 0.0, 0.0, False, self.suspect_open,
                                 False, False)
         e = wrap180(dy_deg) / cfg.y_scale - d
-        e2 = (e * cfg.y_scale) ** 2  # eq. (7): J^2(k) = [d(k) - y(k)]^2, deg^2
+        e_deg = e * cfg.y_scale
+        e2 = e_deg * e_deg  # eq. (7): J^2(k) = [d(k) - y(k)]^2, deg^2
         self._trained += 1
-        exceed = e2 > cfg.theta_deg2 and self._trained > cfg.warmup_samples
+        self._cum_e += e_deg
+        self.short.push(self._cum_e)  # its first differences are e itself
+        exceed = e2 > self.theta and self._trained > cfg.warmup_samples
         if exceed and not self.suspect_open and not self.frozen:
             # Store the weights at the suspect instant (before this sample trains them); with
             # store_average_samples, their recent average: the instantaneous C_k carries the
@@ -272,13 +308,20 @@ class DualCriterionDetector:
             self._stored_sum = self.fir.w_sum
             self._suspect_age = 0
             self._over = 0
+            self._sum_e = 0.0
+            self._n_e = 0
+        if self.suspect_open:
+            self._sum_e += e_deg
+            self._n_e += 1
+        elif not self.frozen:
+            self.var.update(e_deg, alpha=max(self.var.alpha, 1.0 / self._trained))
         if not self.frozen:
             self.fir.train(e)
         R = self.snr.push(self.fir.w_sum) if not self.frozen else 0.0
         confirmed = dismissed = False
         if self.suspect_open:
             self._over = self._over + 1 if cfg.n0 < R else 0
-            if self._over >= cfg.persist:
+            if self._over >= cfg.persist and self._level_changed():
                 confirmed = True
                 self._suspect_age = -1
             else:
@@ -288,6 +331,17 @@ class DualCriterionDetector:
                     self.dismiss()
         return DetectorStep(d * cfg.y_scale, e2, R, self.snr.V_last, exceed,
                             self.suspect_open or confirmed, confirmed, dismissed)
+
+    def _level_changed(self) -> bool:
+        """Criterion 2 alone fires on any persisting weight change (R(k) is scale-free); also
+        require a change of the residual mean, in sigma_e, and no noise burst."""
+        cfg = self.cfg
+        sigma = self.var.sigma
+        if cfg.burst_ratio > 0.0 and self.short.full and self.short.sigma > cfg.burst_ratio * sigma:
+            return False
+        if cfg.mean_sigmas <= 0.0 or self._n_e == 0:
+            return True
+        return abs(self._sum_e) >= cfg.mean_sigmas * sigma * math.sqrt(self._n_e)
 
     def dismiss(self) -> None:
         """Close an open suspect as a disturbance: restore the stored weights and window."""

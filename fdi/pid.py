@@ -3,7 +3,8 @@
 The error is ``wrap180(setpoint - heading)`` (degrees), so 359 deg -> 1 deg is a 2 deg turn, not
 358. The derivative acts on the measurement (no kick on a setpoint change) through a first-order
 low-pass of time constant ``d_tau_s``. Anti-windup: the integral only moves when the output is
-not saturated in the direction the error pushes it, and it is itself bounded to the output range.
+not saturated in the direction the error pushes it, and only while the error is inside
+``i_band_deg`` (a large turn does not wind it up), and it is itself bounded to the output range.
 Output units are those of the gains (here % differential thrust per degree).
 """
 
@@ -20,9 +21,11 @@ class PidConfig:
     """Gains (% per deg, % per deg*s, % per deg/s) and limits (the ``[pid]`` table)."""
 
     kp: float = field(default=3.0, metadata={"ge": 0.0})
-    ki: float = field(default=0.1, metadata={"ge": 0.0})
+    ki: float = field(default=0.3, metadata={"ge": 0.0})
     kd: float = field(default=2.0, metadata={"ge": 0.0})
     d_tau_s: float = field(default=0.2, metadata={"ge": 0.0})
+    i_band_deg: float = field(default=10.0, metadata={
+        "ge": 0.0, "doc": "integrate only while |error| < this (0: always)"})
     out_min: float = -100.0
     out_max: float = 100.0
 
@@ -63,7 +66,9 @@ class HeadingPid:
         trial_i = self.integral + c.ki * err * dt
         unclamped = p + trial_i + d
         # Anti-windup: integrate only if that does not push a saturated output further out.
-        if not ((unclamped > c.out_max and err > 0) or (unclamped < c.out_min and err < 0)):
+        in_band = c.i_band_deg <= 0.0 or abs(err) < c.i_band_deg
+        if in_band and not ((unclamped > c.out_max and err > 0)
+                            or (unclamped < c.out_min and err < 0)):
             self.integral = min(max(trial_i, c.out_min), c.out_max)
         out = p + self.integral + d
         self.output = min(max(out, c.out_min), c.out_max)

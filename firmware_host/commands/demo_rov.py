@@ -7,6 +7,7 @@ R(k) with their thresholds) and Fig. 4 (heading with and without fault tolerance
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="directory for the PNGs")
     parser.add_argument("--seed", type=int, default=None,
                         help="simulation seed (default: the config's sim.seed)")
+    parser.add_argument("--plant", choices=("nomoto", "nonlinear"), default=None,
+                        help="simulated yaw model (default: the config's)")
+    parser.add_argument("--gyro", action="store_true", help="the controller gets the yaw gyro")
 
 
 def _err(e: dict[str, Any]) -> float:
@@ -32,8 +36,11 @@ def _err(e: dict[str, Any]) -> float:
 
 def run(args: argparse.Namespace) -> int:
     cfg, _ = load_rov_config(args.config)
+    if args.plant is not None:
+        cfg = replace(cfg, sim=replace(cfg.sim, plant=args.plant))
     faults = [parse_fault(f"drift:{args.drift:g}@70")]
-    runs = {ft: run_experiment(cfg, faults, 130.0, ft=ft, seed=args.seed) for ft in (False, True)}
+    runs = {ft: run_experiment(cfg, faults, 130.0, ft=ft, seed=args.seed, gyro=args.gyro)
+            for ft in (False, True)}
     print(f"ROV compass drift {args.drift:g} deg at t = 70 s, setpoint {cfg.setpoint_deg:g} deg")
     print(f"{'':10s} {'suspect t':>10s} {'confirm t':>10s} {'max |err| after':>16s} "
           f"{'mean err 104-130 s':>19s}")

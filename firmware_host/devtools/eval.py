@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from fdi.baselines import BASELINES, BaselineParams, make_baseline
 from fdi.errors import UsageError
@@ -327,45 +327,64 @@ def generate_case(case: RoverCase, duration_s: float, seed: int
 
 
 ROV_FAULTS: tuple[tuple[str, ...], ...] = (
-    ("drift:30@70",), ("drift:20@70",), ("drift:10@70",), ("stuck@60",), ("noise:5@50-60",),
+    ("drift:30@70",), ("drift:20@70",), ("drift:10@70",), ("drift:-5@70",), ("stuck@60",),
+    ("stuck@60-80",), ("ramp:0.3@60",), ("ramp:-1@60",), ("ramp:0.1@60",), ("noise:3@50-60",),
     ("dropout@90-95",), ("spike:25@80-80.4",), (),
 )
+# (plant, compass noise deg): the paper's textbook plant, and the non-linear one at 1 and 2 deg
+ROV_PLANTS: tuple[tuple[Literal["nomoto", "nonlinear"], float], ...] = (
+    ("nomoto", 0.5), ("nonlinear", 1.0), ("nonlinear", 2.0))
 
 
 def rov_suite(duration_s: float = 130.0, seed: int = 1) -> list[dict[str, Any]]:
-    """The ROV compass faults of issue 3, with fault tolerance and without (the plain PID)."""
+    """The ROV compass faults on both plants and noise levels, with the yaw gyro fed to the
+    controller and without, with fault tolerance and without (the plain PID)."""
 
-    cfg = RovConfig()
+    base = RovConfig()
     rows = []
-    for specs in ROV_FAULTS:
-        faults = [parse_fault(s) for s in specs]
-        for ft in (True, False):
-            ep = run_experiment(cfg, faults, duration_s, ft=ft, seed=seed)
-            s = summarize(ep, faults)
-            start = faults[0].start_s if faults else None
-            confirm = next((e["t"] for e in ep if e["fault"]), None)
-            suspect = next((e["t"] for e in ep if e["suspect"]), None)
-            is_fault = bool(faults) and faults[0].kind != "spike"
-            rows.append({
-                "faults": list(specs) or ["none"], "ft": ft,
-                "suspect_t": suspect, "confirmed_t": confirm,
-                "delay_s": (None if confirm is None or start is None or not is_fault
-                            else round(confirm - start, 3)),
-                "false_confirmation": bool(confirm is not None and not is_fault),
-                "max_abs_err_after_fault_deg": s.get("max_abs_err_after_fault_deg"),
-                "final_mean_err_deg": round(s["final_mean_err_deg"], 3),
-            })
+    for plant, noise in ROV_PLANTS:
+        sim = replace(base.sim, plant=plant, compass_noise_deg=noise)
+        cfg = replace(base, sim=sim)
+        for gyro in (True, False):
+            for specs in ROV_FAULTS:
+                faults = [parse_fault(s) for s in specs]
+                for ft in (True, False):
+                    ep = run_experiment(cfg, faults, duration_s, ft=ft, seed=seed, gyro=gyro)
+                    s = summarize(ep, faults)
+                    start = faults[0].start_s if faults else None
+                    is_fault = bool(faults) and faults[0].kind not in ("spike", "noise")
+                    conf = [e["t"] for e in ep if e["event"] in ("confirmed", "stuck")]
+                    early = [t for t in conf if start is None or t < start - 1e-9]
+                    confirm = next((t for t in conf if start is not None and t >= start - 1e-9),
+                                   None) if is_fault else None
+                    suspect = next((e["t"] for e in ep if e["suspect"]), None)
+                    rows.append({
+                        "plant": plant, "noise_deg": noise, "gyro": gyro,
+                        "faults": list(specs) or ["none"], "ft": ft,
+                        "suspect_t": suspect, "confirmed_t": confirm,
+                        "delay_s": (None if confirm is None or start is None
+                                    else round(confirm - start, 3)),
+                        "false_confirmations": len(early) + (0 if is_fault else len(conf)
+                                                             - len(early)),
+                        "false_confirmation": bool(early) or (not is_fault and bool(conf)),
+                        "max_abs_err_after_fault_deg": s.get("max_abs_err_after_fault_deg"),
+                        "final_mean_err_deg": round(s["final_mean_err_deg"], 3),
+                    })
     return rows
 
 
 def rov_table(rows: Sequence[dict[str, Any]]) -> str:
-    lines = ["| fault | fault tolerance | suspect at (s) | confirmed at (s) | delay (s) "
-             "| false confirmation | final mean heading error (deg) |", "|" + "---|" * 7]
+    lines = ["| plant | compass noise (deg) | gyro | fault | fault tolerance | suspect at (s) "
+             "| confirmed at (s) | delay (s) | false confirmations "
+             "| final mean heading error (deg) |", "|" + "---|" * 10]
     for r in rows:
         lines.append(
-            f"| {' '.join(r['faults'])} | {'on' if r['ft'] else 'off (plain PID)'} "
+            f"| {r.get('plant', 'nomoto')} | {r.get('noise_deg', 0.5):g} "
+            f"| {'yes' if r.get('gyro') else 'no'} | {' '.join(r['faults'])} "
+            f"| {'on' if r['ft'] else 'off (plain PID)'} "
             f"| {_f(r['suspect_t'], 1)} | {_f(r['confirmed_t'], 1)} | {_f(r['delay_s'], 1)} "
-            f"| {'yes' if r['false_confirmation'] else 'no'} | {_f(r['final_mean_err_deg'], 2)} |"
+            f"| {r.get('false_confirmations', int(r['false_confirmation']))} "
+            f"| {_f(r['final_mean_err_deg'], 2)} |"
         )
     return "\n".join(lines)
 
@@ -494,7 +513,8 @@ def run_suite(
         rov = rov_suite()
         done("rov")
         doc["rov"] = rov
-        md += ["## ROV compass (issue 3 faults)", "", rov_table(rov), ""]
+        md += ["## ROV compass (both plants, with and without a yaw gyro)", "", rov_table(rov),
+               ""]
     if include_insgnss:
         ins = insgnss_suite(seed, ["paper-single"] if quick else None)
         done("insgnss")

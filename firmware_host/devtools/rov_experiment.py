@@ -7,9 +7,10 @@ here the plant is advanced one period per step, so a 30-minute run takes about a
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
-from firmware_host.devtools.rov_sim import FaultSpec, RovPlant
+from firmware_host.devtools.rov_sim import FaultSpec, make_plant
 from firmware_host.rov.config import RovConfig
 from firmware_host.rov.control import RovController, epoch_record
 
@@ -20,20 +21,34 @@ def run_experiment(
     duration_s: float = 120.0,
     ft: bool = True,
     seed: int | None = None,
+    gyro: bool = False,
 ) -> list[dict[str, Any]]:
-    """Run ``duration_s`` of simulated time; one epoch record per period."""
-    sim_cfg = cfg.sim if seed is None else type(cfg.sim)(**{**cfg.sim.__dict__, "seed": seed})
-    plant = RovPlant(sim_cfg, faults)
+    """Run ``duration_s`` of simulated time; one epoch record per period.
+
+    ``cfg.sim.plant`` chooses the plant; ``gyro``: the controller also gets the plant's yaw-rate
+    gyro (in-process: the Outland frame of ``config/protocols/`` has no rate field).
+    ``cfg.sim.turn_every_s`` > 0: the setpoint alternates between ``cfg.setpoint_deg`` and
+    ``+ turn_deg`` every that many seconds (the first turn at ``turn_every_s``).
+    """
+    sim_cfg = cfg.sim if seed is None else replace(cfg.sim, seed=seed)
+    plant = make_plant(sim_cfg, faults)
     ctl = RovController(cfg, ft=ft)
     dt = cfg.period_s
     n = round(duration_s / dt)
+    turn_steps = round(sim_cfg.turn_every_s / dt) if sim_cfg.turn_every_s > 0 else 0
+    base = ctl.setpoint_deg
     out: list[dict[str, Any]] = []
     for k in range(n + 1):
         if k:
-            plant.advance(ctl.command.yaw_pct, dt)
+            c = ctl.command
+            plant.advance(c.yaw_pct, dt, 0.5 * (c.port_pct + c.starboard_pct))
+        if turn_steps and k and k % turn_steps == 0:
+            odd = (k // turn_steps) % 2 == 1
+            ctl.setpoint_deg = (base + (sim_cfg.turn_deg if odd else 0.0)) % 360.0
         tel = plant.measure()
         meas = None if tel is None else tel.heading_deg
-        cmd, dec = ctl.step(meas, dt)
+        rate = plant.gyro_dps() if gyro else None
+        cmd, dec = ctl.step(meas, dt, rate)
         out.append(epoch_record(k * dt, plant.heading_true, meas, ctl.setpoint_deg, cmd, dec,
                                 ctl.action))
     return out

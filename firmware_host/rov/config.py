@@ -11,6 +11,7 @@ from pathlib import Path
 
 from firmware_host.runtime.config import load_bridge_file, resolve_protocol, rov_config
 from firmware_host.runtime.config_rov import LinkConfig as LinkConfig
+from firmware_host.runtime.config_rov import Plant as Plant
 from firmware_host.runtime.config_rov import RovConfig as RovConfig
 from firmware_host.runtime.config_rov import SimConfig as SimConfig
 from firmware_host.runtime.config_rov import Wiring as Wiring

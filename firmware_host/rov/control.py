@@ -35,10 +35,15 @@ class RovController:
         self._ratelog = RateLimitedLog(log)
 
     def step(
-        self, heading_meas: float | None, dt: float
+        self, heading_meas: float | None, dt: float, yaw_rate_dps: float | None = None
     ) -> tuple[ThrusterCommand, HeadingDecision]:
-        """``heading_meas`` (deg) from this period's telemetry, None when none arrived."""
-        dec = self.heading.step(self.command.yaw_pct, heading_meas)
+        """``heading_meas`` (deg) from this period's telemetry, None when none arrived.
+
+        ``yaw_rate_dps``: the vehicle's yaw-rate gyro for this period (deg/s, positive in the
+        direction of increasing heading), None when the vehicle has none or it did not arrive;
+        with it the compass is cross-checked against the integrated rate (:mod:`fdi.heading_ft`).
+        """
+        dec = self.heading.step(self.command.yaw_pct, heading_meas, yaw_rate_dps, dt)
         if heading_meas is None:
             self._since_telemetry += dt
             if self._since_telemetry <= self.cfg.dropout_hold_s + 1e-9:
@@ -59,7 +64,7 @@ class RovController:
             s = self.cfg.surge_pct
             cmd = ThrusterCommand(min(max(s + u, -100.0), 100.0), min(max(s - u, -100.0), 100.0))
             self._last_safe = cmd
-            action = "substitute" if dec.source != "sensor" else "control"
+            action = "control" if dec.source in ("sensor", "fused") else "substitute"
         if dec.event:
             log.info("compass: %s (%s)", dec.event, dec.kind or "-")
         self.action = action

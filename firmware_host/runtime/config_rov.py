@@ -31,11 +31,21 @@ class LinkConfig:
     reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1})  # reopen backoff cap
 
 
+Plant = Literal["nomoto", "nonlinear"]
+
+
 @dataclass(frozen=True)
 class SimConfig:
-    """The simulated vehicle: first-order Nomoto yaw model, current, compass noise."""
+    """The simulated vehicle: yaw model, current, compass noise, yaw-rate gyro.
+
+    ``plant = "nomoto"``: first-order linear Nomoto (the paper's textbook case). ``"nonlinear"``
+    adds quadratic yaw damping, thrust ~ c|c| with a dead band and a weaker reverse, one period
+    of actuator latency, compass outliers, a magnetic deviation that grows with thrust and waves
+    (the keys marked "nonlinear" apply to that plant only). Turns and the gyro apply to both.
+    """
 
     seed: int = 1
+    plant: Plant = "nomoto"
     nomoto_T_s: float = field(default=1.5, metadata={"gt": 0.0})
     nomoto_K: float = field(default=0.2, metadata={"gt": 0.0, "doc": "deg/s per % thrust"})
     current_max_pct: float = field(default=4.0, metadata={"ge": 0.0})
@@ -44,6 +54,20 @@ class SimConfig:
     compass_noise_deg: float = field(default=0.5, metadata={"ge": 0.0})
     initial_heading_deg: float = 110.0
     depth_m: float = 10.0
+    thrust_K: float = field(default=1.0, metadata={"gt": 0.0, "doc": "nonlinear: deg/s per %"})
+    quad_damping: float = field(default=0.05, metadata={"ge": 0.0, "doc": "nonlinear: 1/(deg/s)"})
+    dead_band_pct: float = field(default=3.0, metadata={"ge": 0.0, "lt": 100.0})
+    reverse_efficiency: float = field(default=0.7, metadata={"gt": 0.0, "le": 1.0})
+    latency_periods: int = field(default=1, metadata={"ge": 0, "le": 10})
+    outlier_prob: float = field(default=0.002, metadata={"ge": 0.0, "lt": 1.0})
+    outlier_deg: float = field(default=20.0, metadata={"ge": 0.0})
+    deviation_deg: float = field(default=1.0, metadata={"doc": "nonlinear: at full thrust"})
+    wave_amp_dps: float = field(default=0.4, metadata={"ge": 0.0})
+    wave_period_s: float = field(default=7.0, metadata={"gt": 0.0})
+    turn_every_s: float = field(default=0.0, metadata={"ge": 0.0, "doc": "0: no turns"})
+    turn_deg: float = 30.0
+    gyro_noise_dps: float = field(default=0.05, metadata={"ge": 0.0})
+    gyro_bias_max_dps: float = field(default=0.2, metadata={"ge": 0.0})
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,371 @@
+"""A second, independent witness of the compass: the yaw-rate gyro (an extension of the paper).
+
+Zhu, Chen & Liu (2009) detect a compass fault from the command FIR alone (eq. (3)-(12)); the FIR
+sees a drift's onset only, and its dead reckoning drifts (~0.7 deg/s, ``FINDINGS.md``). With a
+yaw-rate gyro the compass's heading increments are checked against the integrated rate, whose
+drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg/s):
+
+* propagation: ``psi^-(k) = psi(k-1) + (r(k) - b) dt`` (r the gyro, b its estimated bias);
+  innovation ``nu(k) = wrap(y(k) - psi^-(k))`` (y the compass).
+* Bias: the least-squares slope of ``z = y - sum(r dt)`` (``z = const - b t + noise``): a fit
+  over the warm-up, and one with forgetting (``bias_tau_s``) fed with the trusted samples of
+  ``bias_delay_s`` ago, combined by their slope information ``sum (t - mean t)^2``. The delay
+  gives a slow drift that long to be detected before the bias absorbs it; the samples of a
+  fault (from its estimated start minus ``test_tau_s``) are never fed.
+* Headings: ``psi = psi^- + alpha nu`` (nu clipped at ``clip`` sigmas), ``alpha =
+  max(1/n, dt/heading_tau_s)``: the output. The test uses a second one, ``psi_t``, with the
+  slower ``test_tau_s``, whose innovation a drift of rate rho moves by ``rho * test_tau_s``.
+* Change test on ``s = (nu - nu_ref) / sigma``: ``nu_ref`` is the innovation's own slow mean
+  (a running mean after the warm-up, then an EWMA over ``ref_tau_s``; it holds the steady
+  offset a residual bias error leaves), ``sigma`` a robust running scale
+  (:class:`fdi.noise_scale.RobustVariance`, from first differences during the warm-up); both
+  frozen while a fault is suspected. Two two-sided CUSUMs (Page), each clipped,
+  ``g+ = max(0, g+ + min(s, clip) - kappa)`` and the mirror ``g-``: a fast one (``kappa``,
+  ``clip``, ``h``) for a level of several sigmas, and a slow one (``slow_*``) for a small level
+  or a ramp. Since ``h > 3 (clip - kappa)`` (likewise for the slow one), a spike of 1 to 3
+  samples cannot confirm, whatever its size.
+* Suspect (the loops, the bias and sigma frozen; ``psi`` is gyro dead reckoning): fast CUSUM
+  above ``h_suspect``, slow above ``slow_h / 2``, or ``|s| >= jump_sigmas``. Confirmed: either
+  reaches its ``h`` and the innovations since the change began (Page's estimate: the last step
+  the confirming CUSUM was 0; the newest 6) are a level or a ramp, their spread about a fitted
+  line (without the farthest sample) within ``spread_ratio`` sigmas. Dismissed: the fast CUSUM
+  back at 0 and the slow one under ``slow_h / 4``, or ``max_suspect_s`` elapsed.
+* Noise burst: the trimmed short scale of the innovation's first differences
+  (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` sigmas resets the CUSUMs.
+* At a confirmation the output loop's corrections since the change began are undone.
+* Recovery: ``|nu| <= max(recover_gate, 3 sigma)`` for ``recover_samples`` periods with the
+  compass alive (not repeating; the caller says so) and their mean within ``recover_gate``
+  (a slow drift passing near the dead reckoning is not taken back); both headings are then
+  re-aligned to the compass by that mean.
+
+The heading to use is ``psi`` at every step: the filtered compass when it is trusted, the gyro
+dead reckoning from the last trusted state when it is not, so switching is bumpless.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from fdi.noise_scale import RobustVariance, TrimmedScale
+
+
+def _wrap180(a: float) -> float:
+    a = math.fmod(a + 180.0, 360.0)
+    if a <= 0.0:
+        a += 360.0
+    return a - 180.0
+
+
+def _line_residuals(x: list[float], t: list[float] | None = None) -> list[float]:
+    """Residuals of the least-squares line through (t, x) (t = 0, 1, ... by default)."""
+    ts = t if t is not None else [float(i) for i in range(len(x))]
+    n = len(x)
+    mt = sum(ts) / n
+    mx = sum(x) / n
+    stt = sum((ti - mt) ** 2 for ti in ts)
+    slope = sum((ti - mt) * (xi - mx) for ti, xi in zip(ts, x, strict=True)) / stt
+    return [xi - mx - slope * (ti - mt) for ti, xi in zip(ts, x, strict=True)]
+
+
+@dataclass(frozen=True)
+class WitnessParams:
+    """The witness's parameters (the ``gyro_*`` keys of the ``[ft]`` table)."""
+
+    heading_tau_s: float = 10.0  # time constant of the output heading's loop
+    test_tau_s: float = 30.0  # time constant of the test heading's loop
+    bias_tau_s: float = 600.0  # forgetting of the bias fit
+    bias_delay_s: float = 15.0  # the bias fit uses trusted samples this old
+    ref_tau_s: float = 60.0  # the slow mean of the innovation
+    max_suspect_s: float = 20.0  # a suspect not confirmed by then is dismissed
+    sigma0_deg: float = 1.0  # initial innovation sigma
+    sigma_min_deg: float = 0.2  # floor of sigma
+    sigma_samples: int = 150  # EWMA length of sigma^2
+    clip: float = 4.5  # fast CUSUM: score clip, sigmas
+    kappa: float = 1.5  # fast CUSUM: drift, sigmas
+    h: float = 11.0  # fast CUSUM: confirmation level (> 3 (clip - kappa))
+    slow_clip: float = 2.5
+    slow_kappa: float = 0.75
+    slow_h: float = 20.0
+    h_suspect: float = 3.0
+    jump_sigmas: float = 4.0
+    burst_ratio: float = 2.5
+    spread_ratio: float = 1.6
+    warmup_samples: int = 100
+    recover_gate_deg: float = 1.5
+    recover_samples: int = 10
+
+
+@dataclass(frozen=True)
+class WitnessStep:
+    """What the witness concluded at step k."""
+
+    psi: float  # heading to use (unwrapped), deg
+    nu: float  # innovation, deg
+    score: float  # max of the CUSUMs, each over its confirmation level (1 = confirms)
+    sigma: float  # innovation sigma, deg
+    suspect: bool
+    confirmed: bool  # edge
+    dismissed: bool  # edge
+    recovered: bool  # edge
+    burst: bool
+
+
+class GyroWitness:
+    """Compass against the integrated yaw rate (module docstring)."""
+
+    def __init__(self, p: WitnessParams) -> None:
+        self.p = p
+        self.psi: float | None = None  # unwrapped heading estimate (the output), deg
+        self.psi_t = 0.0  # the same with the test's slower loop, deg
+        self.bias = 0.0  # deg/s
+        self._G = 0.0  # raw integrated rate, deg
+        self._lam = 1.0
+        self._S = [0.0, 0.0, 0.0, 0.0, 0.0]  # warm-up sums: 1, t, t^2, z, t z
+        self._Sp = [0.0, 0.0, 0.0, 0.0, 0.0]  # after the warm-up (delayed), with forgetting
+        self._delayed: deque[tuple[float, float, bool]] = deque()  # (t, z, trusted)
+        self._dt = 0.2
+        self.var = RobustVariance(p.sigma0_deg**2, p.sigma_samples, 3.0, p.sigma_min_deg**2,
+                                  reject_sigmas=4.0)
+        self.short = TrimmedScale(8, 3)  # a step with an outlier in it: 3 large differences
+        self.g_pos = 0.0
+        self.g_neg = 0.0
+        self.gs_pos = 0.0
+        self.gs_neg = 0.0
+        self.k = 0  # steps with a compass reading since start
+        self.t = 0.0  # s since start
+        self.suspect = False
+        self.fault = False
+        # innovations (output, test) while the compass agrees again after a fault
+        self._agree: deque[tuple[float, float]] = deque(maxlen=p.recover_samples)
+        self._run: deque[tuple[int, float]] = deque(maxlen=10)  # the last innovations
+        self.nu_ref = 0.0
+        self._suspect_k = 0
+        self.confirmed_fast = False  # the last confirmation came from the fast CUSUM
+        self._nu_prev: float | None = None
+        self._ref_n = 0
+        # Page's change-time estimate: the last step at which each CUSUM side was 0, and the
+        # output loop's corrections since, undone at a confirmation.
+        self._zero_at = [0, 0, 0, 0]  # fast +, fast -, slow +, slow -
+        self._corr: deque[tuple[int, float]] = deque(maxlen=600)
+
+    @property
+    def ready(self) -> bool:
+        return self.psi is not None
+
+    def propagate(self, rate_dps: float, dt: float) -> None:
+        """Advance ``psi`` by the gyro over the period (no compass needed)."""
+        if self.psi is not None:
+            step = (rate_dps - self.bias) * dt
+            self.psi += step
+            self.psi_t += step
+        self._G += rate_dps * dt
+        self.t += dt
+        self._lam = 1.0 - dt / self.p.bias_tau_s
+        self._dt = dt
+
+    def reset(self, heading_deg: float) -> None:
+        self.psi = self.psi_t = heading_deg
+        self.short.restart()
+
+    def update(self, y_deg: float, dt: float, repeating: bool = False) -> WitnessStep:
+        """The compass reading of this period (after :meth:`propagate`)."""
+        p = self.p
+        if self.psi is None:
+            self.psi = self.psi_t = y_deg
+            return WitnessStep(y_deg, 0.0, 0.0, self.var.sigma, False, False, False, False,
+                               False)
+        nu_o = _wrap180(y_deg - self.psi)
+        self._y_unw = self.psi + nu_o
+        nu = _wrap180(y_deg - self.psi_t)
+        if self.k >= p.warmup_samples:  # the bias fit's delay line (trusted: set below)
+            self._delayed.append((self.t, self._y_unw - self._G, False))
+            while self._delayed and self._delayed[0][0] < self.t - p.bias_delay_s - 1e-9:
+                t_old, z_old, ok = self._delayed.popleft()
+                if ok and not self.fault:
+                    self._fit(self._Sp, self._lam, t_old, z_old)
+        self.short.push(nu)
+        sigma = self.var.sigma
+        confirmed = dismissed = recovered = burst = False
+        self.k += 1
+        if self.k <= p.warmup_samples:
+            self._correct(nu_o, nu, dt, self.k)
+            # sigma from the first differences while the loops converge (a transient of the
+            # heading or the bias does not inflate it; white noise: var(d nu) = 2 sigma^2)
+            if self._nu_prev is not None:
+                self.var.update((nu - self._nu_prev) / math.sqrt(2.0),
+                                alpha=max(self.var.alpha, 1.0 / self.k))
+            self._nu_prev = nu
+            return WitnessStep(self.psi, nu, 0.0, sigma, False, False, False, False, False)
+        x = (nu - self.nu_ref) / sigma
+        s = max(-p.clip, min(p.clip, x))
+        if self.fault:
+            # Recovery: the compass agrees with the dead reckoning again, and is alive.
+            gate = max(p.recover_gate_deg, 3.0 * sigma)
+            if abs(nu_o) <= gate and not repeating:
+                self._agree.append((nu_o, nu))
+            else:
+                self._agree.clear()
+            n_ok = len(self._agree)
+            mean_o = sum(a for a, _ in self._agree) / n_ok if n_ok else 0.0
+            if n_ok >= p.recover_samples and abs(mean_o) <= p.recover_gate_deg:
+                self.fault = self.suspect = False
+                self.clear()
+                # Back on the compass: re-align both headings to it (the dead reckoning's
+                # error, at most the gate), so that the test restarts from no offset.
+                self.psi += mean_o
+                self.psi_t += sum(b for _, b in self._agree) / n_ok
+                self._agree.clear()
+                recovered = True
+            return WitnessStep(self.psi, nu, 0.0, sigma, self.suspect, False, False, recovered,
+                               False)
+        self.g_pos = max(0.0, self.g_pos + s - p.kappa)
+        self.g_neg = max(0.0, self.g_neg - s - p.kappa)
+        xs = max(-p.slow_clip, min(p.slow_clip, x))
+        self.gs_pos = max(0.0, self.gs_pos + xs - p.slow_kappa)
+        self.gs_neg = max(0.0, self.gs_neg - xs - p.slow_kappa)
+        ss = self.short.sigma
+        if self.short.full and ss > p.burst_ratio * sigma:
+            burst = True  # the compass is noisy, not biased
+            self.clear()
+        fast = max(self.g_pos, self.g_neg)
+        slow = max(self.gs_pos, self.gs_neg)
+        level = max(fast / p.h, slow / p.slow_h)
+        was = self.suspect
+        self._run.append((self.k, nu))
+        for i, g_i in enumerate((self.g_pos, self.g_neg, self.gs_pos, self.gs_neg)):
+            if g_i == 0.0:
+                self._zero_at[i] = self.k
+        if level >= 1.0 and self._spread_ok(sigma):
+            confirmed = True
+            self.confirmed_fast = fast / p.h >= slow / p.slow_h
+            self.fault = True
+            self.suspect = True
+            self._agree.clear()
+            self._rollback()
+        elif was and self.k - self._suspect_k > p.max_suspect_s / dt:
+            # A suspect that neither confirms nor fades within max_suspect_s is a steady offset
+            # that the frozen loops cannot follow (their own dead-reckoning drift): dismissed.
+            self.suspect = False
+            dismissed = True
+            self.clear()
+        elif (fast > p.h_suspect or slow > 0.5 * p.slow_h or abs(s) >= p.jump_sigmas
+              or burst):
+            if not was:
+                self._suspect_k = self.k
+            self.suspect = True
+        elif was and fast == 0.0 and slow <= 0.25 * p.slow_h:
+            self.suspect = False
+            dismissed = True
+        self.var.frozen = self.suspect
+        if not self.suspect:
+            self._correct(nu_o, nu, dt, 0)
+            self.var.update(nu - self.nu_ref)
+            d = max(-p.clip * sigma, min(p.clip * sigma, nu - self.nu_ref))
+            # a running mean at first (the offset is learned as fast as the data allow)
+            self._ref_n += 1
+            self.nu_ref += max(dt / p.ref_tau_s, 1.0 / (self._ref_n + 25)) * d
+        return WitnessStep(self.psi, nu, level, sigma, self.suspect, confirmed, dismissed, False,
+                           burst)
+
+    def clear(self) -> None:
+        """Reset both CUSUMs (after a recovery, or while a noise burst lasts)."""
+        self.g_pos = self.g_neg = self.gs_pos = self.gs_neg = 0.0
+
+    def _spread_ok(self, sigma: float) -> bool:
+        """The innovations since the change began (Page's estimate; the newest 6) are a level
+        or a ramp, not a burst: about a line fitted to them (without the sample farthest from
+        it), their spread is within ``spread_ratio`` sigmas."""
+        k0 = self._zero_at[self._confirming_side()]
+        r = [x for k, x in self._run if k > k0][-6:]  # the newest: a step's first samples
+        #                                              may straddle it
+        if len(r) < 4:
+            return True
+        res = _line_residuals(r)
+        if len(r) >= 4:
+            worst = max(range(len(r)), key=lambda i: abs(res[i]))
+            ts = [float(i) for i in range(len(r)) if i != worst]
+            r = [x for i, x in enumerate(r) if i != worst]
+            res = _line_residuals(r, ts)
+        sd = math.sqrt(sum(e * e for e in res) / (len(res) - 2))
+        return sd <= self.p.spread_ratio * sigma
+
+    def _fit(self, S: list[float], lam: float, t: float, z: float,
+             update_bias: bool = True) -> None:
+        """Least squares z = a - b t (b the gyro bias): add a sample to the sums ``S``, then
+        combine the warm-up fit and the later one, each weighted by its slope information
+        sum((t - mean t)^2) (the warm-up holds the first turn, whose thrust deviates the
+        compass; the later data soon outweighs it)."""
+        S[0] = lam * S[0] + 1.0
+        S[1] = lam * S[1] + t
+        S[2] = lam * S[2] + t * t
+        S[3] = lam * S[3] + z
+        S[4] = lam * S[4] + t * z
+        if not update_bias:
+            return
+        num = info = 0.0
+        for T in (self._S, self._Sp):
+            if T[0] < 3.0:
+                continue
+            stt = T[2] - T[1] * T[1] / T[0]  # sum (t - mean t)^2
+            if stt <= 1e-9 * T[2]:
+                continue
+            stz = T[4] - T[1] * T[3] / T[0]
+            num += -stz  # information-weighted slope: (stz / stt) * stt
+            info += stt
+        if info > 0.0:
+            self.bias = num / info
+
+    def _correct(self, nu_o: float, nu: float, dt: float, n: int) -> None:
+        """Bias fit and both heading loops; ``n`` > 0: the n-th sample of the warm-up."""
+        assert self.psi is not None
+        p = self.p
+        if n > 10:  # Huber: an outlier moves the estimates by a bounded amount
+            lim = p.clip * self.var.sigma
+            c_o = max(-lim, min(lim, nu_o))
+            c_t = max(-lim, min(lim, nu))
+        else:
+            c_o, c_t = nu_o, nu
+        z = self._y_unw - (nu_o - c_o) - self._G
+        if n > 0:
+            self._fit(self._S, 1.0, self.t, z, update_bias=n > 20)
+        elif self._delayed:
+            t_new, _, _ = self._delayed[-1]
+            self._delayed[-1] = (t_new, z, True)
+        a_o = dt / p.heading_tau_s
+        a_t = dt / p.test_tau_s
+        if n > 0:
+            a_o = max(a_o, 1.0 / n)
+            a_t = max(a_t, 1.0 / n)
+        self.psi += a_o * c_o
+        self.psi_t += a_t * c_t
+        self._corr.append((self.k, a_o * c_o))
+
+    def _confirming_side(self) -> int:
+        """Which CUSUM side is nearest its confirmation level (index into ``_zero_at``)."""
+        p = self.p
+        gs = ((self.g_pos / p.h, 0), (self.g_neg / p.h, 1),
+              (self.gs_pos / p.slow_h, 2), (self.gs_neg / p.slow_h, 3))
+        return max(gs)[1]
+
+    def force_fault(self, samples_back: int) -> None:
+        """A fault found by another test (a stuck compass) that began ``samples_back`` ago."""
+        self.fault = self.suspect = True
+        self.var.frozen = True
+        self._agree.clear()
+        self._rollback(self.k - samples_back)
+
+    def _rollback(self, k0: int | None = None) -> None:
+        """Undo the output loop's corrections since the change began (Page's estimate: the
+        last time the CUSUM that confirmed was 0): they followed the faulty compass."""
+        if k0 is None:
+            k0 = self._zero_at[self._confirming_side()]
+        undo = sum(c for k, c in self._corr if k > k0)
+        if self.psi is not None:
+            self.psi -= undo
+        self._corr.clear()
+        # ... and the bias fit does not get the samples since then, nor those of the test
+        # loop's time constant before (a slow drift starts before the CUSUM sees it).
+        t0 = self.t - (self.k - k0) * self._dt - self.p.test_tau_s
+        self._delayed = deque((t, z, ok and t <= t0) for t, z, ok in self._delayed)

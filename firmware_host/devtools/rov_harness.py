@@ -1,0 +1,234 @@
+"""The ROV compass FDI measured against issue 14's "done means", on both plants, over seeds.
+
+Every scenario runs the same :class:`~firmware_host.rov.control.RovController` step-locked on the
+simulated vehicle (:func:`~firmware_host.devtools.rov_experiment.run_experiment`), with the yaw
+gyro fed in-process or not. Per criterion the WORST seed is kept (and which seed it was).
+
+Scenarios, per seed (onsets after the 20 s warm-up):
+
+* ``step``: drifts of +-5, 10, 20, 30, 45 deg at an onset in 21..120 s that varies with the seed
+  and the case; confirmed within 5 samples, heading error after confirmation <= 1.5 deg
+  (measured over the 60 s after the onset);
+* ``ramp``: +-0.3, 1 and 3 deg/s from 40 s; confirmed within 15 s, heading within 3 deg of the
+  setpoint from confirmation on (60 s); ``ramp_slow``: +-0.1 deg/s within 40 s (with a gyro);
+* ``stuck``: 20 s stuck from 40 s; confirmed within 10 samples, worst heading error 3 deg from the
+  onset on, the compass taken back ("recovered") within 5 s of the end, final error <= 1 deg;
+* ``spike`` (25 deg for 1, 2, 3 samples) and ``burst`` (noise of 3 deg for 10 s): no
+  confirmation;
+* ``long``: ``long_s`` (3600) seconds at 2 deg compass noise with a turn every 60 s: no
+  confirmation; then a 20 deg drift: confirmed within 5 s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+from firmware_host.devtools.rov_experiment import run_experiment
+from firmware_host.devtools.rov_sim import FaultSpec, parse_fault
+from firmware_host.rov.config import Plant, RovConfig
+
+CONFIRM_EVENTS = ("confirmed", "stuck")
+PLANT_NOISE_DEG: dict[str, float] = {"nomoto": 0.5, "nonlinear": 1.0}
+STEP_DEG = (5.0, 10.0, 20.0, 30.0, 45.0)
+RAMP_DPS = (0.3, 1.0, 3.0)
+
+# The issue's bounds, per criterion: (metric, limit, "max" = the worst seed must be <= limit).
+GOALS: dict[str, tuple[str, float]] = {
+    "step.delay_samples": ("step confirmed within (samples)", 5.0),
+    "step.err_after_deg": ("step: heading error after confirmation (deg)", 1.5),
+    "ramp.delay_s": ("ramp >= 0.3 deg/s confirmed within (s)", 15.0),
+    "ramp.err_after_deg": ("ramp: heading error from confirmation on (deg)", 3.0),
+    "ramp_slow.delay_s": ("ramp 0.1 deg/s confirmed within (s, gyro)", 40.0),
+    "stuck.delay_samples": ("stuck confirmed within (samples)", 10.0),
+    "stuck.worst_err_deg": ("stuck: worst heading error (deg)", 3.0),
+    "stuck.retake_s": ("stuck: compass taken back within (s)", 5.0),
+    "stuck.final_err_deg": ("stuck: final error (deg)", 1.0),
+    "spike.confirmations": ("spikes of 1-3 samples: confirmations", 0.0),
+    "burst.confirmations": ("noise bursts: confirmations", 0.0),
+    "long.false_confirmations": ("1 h at 2 deg, turns: false confirmations", 0.0),
+    "long.drift_delay_s": ("then a 20 deg drift confirmed within (s)", 5.0),
+}
+INF = float("inf")
+
+
+def plant_config(cfg: RovConfig, plant: Plant, noise_deg: float | None = None) -> RovConfig:
+    """``cfg`` on ``plant`` with its harness compass noise (or ``noise_deg``)."""
+    n = PLANT_NOISE_DEG[plant] if noise_deg is None else noise_deg
+    return replace(cfg, sim=replace(cfg.sim, plant=plant, compass_noise_deg=n))
+
+
+def _err(e: dict[str, Any]) -> float:
+    return float((e["heading_true"] - e["setpoint"] + 180.0) % 360.0 - 180.0)
+
+
+def _confirms(ep: Sequence[dict[str, Any]]) -> list[float]:
+    return [float(e["t"]) for e in ep if e["event"] in CONFIRM_EVENTS]
+
+
+@dataclass
+class Worst:
+    """The worst value of one metric over the runs, and where it came from."""
+
+    value: float = -INF
+    where: str = ""
+    runs: int = 0
+
+    def add(self, v: float, where: str) -> None:
+        self.runs += 1
+        if v > self.value:
+            self.value, self.where = v, where
+
+    def as_dict(self) -> dict[str, Any]:
+        v: float | None = None if self.value == INF else self.value
+        return {"worst": v, "where": self.where, "runs": self.runs}
+
+
+def _first_after(ts: Sequence[float], t0: float) -> float | None:
+    return next((t for t in ts if t >= t0 - 1e-9), None)
+
+
+def measure(
+    cfg: RovConfig,
+    plant: Plant,
+    seeds: Sequence[int],
+    *,
+    gyro: bool,
+    long_s: float = 3600.0,
+    which: Sequence[str] = ("step", "ramp", "ramp_slow", "stuck", "spike", "burst", "long"),
+) -> dict[str, dict[str, Any]]:
+    """Run the scenarios of ``which`` on ``plant`` for each seed; the worst value per metric."""
+    c = plant_config(cfg, plant)
+    dt = c.period_s
+    w: dict[str, Worst] = {k: Worst() for k in GOALS}
+
+    def run(faults: Sequence[FaultSpec], dur: float, seed: int, cc: RovConfig = c
+            ) -> list[dict[str, Any]]:
+        return run_experiment(cc, faults, dur, ft=True, seed=seed, gyro=gyro)
+
+    for seed in seeds:
+        if "step" in which:
+            i = 0
+            for mag in STEP_DEG:
+                for sign in (1.0, -1.0):
+                    onset = 21.0 + float((seed * 37 + i * 23) % 100)
+                    i += 1
+                    spec = f"drift:{sign * mag:g}@{onset:g}"
+                    ep = run([parse_fault(spec)], onset + 60.0, seed)
+                    where = f"seed {seed} {spec}"
+                    early = [t for t in _confirms(ep) if t < onset - 1e-9]
+                    tc = _first_after(_confirms(ep), onset)
+                    if early or tc is None:
+                        w["step.delay_samples"].add(INF, where + (" false" if early else " miss"))
+                        continue
+                    w["step.delay_samples"].add(round((tc - onset) / dt), where)
+                    w["step.err_after_deg"].add(max(abs(_err(e)) for e in ep if e["t"] >= tc),
+                                                where)
+        for key, rates in (("ramp", RAMP_DPS), ("ramp_slow", (0.1,))):
+            if key not in which or (key == "ramp_slow" and not gyro):
+                continue
+            for rate in rates:
+                for sign in (1.0, -1.0):
+                    spec = f"ramp:{sign * rate:g}@40"
+                    ep = run([parse_fault(spec)], 100.0, seed)
+                    where = f"seed {seed} {spec}"
+                    early = [t for t in _confirms(ep) if t < 40.0 - 1e-9]
+                    tc = _first_after(_confirms(ep), 40.0)
+                    if early or tc is None:
+                        w[f"{key}.delay_s"].add(INF, where + (" false" if early else " miss"))
+                        if key == "ramp":
+                            w["ramp.err_after_deg"].add(
+                                max(abs(_err(e)) for e in ep if e["t"] >= 40.0), where)
+                        continue
+                    w[f"{key}.delay_s"].add(tc - 40.0, where)
+                    if key == "ramp":
+                        w["ramp.err_after_deg"].add(
+                            max(abs(_err(e)) for e in ep if e["t"] >= tc), where)
+        if "stuck" in which:
+            spec = "stuck@40-60"
+            ep = run([parse_fault(spec)], 100.0, seed)
+            where = f"seed {seed} {spec}"
+            tc = _first_after(_confirms(ep), 40.0)
+            w["stuck.delay_samples"].add(INF if tc is None else round((tc - 40.0) / dt), where)
+            w["stuck.worst_err_deg"].add(max(abs(_err(e)) for e in ep if e["t"] >= 40.0), where)
+            rec = next((e["t"] for e in ep if e["t"] >= 60.0 - 1e-9 and e["event"] == "recovered"),
+                       None)
+            back = rec is not None and not ep[-1]["fault"]
+            w["stuck.retake_s"].add(rec - 60.0 if back and rec is not None else INF, where)
+            tail = [_err(e) for e in ep if e["t"] >= 90.0]
+            w["stuck.final_err_deg"].add(abs(sum(tail) / len(tail)), where)
+        if "spike" in which:
+            for k in (1, 2, 3):
+                spec = f"spike:25@80-{80.0 + k * dt:g}"
+                ep = run([parse_fault(spec)], 100.0, seed)
+                w["spike.confirmations"].add(len(_confirms(ep)), f"seed {seed} {spec}")
+        if "burst" in which:
+            spec = "noise:3@50-60"
+            ep = run([parse_fault(spec)], 90.0, seed)
+            w["burst.confirmations"].add(len(_confirms(ep)), f"seed {seed} {spec}")
+        if "long" in which:
+            lc = plant_config(cfg, plant, 2.0)
+            lc = replace(lc, sim=replace(lc.sim, turn_every_s=60.0))
+            t_d = long_s + 30.0
+            spec = f"drift:20@{t_d:g}"
+            ep = run([parse_fault(spec)], long_s + 60.0, seed, lc)
+            where = f"seed {seed} 2 deg noise, turns, {spec}"
+            conf = _confirms(ep)
+            w["long.false_confirmations"].add(sum(1 for t in conf if t < t_d - 1e-9), where)
+            tc = _first_after(conf, t_d)
+            w["long.drift_delay_s"].add(INF if tc is None else tc - t_d, where)
+    return {k: v.as_dict() for k, v in w.items() if v.runs}
+
+
+def hold_floor(cfg: RovConfig, plant: Plant, seeds: Sequence[int], *, gyro: bool
+               ) -> dict[str, Any]:
+    """No fault: the worst |heading error| after 25 s over 100 s (what the plant and the PID
+    achieve with a healthy compass: the floor under the "heading error" criteria)."""
+    c = plant_config(cfg, plant)
+    w = Worst()
+    for seed in seeds:
+        ep = run_experiment(c, [], 100.0, ft=True, seed=seed, gyro=gyro)
+        w.add(max(abs(_err(e)) for e in ep if e["t"] >= 25.0), f"seed {seed}")
+    return w.as_dict()
+
+
+def run_all(
+    cfg: RovConfig, seeds: Sequence[int], long_s: float = 3600.0
+) -> dict[str, dict[str, dict[str, Any]]]:
+    """Both plants, with and without the gyro: ``{"nomoto/gyro": {...}, ...}``."""
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for plant in ("nomoto", "nonlinear"):
+        for gyro in (True, False):
+            out[f"{plant}/{'gyro' if gyro else 'no gyro'}"] = measure(
+                cfg, plant, seeds, gyro=gyro, long_s=long_s)
+    return out
+
+
+def verdict(res: dict[str, dict[str, Any]]) -> dict[str, bool]:
+    """Which goals the worst seed meets (``None`` worst = infinite = not met)."""
+    out = {}
+    for k, r in res.items():
+        v = r["worst"]
+        out[k] = v is not None and v <= GOALS[k][1] + 1e-9
+    return out
+
+
+def table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
+    """Markdown: one row per goal, one column per ``plant/gyro`` label of ``results``."""
+    labels = list(results)
+    lines = ["| criterion | goal | " + " | ".join(labels) + " |",
+             "|" + "---|" * (len(labels) + 2)]
+    for k, (text, limit) in GOALS.items():
+        cells = []
+        for lab in labels:
+            r = results[lab].get(k)
+            if r is None:
+                cells.append("–")
+                continue
+            v = r["worst"]
+            ok = v is not None and v <= limit + 1e-9
+            shown = "never" if v is None else f"{v:.2f}".rstrip("0").rstrip(".")
+            cells.append(f"{shown} {'ok' if ok else 'FAIL'}")
+        lines.append(f"| {text} | {limit:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)

@@ -1,0 +1,178 @@
+"""The gyro witness and the noise scales on synthetic compass/gyro data (seeded).
+
+No vehicle: a known heading, a compass of known noise and a gyro of known bias, so that each
+property of :mod:`fdi.gyro_witness` (bias learned, spike bound, burst, ramp, recovery) is
+checked against numbers it cannot tune itself to.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fdi.gyro_witness import GyroWitness, WitnessParams
+from fdi.heading_ft import FaultTolerantHeading, FtConfig
+from fdi.lms_fir import DetectorConfig
+from fdi.noise_scale import RobustVariance, TrimmedScale
+
+DT = 0.2
+
+
+def test_trimmed_scale_follows_noise_not_steps() -> None:
+    rng = np.random.default_rng(3)
+    sc = TrimmedScale(6, 2)
+    est = []
+    x = 0.0
+    for k in range(3000):
+        x = float(rng.normal(0.0, 2.0)) + (30.0 if k >= 1500 else 0.0)  # a step half-way
+        sc.push(x)
+        if sc.full:
+            est.append(sc.sigma)
+    # unbiased on average (the trim's bias is calibrated), and the step does not show
+    assert float(np.mean(est)) == pytest.approx(2.0, rel=0.1)
+    assert max(est[1490:1510]) < 2.0 * 2.5
+
+
+def test_robust_variance_clips_and_freezes() -> None:
+    v = RobustVariance(1.0, 10, 3.0, 0.01)
+    v.update(100.0)  # an outlier moves it by at most (9 - 1) / 10
+    assert v.var == pytest.approx(1.8)
+    v.frozen = True
+    v.update(0.0)
+    assert v.var == pytest.approx(1.8)
+
+
+def _run(
+    n: int,
+    fault: str = "",
+    start: int = 300,
+    length: int = 10**9,
+    mag: float = 0.0,
+    noise: float = 1.0,
+    seed: int = 1,
+    params: WitnessParams | None = None,
+) -> tuple[GyroWitness, list[tuple[int, str]]]:
+    """A vehicle turning slowly (sinusoid), compass noise ``noise``, gyro bias 0.15 deg/s."""
+    rng = np.random.default_rng(seed)
+    w = GyroWitness(params or WitnessParams())
+    psi = 40.0
+    events: list[tuple[int, str]] = []
+    for k in range(n):
+        r = 2.0 * math.sin(2 * math.pi * k * DT / 40.0)
+        psi += r * DT
+        w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
+        y = psi + float(rng.normal(0.0, noise))
+        on = start <= k < start + length
+        if on and fault == "step":
+            y += mag
+        elif on and fault == "ramp":
+            y += mag * (k - start) * DT
+        elif on and fault == "burst":
+            y += float(rng.normal(0.0, mag))
+        st = w.update(y % 360.0, DT)
+        for name in ("confirmed", "dismissed", "recovered"):
+            if getattr(st, name):
+                events.append((k, name))
+    return w, events
+
+
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_bias_learned_and_quiet_without_fault(seed: int) -> None:
+    w, events = _run(3000, noise=1.0, seed=seed)  # 10 minutes
+    assert abs(w.bias - 0.15) < 0.01
+    assert [e for e in events if e[1] == "confirmed"] == []
+
+
+@pytest.mark.parametrize("length", [1, 2, 3])
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_spike_of_up_to_3_samples_never_confirms(length: int, seed: int) -> None:
+    # 3 (clip - kappa) < h: whatever the size, three samples cannot reach h
+    p = WitnessParams()
+    assert 3 * (p.clip - p.kappa) < p.h and 3 * (p.slow_clip - p.slow_kappa) < p.slow_h
+    _, events = _run(600, "step", length=length, mag=90.0, seed=seed)
+    assert [e for e in events if e[1] == "confirmed"] == []
+
+
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_step_confirmed_within_5_samples_and_ramp_within_40_s(seed: int) -> None:
+    _, ev = _run(400, "step", mag=-6.0, seed=seed)
+    k = next(k for k, e in ev if e == "confirmed")
+    assert 0 <= k - 300 <= 4
+    _, ev = _run(700, "ramp", mag=0.1, seed=seed)
+    k = next(k for k, e in ev if e == "confirmed")
+    assert 0 < (k - 300) * DT <= 40.0
+
+
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_noise_burst_not_confirmed(seed: int) -> None:
+    _, ev = _run(600, "burst", length=50, mag=4.0, noise=0.5, seed=seed)
+    assert [e for e in ev if e[1] == "confirmed"] == []
+
+
+def test_drift_that_ends_is_taken_back() -> None:
+    w, ev = _run(600, "step", length=100, mag=20.0)
+    names = [e for _, e in ev if e != "dismissed"]
+    assert names == ["confirmed", "recovered"]
+    rec = next(k for k, e in ev if e == "recovered")
+    assert 400 <= rec <= 400 + 2 * w.p.recover_samples
+    assert not w.fault
+
+
+def test_heading_ft_with_gyro_substitutes_the_gyro_heading() -> None:
+    """Through FaultTolerantHeading: a 30 deg drift, the heading used stays on the truth."""
+    rng = np.random.default_rng(9)
+    ft = FaultTolerantHeading(DetectorConfig(), FtConfig())
+    psi = 150.0
+    errs = []
+    events = []
+    for k in range(800):
+        psi += 0.0
+        y = psi + float(rng.normal(0.0, 0.5)) + (30.0 if k >= 400 else 0.0)
+        d = ft.step(0.0, y % 360.0, 0.1 + float(rng.normal(0.0, 0.05)), DT)
+        if d.event:
+            events.append((k, d.event))
+        if k >= 400:
+            assert d.heading_used is not None
+            errs.append(abs((d.heading_used - psi + 180.0) % 360.0 - 180.0))
+            assert d.source == "gyro" or k < 405
+    assert ("confirmed" in [e for _, e in events])
+    assert max(errs) < 1.0
+
+
+def test_paper_preset_has_no_witness() -> None:
+    ft = FaultTolerantHeading(DetectorConfig(), FtConfig(gyro_enabled=False))
+    d = ft.step(0.0, 10.0, 0.5, DT)
+    assert d.source == "sensor"
+
+
+def test_third_vote_blames_a_failing_gyro_and_keeps_the_compass() -> None:
+    """A gyro whose bias jumps by 1 deg/s while the vehicle (no commands) does not turn: the
+    FIR (no commands, no increments) sides with the compass, so the gyro is blamed. (The vote
+    is off in the default preset: on the closed loop the FIR learns a slow compass drift.)"""
+    rng = np.random.default_rng(4)
+    ft = FaultTolerantHeading(DetectorConfig(), FtConfig(gyro_vote=True))
+    events = []
+    sources = []
+    for k in range(1000):
+        y = 150.0 + float(rng.normal(0.0, 0.5))
+        g = 0.1 + (1.0 if k >= 500 else 0.0) + float(rng.normal(0.0, 0.05))
+        d = ft.step(0.0, y, g, DT)
+        if d.event:
+            events.append(d.event)
+        sources.append(d.source)
+    assert "gyro_fault" in events and "confirmed" not in events
+    assert ft.gyro_failed and sources[-1] == "sensor"
+
+
+def test_third_vote_does_not_blame_the_gyro_for_a_compass_drift() -> None:
+    rng = np.random.default_rng(5)
+    ft = FaultTolerantHeading(DetectorConfig(), FtConfig(gyro_vote=True))
+    events = []
+    for k in range(800):
+        y = 150.0 + float(rng.normal(0.0, 0.5)) + (0.5 * (k - 500) * DT if k >= 500 else 0.0)
+        d = ft.step(0.0, y % 360.0, 0.1 + float(rng.normal(0.0, 0.05)), DT)
+        if d.event:
+            events.append(d.event)
+    assert "confirmed" in events and "gyro_fault" not in events
