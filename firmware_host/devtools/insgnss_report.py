@@ -15,17 +15,22 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from firmware_host.devtools.insgnss_sim import (
     CONFIG_DIR,
     SCENARIOS,
     InsGnssSetup,
     Scenario,
+    generate,
     load_setup,
+    run_method,
     run_scenario,
 )
 
@@ -134,6 +139,63 @@ def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
     return "\n".join(out) + "\n"
 
 
+FAULT_ROWS = slice(9, 200)  # paper-continuous: epochs 10..200 (pos_err row k is epoch k + 1)
+OTHER_SCENARIOS: tuple[Scenario, ...] = ("paper-random", "paper-single", "paper-deviation")
+
+
+def _rms(values: Sequence[float]) -> float:
+    """Pooled RMS of per-run RMS values (each run has the same number of epochs)."""
+    return math.sqrt(math.fsum(v * v for v in values) / len(values))
+
+
+def done_means(name: str, setup: InsGnssSetup, seeds: Sequence[int]) -> str:
+    """The issue-15 checks over ``seeds``: ``paper-continuous`` per seed for the preset's own
+    strategy against no robust filtering, and the other three scenarios against plain
+    down-weighting. Markdown."""
+    strat = setup.filter.strategy
+    out = [f"### {name}: paper-continuous, strategy `{strat}` against no robust filtering", "",
+           "| seed | 3-D RMS (m) | none 3-D RMS (m) | max horiz. during the fault (m) |",
+           "|---|---:|---:|---:|"]
+    rms: list[float] = []
+    nones: list[float] = []
+    horiz: list[float] = []
+    for seed in seeds:
+        data = generate(setup, "paper-continuous", seed)
+        run = run_method(data, setup.filter, strat)
+        none = run_method(data, setup.filter, "none")
+        r3 = float(np.sqrt(np.mean(np.sum(run.pos_err**2, axis=1))))
+        n3 = float(np.sqrt(np.mean(np.sum(none.pos_err**2, axis=1))))
+        e = run.pos_err[FAULT_ROWS]
+        h = float(np.hypot(e[:, 0], e[:, 1]).max())
+        rms.append(r3)
+        nones.append(n3)
+        horiz.append(h)
+        out.append(f"| {seed} | {r3:.2f} | {n3:.2f} | {h:.1f} |")
+    med = float(np.median(rms))
+    worst = int(np.argmax(rms))
+    out += ["", f"Median 3-D RMS {med:.2f} m; worst seed {seeds[worst]} {rms[worst]:.2f} m "
+            f"({rms[worst] / med:.2f}x the median); seeds above 3x the median: "
+            f"{sum(r > 3 * med for r in rms)}; seeds above no robust filtering: "
+            f"{sum(r > n for r, n in zip(rms, nones, strict=True))}; largest horizontal error "
+            f"during the fault {max(horiz):.1f} m (seed {seeds[int(np.argmax(horiz))]}).", ""]
+    out += [f"### {name}: strategy `{strat}` against plain down-weighting, 3-D RMS (m)", "",
+            "| scenario | seeds | pooled RMS | downweight pooled RMS | ratio | worst seed ratio |",
+            "|---|---|---:|---:|---:|---:|"]
+    for scenario in OTHER_SCENARIOS:
+        a: list[float] = []
+        b: list[float] = []
+        for seed in seeds:
+            data = generate(setup, scenario, seed)
+            for lst, method in ((a, strat), (b, "downweight")):
+                r = run_method(data, setup.filter, method)
+                lst.append(float(np.sqrt(np.mean(np.sum(r.pos_err**2, axis=1)))))
+        ratios = [x / y for x, y in zip(a, b, strict=True)]
+        k = int(np.argmax(ratios))
+        out.append(f"| {scenario} | {seeds[0]}-{seeds[-1]} | {_rms(a):.3f} | {_rms(b):.3f} "
+                   f"| {_rms(a) / _rms(b):.3f} | {ratios[k]:.2f} (seed {seeds[k]}) |")
+    return "\n".join(out) + "\n"
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=_seeds, default=_seeds("1-5"),
                         help="seeds, like 1-5 or 1,3 (default 1-5)")
@@ -147,12 +209,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", choices=PAPER_SCENARIOS, action="append", default=None,
                         help="only these scenarios, repeatable (default: the four paper ones)")
     parser.add_argument("--out", type=Path, default=None, help="write the Markdown here")
+    parser.add_argument("--done-means", action="store_true",
+                        help="only the issue-15 checks per preset: paper-continuous against no "
+                             "robust filtering, the others against down-weighting (use 1-50)")
 
 
 def run(args: argparse.Namespace) -> int:
     paths: list[Path] = args.config or [CONFIG_DIR / "insgnss-paper.toml",
                                         CONFIG_DIR / "insgnss.toml"]
     presets = [(p.stem, load_setup(p)) for p in paths]
+    if args.done_means:
+        text = "\n".join(done_means(name, setup, args.seeds) for name, setup in presets)
+        if args.out is not None:
+            args.out.write_text(text, encoding="utf-8")
+        sys.stdout.write(text)
+        return 0
     text = report(presets, args.seeds, args.sweep_sigma_v,
                   tuple(args.scenario) if args.scenario else PAPER_SCENARIOS)
     if args.out is not None:
