@@ -40,27 +40,31 @@ from drivers.configload import load_file
 from fdi.errors import ConfigError
 from fdi.insgnss import (
     DEG,
+    INS_STRATEGIES,
     EarthModel,
     ImuErrorModel,
     InsGnssFilter,
     InsGnssParams,
+    InsGnssStrategy,
     NavState,
     earth_step_quat,
     euler_to_quat,
     invert_mechanization,
 )
-from fdi.three_zone import STRATEGIES, Action, Strategy, Zone
+from fdi.three_zone import Action, Zone
 
 log = logging.getLogger(__name__)
 
 FloatArray = npt.NDArray[np.floating[Any]]
-Scenario = Literal["clean", "paper-random", "paper-single", "paper-continuous", "paper-deviation"]
+Scenario = Literal["clean", "paper-random", "paper-single", "paper-continuous", "paper-deviation",
+                   "table2-calibrated"]
 SCENARIOS: tuple[Scenario, ...] = (
     "clean",
     "paper-random",
     "paper-single",
     "paper-continuous",
     "paper-deviation",
+    "table2-calibrated",
 )
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 PAPER_PRESET = CONFIG_DIR / "insgnss-paper.toml"
@@ -82,6 +86,10 @@ class InsGnssSimParams:
     deviation_h_m: float = field(default=20.0, metadata={"doc": "deviation fault, east/north"})
     deviation_v_m: float = field(default=4.0, metadata={"doc": "deviation fault, up"})
     random_faults: int = field(default=100, metadata={"ge": 0})
+    table2_fault_h_m: float = field(
+        default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the east/north fault"})
+    table2_fault_v_m: float = field(
+        default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the up fault"})
 
 
 @dataclass(frozen=True)
@@ -224,6 +232,11 @@ def fault_table(scenario: Scenario, sim: InsGnssSimParams,
         fault[(epochs >= 10) & (epochs <= 200)] = big
     elif scenario == "paper-deviation":
         fault[(epochs % 10 == 0) & (epochs > 0)] = small
+    elif scenario == "table2-calibrated":
+        # "20 m of observation noise" every 10 s (the paper's wording): a zero-mean draw
+        at = (epochs % 10 == 0) & (epochs > 0)
+        sig = np.array([sim.table2_fault_h_m, sim.table2_fault_h_m, sim.table2_fault_v_m])
+        fault[at] = rng.normal(0.0, 1.0, (int(at.sum()), 3)) * sig
     elif scenario != "clean":
         raise ValueError(f"unknown scenario {scenario!r}")
     return fault
@@ -282,9 +295,11 @@ class MethodRun:
     fault_onsets: int = 0  # receiver judged faulty by the jump tracker (position)
     returns: int = 0  # ... and healthy again
     readmissions: int = 0  # position components accepted again after the INS drifted
+    # strategy "fault_state": epochs at which a receiver fault was believed (after the update)
+    faulted: npt.NDArray[np.bool_] | None = None
 
 
-def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> MethodRun:
+def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) -> MethodRun:
     """Run the filter with ``strategy`` over ``data``."""
     prm = replace(params, strategy=strategy)
     traj = data.traj
@@ -294,6 +309,7 @@ def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> Meth
     pos_err = np.zeros((m - 1, 3))
     vel_err = np.zeros((m - 1, 3))
     flagged = np.zeros(m - 1, dtype=bool)
+    faulted = np.zeros(m - 1, dtype=bool)
     t_list = traj.t.tolist()
     gyro, accel = data.gyro.tolist(), data.accel.tolist()
     for j in range(1, m):
@@ -301,17 +317,61 @@ def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> Meth
             kf.propagate(t_list[k], gyro[k], accel[k])
         rep = kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
         flagged[j - 1] = any(d.zone is not Zone.NO_FAULT for d in rep.decisions[:3])
+        faulted[j - 1] = kf.bias_active
         k = j * rate
         pos_err[j - 1] = kf.position - traj.p[k]
         vel_err[j - 1] = kf.velocity - traj.v[k]
     zones = {z.name.lower(): sum(g.zone_counts[z] for g in kf.gates[:3]) for z in Zone}
     actions = {a.value: sum(g.action_counts[a] for g in kf.gates[:3]) for a in Action}
     tracker = kf.position_tracker
+    if strategy == "fault_state":
+        mon = kf.fault_monitor
+        onsets, returns = mon.onsets, mon.returns
+        flagged |= faulted  # a fix taken as faulty is flagged whatever its zone
+    else:
+        onsets, returns = tracker.fault_onsets, tracker.returns
     return MethodRun(
         data.gnss_t[1:], pos_err, vel_err, zones, actions, flagged,
-        sum(g.restarts for g in kf.gates[:3]), tracker.fault_onsets, tracker.returns,
+        sum(g.restarts for g in kf.gates[:3]), onsets, returns,
         sum(g.readmissions for g in kf.gates[:3]),
+        faulted if strategy == "fault_state" else None,
     )
+
+
+@dataclass
+class CoastRun:
+    """The INS coasting through a fault: position fixes withheld on the faulty epochs."""
+
+    pos_err: FloatArray  # estimate − truth at GNSS epochs 1.., m
+    sigma_h: FloatArray  # the filter's horizontal 1σ, sqrt(P_EE + P_NN), m
+
+
+def run_coast(data: NavData, params: InsGnssParams) -> CoastRun:
+    """The reference "INS coast": the plain filter told the faulty epochs (an oracle), which
+    withholds their position fixes (velocity still used where the preset uses it) and takes
+    every other fix as is. Its covariance bounds what any detector can do through the fault
+    once it stops using the receiver's position: the bound of docs/insgnss.md is
+    ``3 σ_h`` at the fault's end."""
+    prm = replace(params, strategy="none")
+    traj = data.traj
+    kf = InsGnssFilter(prm, float(traj.t[0]), data.init_p, data.init_v, data.init_rpy)
+    m = len(data.gnss_t)
+    rate = round(1.0 / float(traj.t[1] - traj.t[0]))
+    faulty = np.any(data.fault != 0, axis=1)
+    pos_err = np.zeros((m - 1, 3))
+    sigma_h = np.zeros(m - 1)
+    t_list = traj.t.tolist()
+    gyro, accel = data.gyro.tolist(), data.accel.tolist()
+    for j in range(1, m):
+        for k in range((j - 1) * rate + 1, j * rate + 1):
+            kf.propagate(t_list[k], gyro[k], accel[k])
+        if faulty[j]:
+            kf.coast(float(data.gnss_t[j]), data.gnss_v[j])
+        else:
+            kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
+        pos_err[j - 1] = kf.position - traj.p[j * rate]
+        sigma_h[j - 1] = math.sqrt(float(kf.P[0, 0] + kf.P[1, 1]))
+    return CoastRun(pos_err, sigma_h)
 
 
 def _stats(err: FloatArray) -> dict[str, dict[str, float]]:
@@ -365,7 +425,7 @@ def summarize(data: NavData, runs: dict[str, MethodRun], scenario: str, seed: in
 
 
 def run_scenario(setup: InsGnssSetup, scenario: Scenario, seed: int,
-                 strategies: tuple[Strategy, ...] = STRATEGIES,
+                 strategies: tuple[InsGnssStrategy, ...] = INS_STRATEGIES,
                  ) -> tuple[dict[str, Any], NavData, dict[str, MethodRun]]:
     """Generate one run and pass it through each strategy; returns (summary, data, runs)."""
     data = generate(setup, scenario, seed)
