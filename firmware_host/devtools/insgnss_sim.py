@@ -297,6 +297,9 @@ class MethodRun:
     readmissions: int = 0  # position components accepted again after the INS drifted
     # strategy "fault_state": epochs at which a receiver fault was believed (after the update)
     faulted: npt.NDArray[np.bool_] | None = None
+    # median over the epochs of the innovation's 1σ per position axis, sqrt(S_ii) (m), of the
+    # epochs whose position was used as is: what the paper's §2.2 DM statistics measure
+    innovation_sigma: tuple[float, float, float] = (math.nan, math.nan, math.nan)
 
 
 def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) -> MethodRun:
@@ -310,6 +313,7 @@ def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) 
     vel_err = np.zeros((m - 1, 3))
     flagged = np.zeros(m - 1, dtype=bool)
     faulted = np.zeros(m - 1, dtype=bool)
+    s_pos: list[list[float]] = []
     t_list = traj.t.tolist()
     gyro, accel = data.gyro.tolist(), data.accel.tolist()
     for j in range(1, m):
@@ -318,6 +322,8 @@ def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) 
         rep = kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
         flagged[j - 1] = any(d.zone is not Zone.NO_FAULT for d in rep.decisions[:3])
         faulted[j - 1] = kf.bias_active
+        if kf.S.shape[0] >= 3 and all(d.action is Action.ACCEPT for d in rep.decisions[:3]):
+            s_pos.append([float(kf.S[i, i]) for i in range(3)])
         k = j * rate
         pos_err[j - 1] = kf.position - traj.p[k]
         vel_err[j - 1] = kf.velocity - traj.v[k]
@@ -335,7 +341,15 @@ def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) 
         sum(g.restarts for g in kf.gates[:3]), onsets, returns,
         sum(g.readmissions for g in kf.gates[:3]),
         faulted if strategy == "fault_state" else None,
+        _median_sigma(s_pos),
     )
+
+
+def _median_sigma(s_pos: list[list[float]]) -> tuple[float, float, float]:
+    if not s_pos:
+        return (math.nan, math.nan, math.nan)
+    med = np.sqrt(np.median(np.array(s_pos), axis=0))
+    return (float(med[0]), float(med[1]), float(med[2]))
 
 
 @dataclass
