@@ -29,7 +29,8 @@ def _healthy(mon: GnssFaultMonitor, rng: np.random.Generator, n: int) -> None:
 
 def test_thresholds_and_likelihood() -> None:
     p = FaultStateParams()
-    assert p.t_onset == pytest.approx(chi2_ppf(0.99, 3)) and p.t_onset == pytest.approx(11.345, 1e-4)
+    assert p.t_onset == pytest.approx(chi2_ppf(0.99, 3))
+    assert p.t_onset == pytest.approx(11.345, 1e-4)
     nu = np.array([1.0, -2.0, 0.5])
     s = np.diag([2.0, 3.0, 4.0])
     ref = -0.5 * (0.5 + 4.0 / 3.0 + 0.0625 + math.log(24.0) + 3 * math.log(2 * math.pi))

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from fdi.insgnss import InsGnssStrategy
+from fdi.insgnss import INS_STRATEGIES, InsGnssStrategy
 from firmware_host.devtools.insgnss_sim import (
     CONFIG_DIR,
     InsGnssSetup,
@@ -316,6 +316,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--table2-calibrated", action="store_true",
                         help="only the calibrated Table 2 reproduction (config/insgnss-table2."
                              "toml) beside the easier paper-deviation scenario")
+    parser.add_argument("--strategy", choices=INS_STRATEGIES, default=None,
+                        help="--done-means: run this strategy instead of each preset's own")
     parser.add_argument("--done-means", action="store_true",
                         help="only the issue-15 checks per preset: paper-continuous against no "
                              "robust filtering, the others against down-weighting (use 1-50)")
@@ -325,6 +327,10 @@ def run(args: argparse.Namespace) -> int:
     paths: list[Path] = args.config or [CONFIG_DIR / "insgnss-paper.toml",
                                         CONFIG_DIR / "insgnss.toml"]
     presets = [(p.stem, load_setup(p)) for p in paths]
+    if args.strategy is not None:
+        presets = [(name, dataclasses.replace(
+            st, filter=dataclasses.replace(st.filter, strategy=args.strategy)))
+            for name, st in presets]
     if args.done_means or args.table2_calibrated:
         parts = []
         if args.table2_calibrated:
