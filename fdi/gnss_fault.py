@@ -86,7 +86,7 @@ class FaultStateParams:
     window: int = field(
         default=4, metadata={"ge": 1, "le": 64, "doc": "innovation history of the jump test"})
     return_log_lr: float = field(
-        default=math.log(10.0),
+        default=2.3026,  # ln 10
         metadata={"gt": 0.0, "doc": "CUSUM threshold on ln L(H0)/L(H1) to return"})
     bias_sigma0_m: float = field(
         default=1000.0, metadata={"gt": 0.0, "doc": "prior 1σ of the bias at an onset, m"})

@@ -42,6 +42,15 @@ back. Then ``K = P⁻H'ᵀ(H'P⁻H'ᵀ + R')⁻¹``, ``δx̂ = K ν'``, Joseph f
 ``P⁺ = (I − KH')P⁻(I − KH')ᵀ + KR'Kᵀ``, and the correction is fed back into the nominal
 state (``δx̂`` reset to 0).
 
+Strategy ``fault_state`` (ours; :mod:`fdi.gnss_fault`): the gates only down-weight, and a
+:class:`~fdi.gnss_fault.GnssFaultMonitor` decides per epoch between a healthy receiver and a
+biased one. While a fault is believed the filter carries a GNSS position bias ``b`` (random
+walk) beside the 15 states, with the blocks ``P_xb`` and ``P_bb``: position rows
+``H = [I 0 0 0 0 | I]`` (``z = p + b + v``), velocity rows as usual; ``b`` is opened with
+``P_bb = σ_b0² I`` at the onset (the jump goes into ``b``, the INS coasts), reopened when the
+fault changes level, and marginalised out (its rows and columns dropped) when the receiver is
+healthy again. :meth:`InsGnssFilter.coast` is the reference the fault's error is bounded by.
+
 IMU rate: the rectangular rule integrates sampled rates, so it can only follow motion well
 below the sample rate. A rover's or small aircraft's manoeuvres (turns, bank changes) have
 content up to ~2 Hz; ten samples per period of that motion means at least 20 Hz
@@ -341,7 +350,8 @@ class ImuErrorModel:
 class InsGnssParams:
     """Filter parameters (the ``[filter]`` table of ``config/insgnss*.toml``)."""
 
-    strategy: InsGnssStrategy = field(default="three_zone", metadata={"doc": "robust treatment"})
+    strategy: InsGnssStrategy = field(
+        default="fault_state", metadata={"doc": "robust treatment (the paper's: three_zone)"})
     three_zone: ThreeZoneParams = field(default_factory=ThreeZoneParams)
     fault_state: FaultStateParams = field(default_factory=FaultStateParams)
     imu: ImuErrorModel = field(default_factory=ImuErrorModel)

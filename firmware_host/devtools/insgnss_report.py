@@ -103,14 +103,14 @@ def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
                 summary, _data, _runs = run_scenario(setup, scenario, seed)
                 rows.append((name, scenario, seed, summary["methods"]))
     out = ["### 3-D position RMS (m), every seed", "",
-           "| preset | scenario | seed | none | downweight | replace | three_zone "
-           "| three_zone max horiz. (m) |",
-           "|---|---|---|---:|---:|---:|---:|---:|"]
+           "| preset | scenario | seed | none | downweight | replace | three_zone | fault_state "
+           "| three_zone max horiz. (m) | fault_state max horiz. (m) |",
+           "|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name, scen, seed, m in rows:
-        cells = " | ".join(f"{m[k]['position_rms_3d_m']:.2f}"
-                           for k in ("none", "downweight", "replace", "three_zone"))
+        cells = " | ".join(f"{m[k]['position_rms_3d_m']:.2f}" for k in INS_STRATEGIES)
         out.append(f"| {name} | {scen} | {seed} | {cells} "
-                   f"| {m['three_zone']['max_horizontal_error_m']:.1f} |")
+                   f"| {m['three_zone']['max_horizontal_error_m']:.1f} "
+                   f"| {m['fault_state']['max_horizontal_error_m']:.1f} |")
     first = seeds[0]
     out += ["", f"### Seed {first}, per axis: min / max / RMS (m)", "",
             "| preset | scenario | method | east | north | up |", "|---|---|---|---|---|---|"]

@@ -14,9 +14,13 @@ GNSS data with errors, and injected GNSS faults. This module does the same:
   ``paper-random`` 100 distinct random epochs, +100 m east and north, +20 m up;
   ``paper-single`` every 10 s, +100/+100/+20 m; ``paper-continuous`` every epoch 10..200 s,
   +100/+100/+20 m; ``paper-deviation`` every 10 s, +20/+20/+4 m (the paper's deviation study
-  used faults every 10 s; up keeps paper-random's 5:1 ratio); ``clean`` no faults.
+  used faults every 10 s; up keeps paper-random's 5:1 ratio; the *easier* Table 2 scenario);
+  ``table2-calibrated`` every 10 s a zero-mean draw with 1σ ``table2_fault_h_m`` /
+  ``table2_fault_v_m`` (the paper's "20 m of observation noise"; with
+  ``config/insgnss-table2.toml`` the calibrated Table 2, docs/insgnss.md); ``clean`` no faults.
 
-The same data runs through the four strategies (none, downweight, replace, three_zone) and
+The same data runs through the five strategies (none, downweight, replace, three_zone,
+fault_state) and
 the summary gives per method min/max/RMS of the E, N, U position and velocity errors
 (estimate − truth, at the 500 GNSS epochs after the update) and the zone/action counts.
 """
