@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from firmware_host.cli import main
+from firmware_host.devtools.eval import INSGNSS_EVAL_SEEDS, insgnss_suite, insgnss_table
 from firmware_host.devtools.insgnss_report import (
     PAPER_SIGMA_S_M,
     PAPER_TABLE2,
@@ -185,3 +186,17 @@ def test_table2_calibrated_command(tmp_path: Path, capsys: pytest.CaptureFixture
     calibrated, easier = text.split("### Table 2, easier")
     assert "within 25% on every axis: yes; seeds with every axis within: 1/1" in calibrated
     assert "within 25% on every axis: no" in easier
+
+
+# ---------------------------------------------------------------- eval's held-out seeds
+
+
+def test_eval_suite_seeds_are_held_out() -> None:
+    test_seeds = {*CONTINUOUS_SEEDS, *OTHER_SEEDS, 4, 9, 12, 21, 36, 37, 44, *range(1, 51)}
+    assert not set(INSGNSS_EVAL_SEEDS) & test_seeds
+    # the suite's INS/GNSS rows (run here on a test seed, not on the held-out ones)
+    rows = insgnss_suite(1, ["paper-single"], [47])
+    by = {r["method"]: r for r in rows}
+    assert set(by) == {"none", "downweight", "replace", "three_zone", "fault_state"}
+    assert by["fault_state"]["pooled_rms_3d_m"] < by["none"]["pooled_rms_3d_m"] / 5
+    assert "worst seed" in insgnss_table(rows)
