@@ -42,6 +42,15 @@ back. Then ``K = P⁻H'ᵀ(H'P⁻H'ᵀ + R')⁻¹``, ``δx̂ = K ν'``, Joseph f
 ``P⁺ = (I − KH')P⁻(I − KH')ᵀ + KR'Kᵀ``, and the correction is fed back into the nominal
 state (``δx̂`` reset to 0).
 
+Strategy ``fault_state`` (ours; :mod:`fdi.gnss_fault`): the gates only down-weight, and a
+:class:`~fdi.gnss_fault.GnssFaultMonitor` decides per epoch between a healthy receiver and a
+biased one. While a fault is believed the filter carries a GNSS position bias ``b`` (random
+walk) beside the 15 states, with the blocks ``P_xb`` and ``P_bb``: position rows
+``H = [I 0 0 0 0 | I]`` (``z = p + b + v``), velocity rows as usual; ``b`` is opened with
+``P_bb = σ_b0² I`` at the onset (the jump goes into ``b``, the INS coasts), reopened when the
+fault changes level, and marginalised out (its rows and columns dropped) when the receiver is
+healthy again. :meth:`InsGnssFilter.coast` is the reference the fault's error is bounded by.
+
 IMU rate: the rectangular rule integrates sampled rates, so it can only follow motion well
 below the sample rate. A rover's or small aircraft's manoeuvres (turns, bank changes) have
 content up to ~2 Hz; ten samples per period of that motion means at least 20 Hz
@@ -56,13 +65,15 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from fdi.errors import EstimatorError
+from fdi.gnss_fault import FaultStateParams, GnssFaultMonitor, Verdict
 from fdi.three_zone import (
+    STRATEGIES,
     Action,
     GateDecision,
     JumpTracker,
@@ -70,8 +81,13 @@ from fdi.three_zone import (
     Strategy,
     ThreeZoneGate,
     ThreeZoneParams,
+    classify,
 )
 
+# The GNSS treatments: the gate's (fdi.three_zone.Strategy) and "fault_state", a persistent
+# fault as a state of the filter (fdi.gnss_fault) with plain down-weighting while healthy.
+InsGnssStrategy = Literal["none", "downweight", "replace", "three_zone", "fault_state"]
+INS_STRATEGIES: tuple[InsGnssStrategy, ...] = (*STRATEGIES, "fault_state")
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 FloatArray = npt.NDArray[np.float64]
@@ -334,8 +350,10 @@ class ImuErrorModel:
 class InsGnssParams:
     """Filter parameters (the ``[filter]`` table of ``config/insgnss*.toml``)."""
 
-    strategy: Strategy = field(default="three_zone", metadata={"doc": "robust treatment"})
+    strategy: InsGnssStrategy = field(
+        default="fault_state", metadata={"doc": "robust treatment (the paper's: three_zone)"})
     three_zone: ThreeZoneParams = field(default_factory=ThreeZoneParams)
+    fault_state: FaultStateParams = field(default_factory=FaultStateParams)
     imu: ImuErrorModel = field(default_factory=ImuErrorModel)
     gnss_sigma_h_m: float = field(default=3.0, metadata={"gt": 0.0, "doc": "R: E/N 1σ"})
     gnss_sigma_v_m: float = field(default=5.0, metadata={"gt": 0.0, "doc": "R: up 1σ"})
@@ -387,6 +405,7 @@ class EpochReport:
 
     t_s: float
     decisions: tuple[GateDecision, ...]
+    verdict: Verdict | None = None  # strategy "fault_state": the fault monitor's decision
 
     @property
     def rejected(self) -> int:
@@ -450,10 +469,26 @@ class InsGnssFilter:
         # velocity error by 0.3 m/s in 4 s against 0.1 m/s: measured false onsets that locked
         # out the velocity aiding). They keep the paper's limit and window restart.
         vel = dataclasses.replace(params.three_zone, track_jumps=False)
-        self.gates = [ThreeZoneGate(params.three_zone, params.strategy) for _ in range(3)] + [
-            ThreeZoneGate(vel, params.strategy) for _ in range(3)
+        # "fault_state": plain down-weighting while the receiver is believed healthy (the
+        # monitor below decides when it is not)
+        gate: Strategy = "downweight" if params.strategy == "fault_state" else params.strategy
+        self.gates = [ThreeZoneGate(params.three_zone, gate) for _ in range(3)] + [
+            ThreeZoneGate(vel, gate) for _ in range(3)
         ]
         self.position_tracker = JumpTracker(params.three_zone, 3)
+        # Strategy "fault_state" (fdi.gnss_fault): a GNSS position bias b, in the state only
+        # while a fault is believed; its covariance blocks P_xb (15×3) and P_bb (3×3).
+        self.fault_monitor = GnssFaultMonitor(params.fault_state)
+        self.gnss_bias: FloatArray = np.zeros(3)
+        self.bias_active = False
+        self._Pxb: FloatArray = np.zeros((N_STATES, 3))
+        self._Pbb: FloatArray = np.zeros((3, 3))
+        self._q_bias = params.fault_state.bias_rw_m_sqrt_s**2
+        # the filter's accumulated corrections as a trajectory (position offset c_p moved by
+        # the velocity offset c_v): p̂ − c_p is the INS as if never corrected (jump test)
+        self._corr_p: FloatArray = np.zeros(3)
+        self._corr_v: FloatArray = np.zeros(3)
+        self._corr_t = self.t_s
         self._cov_dt = 1.0 / params.cov_rate_hz
         self._acc_dt = 0.0
         self._acc_fn = [0.0, 0.0, 0.0]
@@ -545,6 +580,9 @@ class InsGnssFilter:
         Phi = np.eye(N_STATES) + Fdt + 0.5 * (Fdt @ Fdt)
         # P⁻ = Φ P Φᵀ + Q_d
         self.P = Phi @ self.P @ Phi.T + np.diag(self._q * dt)
+        if self.bias_active:  # b is a random walk: Φ_b = I, Q_b = q_b Δt
+            self._Pxb = Phi @ self._Pxb
+            self._Pbb = self._Pbb + np.eye(3) * (self._q_bias * dt)
         self._acc_dt = 0.0
         self._acc_fn = [0.0, 0.0, 0.0]
 
@@ -575,6 +613,11 @@ class InsGnssFilter:
             rows += [3, 4, 5]
         if not all(math.isfinite(c) for c in z):
             raise EstimatorError(f"non-finite GNSS observation at t = {t_s}: {z}")
+        verdict: Verdict | None = None
+        if prm.strategy == "fault_state":
+            verdict = self._fault_verdict(z, zhat, r)
+            if self.bias_active:
+                return self._update_biased(float(t_s), z, zhat, r, rows, verdict)
         P = self.P
         idx = np.array(rows)
         # (2) ν = z − H x̂ ; (3) S = H P⁻ Hᵀ + R  (H selects position / velocity states)
@@ -624,11 +667,127 @@ class InsGnssFilter:
             self._inject(dx)
         else:
             self.y, self.S = np.zeros(0), np.zeros((0, 0))
-        return EpochReport(float(t_s), decisions)
+        return EpochReport(float(t_s), decisions, verdict)
+
+    def coast(self, t_s: float, velocity_enu_m_s: VecLike | None = None) -> None:
+        """No position fix at ``t_s``: the INS coasts (a plain velocity update when the preset
+        uses velocity and one is given). The reference against which a fault's error is
+        bounded (``firmware_host.devtools.insgnss_sim.run_coast``)."""
+        self._propagate_covariance()
+        if velocity_enu_m_s is None or not self.params.use_velocity:
+            return
+        y = np.array([float(c) for c in velocity_enu_m_s[:3]]) - np.array(self.nav.v)
+        Rm = np.eye(3) * self.params.gnss_sigma_vel_m_s**2
+        PHt = self.P[:, 3:6]
+        S = self.P[3:6, 3:6] + Rm
+        K = np.linalg.solve(S, PHt.T).T
+        IKH = np.eye(N_STATES)
+        IKH[:, 3:6] -= K
+        self.P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
+        self.P = 0.5 * (self.P + self.P.T)
+        self._inject(K @ y)
+
+    # ------------------------------------------------------------ strategy "fault_state"
+
+    def _fault_verdict(self, z: list[float], zhat: list[float], r: list[float]) -> Verdict:
+        """The monitor's decision on this fix (fdi.gnss_fault); opens / drops the bias state."""
+        nu0 = np.array(z[:3]) - np.array(zhat[:3])
+        s0 = self.P[0:3, 0:3] + np.diag(r[:3])  # S0 = P_pp + R
+        mon = self.fault_monitor
+        self._corr_p = self._corr_p + self._corr_v * (self.t_s - self._corr_t)
+        self._corr_t = self.t_s
+        a = nu0 + self._corr_p  # z − (p̂ − c_p): the receiver minus the uncorrected INS
+        rv = np.array(r[:3])
+        if not self.bias_active:
+            # the INS's own increment over the window: velocity error over T plus the white
+            # accelerometer noise, P_vv T² + q_a T³/3, with T the window's length
+            t_w = float(self.params.fault_state.window)
+            var_inc = rv + np.diag(self.P)[3:6] * t_w**2 + self._q[3:6] * t_w**3 / 3.0
+            verdict = mon.healthy_epoch(nu0, s0, a, rv, var_inc)
+            if verdict is Verdict.ONSET:
+                # open b ~ N(0, σ_b0² I), uncorrelated: this epoch's update puts the jump in b
+                self.bias_active = True
+                self.gnss_bias = np.zeros(3)
+                self._Pxb = np.zeros((N_STATES, 3))
+                self._Pbb = np.eye(3) * self.params.fault_state.bias_sigma0_m**2
+            return verdict
+        pxb = self._Pxb[0:3, :]
+        nu1 = nu0 - self.gnss_bias  # ν1 = z − p̂ − b̂
+        s1 = s0 + pxb + pxb.T + self._Pbb  # S1 = H1 P H1ᵀ + R, H1 = [I 0 0 0 0 I]
+        verdict = mon.faulted_epoch(nu0, s0, nu1, s1, a, rv)
+        if verdict is Verdict.RETURN:
+            # b jumps back to 0: marginalise it out (its old estimate says nothing now)
+            self.bias_active = False
+            self.gnss_bias = np.zeros(3)
+            self._Pxb = np.zeros((N_STATES, 3))
+            self._Pbb = np.zeros((3, 3))
+        elif verdict is Verdict.RELEVEL:
+            self._Pbb = self._Pbb + np.eye(3) * self.params.fault_state.bias_sigma0_m**2
+        return verdict
+
+    def _update_biased(
+        self, t_s: float, z: list[float], zhat: list[float], r: list[float], rows: list[int],
+        verdict: Verdict,
+    ) -> EpochReport:
+        """Update of the 18-state filter ``[δx, b]`` under H1: position ``z = p + b + v``,
+        velocity as usual (through its gates)."""
+        n = N_STATES + 3
+        Pa = np.zeros((n, n))
+        Pa[:N_STATES, :N_STATES] = self.P
+        Pa[:N_STATES, N_STATES:] = self._Pxb
+        Pa[N_STATES:, :N_STATES] = self._Pxb.T
+        Pa[N_STATES:, N_STATES:] = self._Pbb
+        decisions: list[GateDecision] = []
+        h_rows: list[FloatArray] = []
+        y: list[float] = []
+        rv: list[float] = []
+        for j, k in enumerate(rows):
+            nu = z[j] - zhat[j]
+            if k < 3:
+                # the fix informs b and, through b's constancy, the INS's changes; judged
+                # against the healthy prediction for the zone counts
+                s0 = float(self.P[k, k]) + r[j]
+                dm = nu * nu / s0
+                zone = classify(dm, self.params.three_zone.t1, self.params.three_zone.t2)
+                decisions.append(GateDecision(zone, Action.REJECT, dm, z[j], math.inf))
+                h = np.zeros(n)
+                h[k] = 1.0
+                h[N_STATES + k] = 1.0
+                h_rows.append(h)
+                y.append(nu - float(self.gnss_bias[k]))
+                rv.append(r[j])
+                continue
+            d = self.gates[k].step(z[j], nu, float(self.P[k, k]) + r[j], r[j])
+            decisions.append(d)
+            if d.action is not Action.REJECT:
+                h = np.zeros(n)
+                h[k] = 1.0
+                h_rows.append(h)
+                y.append(d.value - zhat[j])
+                rv.append(d.variance)
+        H = np.array(h_rows)
+        Rm = np.diag(rv)
+        yv = np.array(y)
+        PHt = Pa @ H.T
+        S = H @ PHt + Rm
+        K = np.linalg.solve(S, PHt.T).T  # K = P Hᵀ S⁻¹
+        dx = K @ yv
+        IKH = np.eye(n) - K @ H
+        Pa = IKH @ Pa @ IKH.T + K @ Rm @ K.T  # Joseph form
+        Pa = 0.5 * (Pa + Pa.T)
+        self.P = Pa[:N_STATES, :N_STATES].copy()
+        self._Pxb = Pa[:N_STATES, N_STATES:].copy()
+        self._Pbb = Pa[N_STATES:, N_STATES:].copy()
+        self.gnss_bias = self.gnss_bias + dx[N_STATES:]
+        self.y, self.S = yv, S
+        self._inject(dx[:N_STATES])
+        return EpochReport(t_s, tuple(decisions), verdict)
 
     def _inject(self, dx: FloatArray) -> None:
         """Feed the error estimate back into the nominal state; δx̂ ← 0."""
         n = self.nav
+        self._corr_p = self._corr_p + dx[0:3]
+        self._corr_v = self._corr_v + dx[3:6]
         n.p = (n.p[0] + dx[0], n.p[1] + dx[1], n.p[2] + dx[2])
         n.v = (n.v[0] + dx[3], n.v[1] + dx[4], n.v[2] + dx[5])
         # C_b^n = (I − [φ×]) Ĉ  →  Ĉ ← Exp(−φ) Ĉ

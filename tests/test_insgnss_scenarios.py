@@ -188,7 +188,7 @@ def test_cli_writes_summary(tmp_path: Path) -> None:
                "--out", str(tmp_path), "--no-plots"])
     assert rc == 0
     doc = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
-    assert set(doc["methods"]) == {"none", "downweight", "replace", "three_zone"}
+    assert set(doc["methods"]) == {"none", "downweight", "replace", "three_zone", "fault_state"}
     m = doc["methods"]["three_zone"]
     assert set(m["position_m"]) == {"east", "north", "up"}
     assert {"min", "max", "rms"} <= set(m["velocity_m_s"]["east"])

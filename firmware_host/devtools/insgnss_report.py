@@ -1,33 +1,46 @@
 """``fdi-bridge sim insgnss-report``: the measured tables of ``docs/insgnss.md``, as a command.
 
-Runs every scenario of :mod:`firmware_host.devtools.insgnss_sim` for each preset and seed through
-the
-four strategies and prints Markdown: the 3-D position RMS per run, seed 1 per axis, and the
-``paper-deviation`` three-zone ranges per seed against the paper's Table 2. With
-``--sweep-sigma-v`` it also reruns ``paper-deviation`` with the vertical GNSS noise (generator
-and filter R alike) set to each value, to show how the up range depends on it.
+Default: every paper scenario of :mod:`firmware_host.devtools.insgnss_sim` for each preset and
+seed through the five strategies, printed as Markdown: the 3-D position RMS per run, seed 1 per
+axis, and the ``paper-deviation`` (the easier Table 2 scenario) three-zone ranges per seed
+against the paper's Table 2. ``--sweep-sigma-v`` also reruns ``paper-deviation`` with the
+vertical GNSS noise (generator and filter R alike) set to each value.
 
-Each filter run takes about 0.6 s: two presets, four scenarios, five seeds and four methods
-take about two minutes.
+``--done-means`` (issue 15, meant for ``--seeds 1-50``): per preset, ``paper-continuous`` for
+the preset's strategy (or ``--strategy``) against no robust filtering, with the coast bound
+(:func:`~firmware_host.devtools.insgnss_sim.run_coast`), and the other three scenarios against
+plain down-weighting. ``--table2-calibrated``: the calibrated Table 2
+(``config/insgnss-table2.toml``) beside the easier scenario.
+
+Each filter run takes about 0.6 s on an idle machine: ``--done-means --seeds 1-50`` makes 700
+runs per preset, ``--table2-calibrated --seeds 1-50`` 400 (measured 17 and 12 minutes under
+load, niced).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from fdi.insgnss import INS_STRATEGIES, InsGnssStrategy
 from firmware_host.commands.checks import input_file_arg, output_file_arg
 from firmware_host.commands.progress import Progress
 from firmware_host.devtools.insgnss_sim import (
     CONFIG_DIR,
-    SCENARIOS,
     InsGnssSetup,
+    MethodRun,
     Scenario,
+    generate,
     load_setup,
+    run_coast,
+    run_method,
     run_scenario,
 )
 
@@ -36,7 +49,17 @@ AXES = ("east", "north", "up")
 PAPER_TABLE2: dict[str, tuple[float, float]] = {
     "east": (-11.8, 6.06), "north": (-6.64, 7.54), "up": (-2.62, 2.57),
 }
-PAPER_SCENARIOS: tuple[Scenario, ...] = tuple(s for s in SCENARIOS if s != "clean")
+# ... and without robust filtering (Table 2's first column)
+PAPER_TABLE2_NONE: dict[str, tuple[float, float]] = {
+    "east": (-25.8, 32.6), "north": (-20.5, 34.9), "up": (-7.9, 13.9),
+}
+# §2.2: a 25 m error is above T2 = 6.635 96 % of the time: σ_S = 25 / (z_0.96 + √T2), m
+PAPER_SIGMA_S_M = 25.0 / (1.7507 + 2.5758)
+PAPER_SCENARIOS: tuple[Scenario, ...] = (
+    "paper-random", "paper-single", "paper-continuous", "paper-deviation")
+TABLE2_PRESET = CONFIG_DIR / "insgnss-table2.toml"
+TABLE2_METHODS: tuple[InsGnssStrategy, ...] = ("none", "downweight", "three_zone", "fault_state")
+SPAN_TOLERANCE = 0.25  # the calibration: spans without robust filtering within 25 %
 GOAL = 0.7  # "our goal is 30 % tighter than the paper": span at most 0.7 of Table 2's
 
 
@@ -92,14 +115,14 @@ def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
                 done(f"{name} {scenario} seed {seed}")
                 rows.append((name, scenario, seed, summary["methods"]))
     out = ["### 3-D position RMS (m), every seed", "",
-           "| preset | scenario | seed | none | downweight | replace | three_zone "
-           "| three_zone max horiz. (m) |",
-           "|---|---|---|---:|---:|---:|---:|---:|"]
+           "| preset | scenario | seed | none | downweight | replace | three_zone | fault_state "
+           "| three_zone max horiz. (m) | fault_state max horiz. (m) |",
+           "|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name, scen, seed, m in rows:
-        cells = " | ".join(f"{m[k]['position_rms_3d_m']:.2f}"
-                           for k in ("none", "downweight", "replace", "three_zone"))
+        cells = " | ".join(f"{m[k]['position_rms_3d_m']:.2f}" for k in INS_STRATEGIES)
         out.append(f"| {name} | {scen} | {seed} | {cells} "
-                   f"| {m['three_zone']['max_horizontal_error_m']:.1f} |")
+                   f"| {m['three_zone']['max_horizontal_error_m']:.1f} "
+                   f"| {m['fault_state']['max_horizontal_error_m']:.1f} |")
     first = seeds[0]
     out += ["", f"### Seed {first}, per axis: min / max / RMS (m)", "",
             "| preset | scenario | method | east | north | up |", "|---|---|---|---|---|---|"]
@@ -141,6 +164,169 @@ def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
     return "\n".join(out) + "\n"
 
 
+FAULT_ROWS = slice(9, 200)  # paper-continuous: epochs 10..200 (pos_err row k is epoch k + 1)
+OTHER_SCENARIOS: tuple[Scenario, ...] = ("paper-random", "paper-single", "paper-deviation")
+
+
+def _rms(values: Sequence[float]) -> float:
+    """Pooled RMS of per-run RMS values (each run has the same number of epochs)."""
+    return math.sqrt(math.fsum(v * v for v in values) / len(values))
+
+
+def _max_horizontal(err: Any) -> float:
+    return float(np.hypot(err[:, 0], err[:, 1]).max())
+
+
+def done_means(name: str, setup: InsGnssSetup, seeds: Sequence[int]) -> str:
+    """The issue-15 checks over ``seeds``: ``paper-continuous`` per seed for the preset's own
+    strategy against no robust filtering, and the other three scenarios against plain
+    down-weighting. Markdown."""
+    strat = setup.filter.strategy
+    out = [f"### {name}: paper-continuous, strategy `{strat}` against no robust filtering", "",
+           "Coast: the plain filter told the fault (position fixes withheld on its epochs); "
+           "bound = its horizontal 3σ at the fault's end, `3 sqrt(P_EE + P_NN)`.", "",
+           "| seed | 3-D RMS (m) | none 3-D RMS (m) | max horiz. during the fault (m) "
+           "| coast bound (m) | coast, realised (m) | downweight 3-D RMS (m) "
+           "| three_zone 3-D RMS (m) |",
+           "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    others: dict[InsGnssStrategy, list[float]] = {"downweight": [], "three_zone": []}
+    rms: list[float] = []
+    nones: list[float] = []
+    horiz: list[float] = []
+    over_bound = 0
+    for seed in seeds:
+        data = generate(setup, "paper-continuous", seed)
+        run = run_method(data, setup.filter, strat)
+        none = run_method(data, setup.filter, "none")
+        coast = run_coast(data, setup.filter)
+        r3 = float(np.sqrt(np.mean(np.sum(run.pos_err**2, axis=1))))
+        n3 = float(np.sqrt(np.mean(np.sum(none.pos_err**2, axis=1))))
+        h = _max_horizontal(run.pos_err[FAULT_ROWS])
+        bound = 3.0 * float(coast.sigma_h[FAULT_ROWS].max())
+        over_bound += h > bound
+        rms.append(r3)
+        nones.append(n3)
+        horiz.append(h)
+        for method, lst in others.items():
+            other = run if method == strat else run_method(data, setup.filter, method)
+            lst.append(float(np.sqrt(np.mean(np.sum(other.pos_err**2, axis=1)))))
+        out.append(f"| {seed} | {r3:.2f} | {n3:.2f} | {h:.1f} | {bound:.1f} "
+                   f"| {_max_horizontal(coast.pos_err[FAULT_ROWS]):.1f} "
+                   f"| {others['downweight'][-1]:.2f} | {others['three_zone'][-1]:.2f} |")
+    med = float(np.median(rms))
+    worst = int(np.argmax(rms))
+    out += ["", f"Median 3-D RMS {med:.2f} m; worst seed {seeds[worst]} {rms[worst]:.2f} m "
+            f"({rms[worst] / med:.2f}x the median); seeds above 3x the median: "
+            f"{sum(r > 3 * med for r in rms)}; seeds above no robust filtering: "
+            f"{sum(r > n for r, n in zip(rms, nones, strict=True))}; largest horizontal error "
+            f"during the fault {max(horiz):.1f} m (seed {seeds[int(np.argmax(horiz))]}); "
+            f"seeds above the coast bound: {over_bound}. Median 3-D RMS of downweight "
+            f"{np.median(others['downweight']):.2f} m (worst {max(others['downweight']):.2f}), "
+            f"of three_zone {np.median(others['three_zone']):.2f} m "
+            f"(worst {max(others['three_zone']):.2f}).", ""]
+    out += [f"### {name}: strategy `{strat}` against plain down-weighting, 3-D RMS (m)", "",
+            "| scenario | seeds | pooled RMS | downweight pooled RMS | ratio | worst seed ratio "
+            "| three_zone pooled RMS | three_zone / downweight, worst seed |",
+            "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for scenario in OTHER_SCENARIOS:
+        a: list[float] = []
+        b: list[float] = []
+        c: list[float] = []
+        for seed in seeds:
+            data = generate(setup, scenario, seed)
+            for lst, method in ((a, strat), (b, "downweight"), (c, "three_zone")):
+                r = run_method(data, setup.filter, method)
+                lst.append(float(np.sqrt(np.mean(np.sum(r.pos_err**2, axis=1)))))
+        ratios = [x / y for x, y in zip(a, b, strict=True)]
+        k = int(np.argmax(ratios))
+        tz = [x / y for x, y in zip(c, b, strict=True)]
+        kt = int(np.argmax(tz))
+        out.append(f"| {scenario} | {seeds[0]}-{seeds[-1]} | {_rms(a):.3f} | {_rms(b):.3f} "
+                   f"| {_rms(a) / _rms(b):.3f} | {ratios[k]:.2f} (seed {seeds[k]}) "
+                   f"| {_rms(c):.3f} | {tz[kt]:.2f} (seed {seeds[kt]}) |")
+    return "\n".join(out) + "\n"
+
+
+def _span(lo_hi: tuple[float, float]) -> float:
+    return lo_hi[1] - lo_hi[0]
+
+
+def table2_runs(setup: InsGnssSetup, scenario: Scenario, seeds: Sequence[int],
+                methods: Sequence[InsGnssStrategy] = TABLE2_METHODS,
+                ) -> dict[str, list[MethodRun]]:
+    """Every method on ``scenario`` for each seed (the same data per seed)."""
+    out: dict[str, list[MethodRun]] = {m: [] for m in methods}
+    for seed in seeds:
+        data = generate(setup, scenario, seed)
+        for m in methods:
+            out[m].append(run_method(data, setup.filter, m))
+    return out
+
+
+def span_stats(runs: Sequence[MethodRun]) -> dict[str, dict[str, float]]:
+    """Per axis over the runs: median min, median max, median / lowest / highest span (m)."""
+    out = {}
+    for i, axis in enumerate(AXES):
+        mins = np.array([float(r.pos_err[:, i].min()) for r in runs])
+        maxs = np.array([float(r.pos_err[:, i].max()) for r in runs])
+        spans = maxs - mins
+        out[axis] = {"min": float(np.median(mins)), "max": float(np.median(maxs)),
+                     "span": float(np.median(spans)), "span_lo": float(spans.min()),
+                     "span_hi": float(spans.max())}
+    return out
+
+
+def table2_calibrated(seeds: Sequence[int], setup: InsGnssSetup | None = None,
+                      easier: InsGnssSetup | None = None) -> str:
+    """The calibrated reproduction of Table 2 (``table2-calibrated`` on
+    ``config/insgnss-table2.toml``), beside the easier scenario (``paper-deviation`` on the
+    paper preset). Markdown."""
+    setup = setup if setup is not None else load_setup(TABLE2_PRESET)
+    easier = easier if easier is not None else load_setup(CONFIG_DIR / "insgnss-paper.toml")
+    out: list[str] = []
+    for title, stp, scen in (
+        ("calibrated: `table2-calibrated`, config/insgnss-table2.toml", setup,
+         "table2-calibrated"),
+        ("easier (uncalibrated): `paper-deviation`, config/insgnss-paper.toml", easier,
+         "paper-deviation"),
+    ):
+        runs = table2_runs(stp, scen, seeds)  # type: ignore[arg-type]
+        none = span_stats(runs["none"])
+        sig = np.nanmedian([r.innovation_sigma[0] for r in runs["none"]])
+        out += [f"### Table 2, {title}, seeds {seeds[0]}-{seeds[-1]}", "",
+                f"East innovation 1σ without robust filtering (median): {sig:.2f} m; the "
+                f"paper's §2.2 implies {PAPER_SIGMA_S_M:.2f} m.", "",
+                "Median min … max per axis (m), and the median span (lowest-highest over the "
+                "seeds) against the paper's span.", "",
+                "| method | east | north | up | span E / paper | span N / paper "
+                "| span U / paper |", "|---|---|---|---|---:|---:|---:|"]
+        for label, (lo_hi_t) in (("paper, no robust filtering", PAPER_TABLE2_NONE),
+                                 ("paper, robust", PAPER_TABLE2)):
+            cells = " | ".join(f"{lo_hi_t[a][0]:.2f} … {lo_hi_t[a][1]:.2f}" for a in AXES)
+            spans = " | ".join(f"{_span(lo_hi_t[a]):.1f}" for a in AXES)
+            out.append(f"| *{label}* | {cells} | {spans} |")
+        for method, rs in runs.items():
+            st = span_stats(rs)
+            ref = PAPER_TABLE2_NONE if method == "none" else PAPER_TABLE2
+            cells = " | ".join(f"{st[a]['min']:.2f} … {st[a]['max']:.2f}" for a in AXES)
+            ratios = " | ".join(
+                f"{st[a]['span']:.1f} ({st[a]['span_lo']:.1f}-{st[a]['span_hi']:.1f}) / "
+                f"{_span(ref[a]):.1f} = {st[a]['span'] / _span(ref[a]):.2f}" for a in AXES)
+            out.append(f"| {method} | {cells} | {ratios} |")
+        within = [
+            all(abs((float(r.pos_err[:, i].max() - r.pos_err[:, i].min()))
+                    / _span(PAPER_TABLE2_NONE[a]) - 1.0) <= SPAN_TOLERANCE
+                for i, a in enumerate(AXES))
+            for r in runs["none"]
+        ]
+        med_ok = all(abs(none[a]["span"] / _span(PAPER_TABLE2_NONE[a]) - 1.0) <= SPAN_TOLERANCE
+                     for a in AXES)
+        out += ["", f"No robust filtering against the paper's first column: median span within "
+                f"{SPAN_TOLERANCE:.0%} on every axis: {'yes' if med_ok else 'no'}; seeds with "
+                f"every axis within: {sum(within)}/{len(within)}.", ""]
+    return "\n".join(out)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=_seeds, default=_seeds("1-5"),
                         help="seeds, like 1-5 or 1,3 (default 1-5)")
@@ -155,12 +341,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="only these scenarios, repeatable (default: the four paper ones)")
     parser.add_argument("--out", type=output_file_arg, default=None,
                         help="also write the Markdown to this file")
+    parser.add_argument("--table2-calibrated", action="store_true",
+                        help="only the calibrated Table 2 reproduction (config/insgnss-table2."
+                             "toml) beside the easier paper-deviation scenario")
+    parser.add_argument("--strategy", choices=INS_STRATEGIES, default=None,
+                        help="--done-means: run this strategy instead of each preset's own")
+    parser.add_argument("--done-means", action="store_true",
+                        help="only the issue-15 checks per preset: paper-continuous against no "
+                             "robust filtering, the others against down-weighting (use 1-50)")
 
 
 def run(args: argparse.Namespace) -> int:
     paths: list[Path] = args.config or [CONFIG_DIR / "insgnss-paper.toml",
                                         CONFIG_DIR / "insgnss.toml"]
     presets = [(p.stem, load_setup(p)) for p in paths]
+    if args.strategy is not None:
+        presets = [(name, dataclasses.replace(
+            st, filter=dataclasses.replace(st.filter, strategy=args.strategy)))
+            for name, st in presets]
+    if args.done_means or args.table2_calibrated:
+        parts = []
+        if args.table2_calibrated:
+            parts.append(table2_calibrated(args.seeds))
+        if args.done_means:
+            parts += [done_means(name, setup, args.seeds) for name, setup in presets]
+        text = "\n".join(parts)
+        if args.out is not None:
+            args.out.write_text(text, encoding="utf-8")
+        sys.stdout.write(text)
+        return 0
     scenarios = tuple(args.scenario) if args.scenario else PAPER_SCENARIOS
     runs = len(presets) * len(scenarios) * len(args.seeds) + len(args.sweep_sigma_v) * len(
         args.seeds)

@@ -14,9 +14,13 @@ GNSS data with errors, and injected GNSS faults. This module does the same:
   ``paper-random`` 100 distinct random epochs, +100 m east and north, +20 m up;
   ``paper-single`` every 10 s, +100/+100/+20 m; ``paper-continuous`` every epoch 10..200 s,
   +100/+100/+20 m; ``paper-deviation`` every 10 s, +20/+20/+4 m (the paper's deviation study
-  used faults every 10 s; up keeps paper-random's 5:1 ratio); ``clean`` no faults.
+  used faults every 10 s; up keeps paper-random's 5:1 ratio; the *easier* Table 2 scenario);
+  ``table2-calibrated`` every 10 s a zero-mean draw with 1σ ``table2_fault_h_m`` /
+  ``table2_fault_v_m`` (the paper's "20 m of observation noise"; with
+  ``config/insgnss-table2.toml`` the calibrated Table 2, docs/insgnss.md); ``clean`` no faults.
 
-The same data runs through the four strategies (none, downweight, replace, three_zone) and
+The same data runs through the five strategies (none, downweight, replace, three_zone,
+fault_state) and
 the summary gives per method min/max/RMS of the E, N, U position and velocity errors
 (estimate − truth, at the 500 GNSS epochs after the update) and the zone/action counts.
 """
@@ -39,15 +43,17 @@ import numpy.typing as npt
 from fdi.errors import ConfigError
 from fdi.insgnss import (
     DEG,
+    INS_STRATEGIES,
     EarthModel,
     InsGnssFilter,
     InsGnssParams,
+    InsGnssStrategy,
     NavState,
     earth_step_quat,
     euler_to_quat,
     invert_mechanization,
 )
-from fdi.three_zone import STRATEGIES, Action, Strategy, Zone
+from fdi.three_zone import Action, Zone
 from firmware_host.commands.checks import input_file_arg, output_dir_arg
 from firmware_host.runtime.config import CONFIG_DIR as CONFIG_DIR
 from firmware_host.runtime.config import insgnss_setup, load_bridge_file
@@ -57,13 +63,15 @@ from firmware_host.runtime.config_insgnss import InsGnssSimParams as InsGnssSimP
 log = logging.getLogger(__name__)
 
 FloatArray = npt.NDArray[np.floating[Any]]
-Scenario = Literal["clean", "paper-random", "paper-single", "paper-continuous", "paper-deviation"]
+Scenario = Literal["clean", "paper-random", "paper-single", "paper-continuous", "paper-deviation",
+                   "table2-calibrated"]
 SCENARIOS: tuple[Scenario, ...] = (
     "clean",
     "paper-random",
     "paper-single",
     "paper-continuous",
     "paper-deviation",
+    "table2-calibrated",
 )
 PAPER_PRESET = CONFIG_DIR / "insgnss-paper.toml"
 
@@ -200,6 +208,11 @@ def fault_table(scenario: Scenario, sim: InsGnssSimParams,
         fault[(epochs >= 10) & (epochs <= 200)] = big
     elif scenario == "paper-deviation":
         fault[(epochs % 10 == 0) & (epochs > 0)] = small
+    elif scenario == "table2-calibrated":
+        # "20 m of observation noise" every 10 s (the paper's wording): a zero-mean draw
+        at = (epochs % 10 == 0) & (epochs > 0)
+        sig = np.array([sim.table2_fault_h_m, sim.table2_fault_h_m, sim.table2_fault_v_m])
+        fault[at] = rng.normal(0.0, 1.0, (int(at.sum()), 3)) * sig
     elif scenario != "clean":
         raise ValueError(f"unknown scenario {scenario!r}")
     return fault
@@ -258,9 +271,14 @@ class MethodRun:
     fault_onsets: int = 0  # receiver judged faulty by the jump tracker (position)
     returns: int = 0  # ... and healthy again
     readmissions: int = 0  # position components accepted again after the INS drifted
+    # strategy "fault_state": epochs at which a receiver fault was believed (after the update)
+    faulted: npt.NDArray[np.bool_] | None = None
+    # median over the epochs of the innovation's 1σ per position axis, sqrt(S_ii) (m), of the
+    # epochs whose position was used as is: what the paper's §2.2 DM statistics measure
+    innovation_sigma: tuple[float, float, float] = (math.nan, math.nan, math.nan)
 
 
-def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> MethodRun:
+def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) -> MethodRun:
     """Run the filter with ``strategy`` over ``data``."""
     prm = replace(params, strategy=strategy)
     traj = data.traj
@@ -270,6 +288,8 @@ def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> Meth
     pos_err = np.zeros((m - 1, 3))
     vel_err = np.zeros((m - 1, 3))
     flagged = np.zeros(m - 1, dtype=bool)
+    faulted = np.zeros(m - 1, dtype=bool)
+    s_pos: list[list[float]] = []
     t_list = traj.t.tolist()
     gyro, accel = data.gyro.tolist(), data.accel.tolist()
     for j in range(1, m):
@@ -277,17 +297,71 @@ def run_method(data: NavData, params: InsGnssParams, strategy: Strategy) -> Meth
             kf.propagate(t_list[k], gyro[k], accel[k])
         rep = kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
         flagged[j - 1] = any(d.zone is not Zone.NO_FAULT for d in rep.decisions[:3])
+        faulted[j - 1] = kf.bias_active
+        if kf.S.shape[0] >= 3 and all(d.action is Action.ACCEPT for d in rep.decisions[:3]):
+            s_pos.append([float(kf.S[i, i]) for i in range(3)])
         k = j * rate
         pos_err[j - 1] = kf.position - traj.p[k]
         vel_err[j - 1] = kf.velocity - traj.v[k]
     zones = {z.name.lower(): sum(g.zone_counts[z] for g in kf.gates[:3]) for z in Zone}
     actions = {a.value: sum(g.action_counts[a] for g in kf.gates[:3]) for a in Action}
     tracker = kf.position_tracker
+    if strategy == "fault_state":
+        mon = kf.fault_monitor
+        onsets, returns = mon.onsets, mon.returns
+        flagged |= faulted  # a fix taken as faulty is flagged whatever its zone
+    else:
+        onsets, returns = tracker.fault_onsets, tracker.returns
     return MethodRun(
         data.gnss_t[1:], pos_err, vel_err, zones, actions, flagged,
-        sum(g.restarts for g in kf.gates[:3]), tracker.fault_onsets, tracker.returns,
+        sum(g.restarts for g in kf.gates[:3]), onsets, returns,
         sum(g.readmissions for g in kf.gates[:3]),
+        faulted if strategy == "fault_state" else None,
+        _median_sigma(s_pos),
     )
+
+
+def _median_sigma(s_pos: list[list[float]]) -> tuple[float, float, float]:
+    if not s_pos:
+        return (math.nan, math.nan, math.nan)
+    med = np.sqrt(np.median(np.array(s_pos), axis=0))
+    return (float(med[0]), float(med[1]), float(med[2]))
+
+
+@dataclass
+class CoastRun:
+    """The INS coasting through a fault: position fixes withheld on the faulty epochs."""
+
+    pos_err: FloatArray  # estimate − truth at GNSS epochs 1.., m
+    sigma_h: FloatArray  # the filter's horizontal 1σ, sqrt(P_EE + P_NN), m
+
+
+def run_coast(data: NavData, params: InsGnssParams) -> CoastRun:
+    """The reference "INS coast": the plain filter told the faulty epochs (an oracle), which
+    withholds their position fixes (velocity still used where the preset uses it) and takes
+    every other fix as is. Its covariance bounds what any detector can do through the fault
+    once it stops using the receiver's position: the bound of docs/insgnss.md is
+    ``3 σ_h`` at the fault's end."""
+    prm = replace(params, strategy="none")
+    traj = data.traj
+    kf = InsGnssFilter(prm, float(traj.t[0]), data.init_p, data.init_v, data.init_rpy)
+    m = len(data.gnss_t)
+    rate = round(1.0 / float(traj.t[1] - traj.t[0]))
+    faulty = np.any(data.fault != 0, axis=1)
+    pos_err = np.zeros((m - 1, 3))
+    sigma_h = np.zeros(m - 1)
+    t_list = traj.t.tolist()
+    gyro, accel = data.gyro.tolist(), data.accel.tolist()
+    for j in range(1, m):
+        for k in range((j - 1) * rate + 1, j * rate + 1):
+            kf.propagate(t_list[k], gyro[k], accel[k])
+        if faulty[j]:
+            kf.coast(float(data.gnss_t[j]), data.gnss_v[j])
+        else:
+            kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
+        pos_err[j - 1] = kf.position - traj.p[j * rate]
+        sigma_h[j - 1] = math.sqrt(float(kf.P[0, 0] + kf.P[1, 1]))
+    return CoastRun(pos_err, sigma_h)
 
 
 def _stats(err: FloatArray) -> dict[str, dict[str, float]]:
@@ -341,7 +415,7 @@ def summarize(data: NavData, runs: dict[str, MethodRun], scenario: str, seed: in
 
 
 def run_scenario(setup: InsGnssSetup, scenario: Scenario, seed: int,
-                 strategies: tuple[Strategy, ...] = STRATEGIES,
+                 strategies: tuple[InsGnssStrategy, ...] = INS_STRATEGIES,
                  ) -> tuple[dict[str, Any], NavData, dict[str, MethodRun]]:
     """Generate one run and pass it through each strategy; returns (summary, data, runs)."""
     data = generate(setup, scenario, seed)

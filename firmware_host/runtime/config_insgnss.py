@@ -26,6 +26,10 @@ class InsGnssSimParams:
     deviation_h_m: float = field(default=20.0, metadata={"doc": "deviation fault, east/north"})
     deviation_v_m: float = field(default=4.0, metadata={"doc": "deviation fault, up"})
     random_faults: int = field(default=100, metadata={"ge": 0})
+    table2_fault_h_m: float = field(
+        default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the east/north fault"})
+    table2_fault_v_m: float = field(
+        default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the up fault"})
 
 
 @dataclass(frozen=True)
