@@ -24,7 +24,7 @@ from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.devtools.soak import SimDevice, rov_device, sim_opener
 from firmware_host.rov.config import SimConfig
 from firmware_host.runtime.config import BridgeConfig, RoverConfig
-from firmware_host.runtime.failsafe import SilenceWatchdog
+from firmware_host.runtime.failsafe import RoverFailsafe, SilenceWatchdog
 from firmware_host.runtime.loop import FakeClock
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -160,3 +160,17 @@ def test_rov_dropout_holds_then_neutral_then_resumes(
     msgs = [r.getMessage() for r in caplog.records]
     assert any("neutral thrust" in m for m in msgs)
     assert any("telemetry back" in m for m in msgs)
+
+
+def test_no_fix_goes_to_the_configured_gps_instance() -> None:
+    """With ``gps_id = 1`` (GPS2) the failsafe's no-fix must go to GPS2 too, not GPS1."""
+    clock = FakeClock()
+    cfg = replace(RoverConfig(), silence_s=1.0)
+    cfg = replace(cfg, output=replace(cfg.output, gps_id=1))
+    ep = FakeEndpoint(clock)
+    fs = RoverFailsafe(cfg, ep, clock=clock)
+    for k in range(30):
+        clock.now = k * 0.1
+        fs.check()
+    fixes = [a for _, kind, a in ep.calls if kind == "gps_input"]
+    assert fixes and all(f.gps_id == 1 and f.fix_type == 1 for f in fixes)

@@ -136,6 +136,7 @@ class RoverFailsafe:
             lat_deg=0.0, lon_deg=0.0, alt_m=0.0, hdop=99.99, vdop=None,
             vn_mps=None, ve_mps=None, vd_mps=None, speed_accuracy_mps=99.0,
             horiz_accuracy_m=9999.0, vert_accuracy_m=9999.0, satellites_visible=0,
+            gps_id=self.cfg.output.gps_id,  # the same GPS instance as the fixes (GPS2: 1)
         )
         self.endpoint.send_heartbeat()
         self.endpoint.send_gps_input(fix)
