@@ -13,12 +13,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from diskfull import fill, free_up, small_tmpfs  # hil_tests/diskfull.py
 
 from drivers.mavlink import io as mio
 from drivers.mavlink.framer import MavFramer
 from firmware_host.mavlink.params import ParamSpec, ParamStore
 from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router
+from tests.diskfull import fill, small_tmpfs  # one tmpfs helper for every disk-full test
 
 KEY = bytes(range(7, 39))
 
@@ -419,7 +419,7 @@ def test_full_disk_stops_the_tlog_and_param_file_never_forwarding(tmp_path: Path
             assert s["tlog_write_errors"] >= 1 and s["tlog_lost_packets"] > 0
             assert params.get("FDI_ALPHA") == pytest.approx(0.2)  # in force, not on disk
             assert s["param_write_errors"] >= 1 and s["params_unsaved"]
-            free_up(ballast)
+            ballast.unlink()
             for _ in range(20):
                 ap.send(ap.p.send_heartbeat(), _port(r, 0))
                 time.sleep(0.05)
