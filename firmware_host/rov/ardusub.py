@@ -193,12 +193,13 @@ class ArduSubRovVehicle:
     name = "rov-ardusub"
     pacing: Literal["period"] = "period"
 
-    def __init__(self, cfg: RovConfig, *, ft: bool = True, vehicle_system_id: int = 1,
+    def __init__(self, cfg: RovConfig, *, ft: bool = True, vehicle_system_id: int | None = None,
                  on_epoch: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.cfg = cfg
         self.period_s = cfg.period_s
         self.ft = ft
-        self.vehicle_system_id = vehicle_system_id
+        self.vehicle_system_id = (cfg.ardusub.vehicle_system_id if vehicle_system_id is None
+                                  else vehicle_system_id)
         self.on_epoch = on_epoch
         self.loop: RovAutopilotLoop | None = None
         self.monitor = RovFailsafeMonitor(cfg.period_s)
