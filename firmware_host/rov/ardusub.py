@@ -23,6 +23,7 @@ ArduSub's rules (docs/rov-ardusub.md; ``[rov.ardusub]``,
 
 * ArduSub takes MANUAL_CONTROL only from its ground station (``SYSID_MYGCS``): the router sends
   it from ``[mavlink] pilot_system_id``;
+* ``steer = false``: detect only (the detector runs on the pilot's yaw, nothing is sent);
 * the bridge steers (:data:`STEERING`) only while the autopilot's HEARTBEAT is fresh
   (``heartbeat_timeout_s``), says it is armed, and its mode is one of ``modes`` (modes whose
   pilot yaw is MANUAL_CONTROL ``r``: MANUAL, STABILIZE, ACRO, ALT_HOLD, POSHOLD; in AUTO, GUIDED,
@@ -84,6 +85,7 @@ STATE_TEXT: dict[str, tuple[int, str]] = {
     "mode": (mio.MAV_SEVERITY_WARNING, "FDI heading hold: mode {mode} not steered"),
     "pilot": (mio.MAV_SEVERITY_NOTICE, "FDI heading hold: pilot yaw, yielding"),
     "pilot_silent": (mio.MAV_SEVERITY_WARNING, "FDI heading hold: pilot input lost, not sending"),
+    "detect_only": (mio.MAV_SEVERITY_INFO, "FDI heading hold: detect only, not steering"),
 }
 _SUB_MODE_NAMES = {n: name for name, n in MODES["sub"].items()}
 
@@ -289,6 +291,8 @@ class RovAutopilotLoop:
     def _gate(self) -> str:
         """Why the bridge may not steer now, or :data:`STEERING`."""
         a = self.acfg
+        if not a.steer:
+            return "detect_only"
         if self._hb_age is None or self._hb_age > a.heartbeat_timeout_s + 1e-9:
             return "no_heartbeat"
         if not self.armed:
@@ -304,7 +308,7 @@ class RovAutopilotLoop:
         """True while the pilot steers the yaw (takeover, then ``pilot_release_s`` centred)."""
         r = self._pilot_axes[3] if self._pilot_axes is not None else 0
         if abs(r) > self.acfg.yaw_dead_band:
-            if not self._pilot_has:
+            if not self._pilot_has and self.acfg.steer:
                 self.takeovers += 1
                 log.warning("pilot yaw %d above the dead band %d: the pilot steers", r,
                             self.acfg.yaw_dead_band)

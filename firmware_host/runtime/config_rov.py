@@ -48,6 +48,8 @@ class ArduSubConfig:
     is ``[mavlink] pilot_system_id`` (ArduSub's ``SYSID_MYGCS``)."""
 
     vehicle_system_id: int = field(default=1, metadata={"ge": 1, "le": 255})
+    steer: bool = field(
+        default=True, metadata={"doc": "false: detect only, never send MANUAL_CONTROL"})
     modes: tuple[str, ...] = field(
         default=ARDUSUB_YAW_MODES, metadata={"doc": "modes the bridge may steer in"})
     yaw_dead_band: int = field(
