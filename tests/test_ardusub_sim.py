@@ -169,9 +169,12 @@ def test_unplugged_5_s_hold_then_neutral_then_recovery(cfg: RovConfig) -> None:
     assert actions[:n_hold] == ["hold"] * n_hold and 4 <= n_hold <= 6  # dropout_hold_s = 1 s
     assert set(actions[n_hold:]) == {"neutral"}
     sent = [r["r_sent"] for r in cut if r["r_sent"] is not None]
-    assert sent[-1] == 0  # neutral yaw while it still sends; then the heartbeat times out
+    assert len(set(sent[:n_hold])) == 1 and sent[n_hold] == 0 and set(sent[n_hold:]) == {0}
+    assert 14 <= len(sent) <= 16  # heartbeat_timeout_s = 3 s: then not sending at all
     assert cut[-1]["ardusub"] == "no_heartbeat"
-    assert back[2]["action"] == "control" and back[-1]["ardusub"] == "steer"
+    assert back[0]["action"] == "control"  # the first ATTITUDE: the hold resumes
+    steer_again = next(i for i, r in enumerate(back) if r["ardusub"] == "steer")
+    assert steer_again <= 6  # with the next 1 Hz HEARTBEAT
     assert max(abs(err(h)) for h in b.true[-25:]) < BOUND_DEG  # held again
     said = " | ".join(b.texts)
     for text in ("holding last command", "neutral thrust", "telemetry back",

@@ -12,8 +12,9 @@ a real pymavlink endpoint (``udpout:127.0.0.1:PORT``, :mod:`drivers.mavlink.io`)
 * the yaw command is ``r / 10`` % of the plant's yaw thrust while armed in a mode that takes the
   pilot's yaw (MANUAL, STABILIZE, ACRO, ALT_HOLD, POSHOLD); 0 otherwise;
 * the pilot-input failsafe (``FS_PILOT_INPUT``): no accepted MANUAL_CONTROL for
-  ``pilot_timeout_s`` (``FS_PILOT_TIMEOUT``, 3 s) neutralises the input (``failsafes`` counts
-  the episodes), as ArduSub does with ``FS_PILOT_INPUT = 1`` (neutral).
+  ``pilot_timeout_s`` (``FS_PILOT_TIMEOUT``, 3 s) neutralises the controls (``failsafes``
+  counts the episodes), as ArduSub's ``failsafe_pilot_input_check`` does for any enabled value
+  (``FS_PILOT_INPUT = 2`` also disarms; not simulated).
 
 :meth:`ArduSubSim.step` advances ``dt`` of simulated time: tests drive it in lockstep with the
 bridge (no wall clock), :meth:`ArduSubSim.serve` runs it in real time in a thread.
