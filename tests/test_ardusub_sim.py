@@ -189,12 +189,15 @@ def test_pilot_yaw_takes_over_and_hands_back(cfg: RovConfig) -> None:
             b.period((300, -50, 600, 0))  # forward, a little left, a little up; yaw centred
         axes = b.sim.last_axes
         sent_before = b.loop.sent
+        # While the bridge steers, the pilot's own frames are not forwarded (one stream).
+        pilot_forwarded = b.sim.counters.accepted - sent_before
         turn = [b.period((300, -50, 600, 600)) for _ in range(3 * 5)]
         sent_during = b.loop.sent - sent_before
         centred = [b.period((300, -50, 600, 0)) for _ in range(4 * 5)]
     finally:
         summary = b.close()
     assert axes is not None and axes[:3] == (300, -50, 600)  # the pilot's axes, unchanged
+    assert pilot_forwarded == 1, pilot_forwarded  # the first, before the first step decided
     assert all(r["ardusub"] == "pilot" for r in turn) and sent_during == 0
     assert b.sim.last_axes is not None
     assert any(r == 600 for _, r in b.sim.counters.r_log)  # the pilot's yaw reached ArduSub

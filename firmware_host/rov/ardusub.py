@@ -325,7 +325,8 @@ class RovAutopilotLoop:
             return
         severity, text = STATE_TEXT[state]
         if state == "mode":
-            text = text.format(mode=_SUB_MODE_NAMES.get(self.mode or -1, str(self.mode)))
+            mode = self.mode if self.mode is not None else -1
+            text = text.format(mode=_SUB_MODE_NAMES.get(mode, str(mode)))
         log.info("ardusub: %s", text)
         self.output.send_statustext(severity, text)
         self.state = state
