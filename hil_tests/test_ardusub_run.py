@@ -46,6 +46,8 @@ def test_run_the_example_against_the_simulated_ardusub(
     text = text.replace("udpin:127.0.0.1:14555", f"udpin:127.0.0.1:{ap_port}")
     text = text.replace("udpin:127.0.0.1:14550", f"udpin:127.0.0.1:{gcs_port}")
     text = text.replace("setpoint_deg = 150.0", "setpoint_deg = 110.0")  # where the sim starts
+    assert 'tlog_dir = "logs/tlog"' in text
+    text = text.replace('tlog_dir = "logs/tlog"', f'tlog_dir = "{tmp_path / "tlog"}"')
     cfg = tmp_path / "rov-ardusub.toml"
     cfg.write_text(text)
     sim = ArduSubSim(f"udpout:127.0.0.1:{ap_port}", SimConfig(seed=3))
@@ -67,4 +69,5 @@ def test_run_the_example_against_the_simulated_ardusub(
     records = [json.loads(line) for line in (out / "epochs.jsonl").read_text().splitlines()]
     assert len(records) >= 15 and records[-1]["ardusub"] == "steer"
     assert sim.counters.accepted >= 10 and sim.counters.refused == 0
+    assert any((tmp_path / "tlog").glob("*.tlog"))  # the dive was recorded
     assert abs((sim.plant.heading_true - 110.0 + 180.0) % 360.0 - 180.0) < 5.0
