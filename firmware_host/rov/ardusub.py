@@ -238,8 +238,8 @@ class PilotInput:
 
     def _on_manual_control(self, frame: MavFrame) -> bool:
         msg = mio.decode_packet(frame.raw)
-        if msg is None or int(msg.target) not in (0, self.vehicle):
-            return True  # not ours to judge: forwarded as any other packet
+        if msg is None or int(msg.target) != self.vehicle:
+            return True  # not for this vehicle (ArduSub ignores it too): forwarded as it is
         axes = (int(msg.x), int(msg.y), int(msg.z), int(msg.r), int(msg.buttons))
         with self._lock:
             self._latest = axes
