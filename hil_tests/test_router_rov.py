@@ -77,6 +77,11 @@ def test_heading_hold_through_an_autopilot_with_a_compass_drift() -> None:
                 plant.advance(controls[-1].r / 10.0, cfg.period_s)
             tel = plant.measure()
             truth.append(plant.heading_true)
+            if k % 5 == 0:  # 1 Hz, armed in ALT_HOLD (2): the loop steers only then
+                beats = loop.autopilot.received + 1
+                ap.send_vehicle_heartbeat(mio.MAV_TYPE_SUBMARINE,
+                                          mio.MAV_MODE_FLAG_SAFETY_ARMED, 2)
+                _wait(lambda b=beats: loop.autopilot.received >= b, "the HEARTBEAT")  # type: ignore[misc]
             if tel is not None:
                 expected = loop.heading.received + 1
                 ap.send_attitude(k * 200, 0.0, 0.0, math.radians(tel.heading_deg))

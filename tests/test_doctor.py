@@ -139,7 +139,8 @@ def test_doctor_and_run_accept_the_same_files(
     assert doctor_accepts == run_accepts, (rep.problems, err)
     if "mavlink" in read_toml(path):
         assert routed == [[str(path)]]
-        assert any(o.startswith("config:") and "(mavlink; tables rover, mavlink)" in o
+        vehicle = "rov" if "rov" in read_toml(path) else "rover"
+        assert any(o.startswith("config:") and f"(mavlink; tables {vehicle}, mavlink)" in o
                    for o in rep.ok)
         assert any("MAVLink autopilot" in line for line in rep.ok + rep.problems)
     assert run_accepts == (not path.stem.startswith("insgnss"))  # an INS/GNSS file: sim only

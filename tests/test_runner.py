@@ -288,6 +288,9 @@ def test_ardusub_rov_on_the_runner_through_a_router() -> None:
     def autopilot() -> None:  # ATTITUDE at 50 Hz, heading 120 deg; collect MANUAL_CONTROL
         k = 0
         while not halt.is_set():
+            if k % 10 == 0:  # armed in ALT_HOLD (2): the bridge steers only then
+                ap.send_vehicle_heartbeat(mio.MAV_TYPE_SUBMARINE,
+                                          mio.MAV_MODE_FLAG_SAFETY_ARMED, 2)
             ap.send_attitude(k * 20, 0.0, 0.0, math.radians(120.0))
             k += 1
             msg = ap.recv(0.02)

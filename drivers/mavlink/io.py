@@ -58,6 +58,9 @@ MAV_TYPE_GCS = mavlink2.MAV_TYPE_GCS
 MAV_TYPE_ONBOARD_CONTROLLER = mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
 MAV_AUTOPILOT_INVALID = mavlink2.MAV_AUTOPILOT_INVALID
 MAV_STATE_ACTIVE = mavlink2.MAV_STATE_ACTIVE
+MAV_TYPE_SUBMARINE = mavlink2.MAV_TYPE_SUBMARINE
+MAV_AUTOPILOT_ARDUPILOTMEGA = mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA
+MAV_MODE_FLAG_SAFETY_ARMED = mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
 MAV_CMD_DO_SET_MODE = mavlink2.MAV_CMD_DO_SET_MODE
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 MAV_PARAM_TYPE_REAL32 = mavlink2.MAV_PARAM_TYPE_REAL32
@@ -277,6 +280,13 @@ class _Encoders:
         """MAV_TYPE_ONBOARD_CONTROLLER / MAV_AUTOPILOT_INVALID: a companion, not a vehicle."""
         msg = self._mav.heartbeat_encode(
             MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE
+        )
+        return self._emit(msg)
+
+    def send_vehicle_heartbeat(self, mav_type: int, base_mode: int, custom_mode: int) -> bytes:
+        """HEARTBEAT of a vehicle (a simulated autopilot: type, armed flag, flight mode)."""
+        msg = self._mav.heartbeat_encode(
+            mav_type, MAV_AUTOPILOT_ARDUPILOTMEGA, base_mode, custom_mode, MAV_STATE_ACTIVE
         )
         return self._emit(msg)
 

@@ -304,7 +304,9 @@ def diagnose(
             rep.warnings.append("no output configured (rover.output nmea_url / mavlink_url): "
                                 "corrected data goes nowhere")
     if bf.rov is not None:
-        if mode == "mavlink":
+        if bf.rov.heading_source == "mavlink":
+            rep.ok.append("rov: heading from the autopilot (ATTITUDE through [mavlink])")
+        elif mode == "mavlink":
             rep.warnings.append("rov: `run` on a file with [mavlink] runs the router and the "
                                 "rover only; the [rov] table is not used")
         else:

@@ -13,6 +13,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.vehicle import OutlandRovVehicle
 from firmware_host.rover.vehicle import RoverVehicle
 from firmware_host.runtime.config import BridgeFile, bridge_config, rov_config, vehicle_of
@@ -29,12 +30,16 @@ def vehicle_from_file(
     record: Path | None = None, note: str = "fdi-bridge run",
 ) -> tuple[Vehicle, FlightRecorder | None]:
     """The vehicle the file describes (``[rover]``: the rover; ``[rov]``: the ROV on the
-    Outland link) and its flight recorder (``record`` overrides the ``[recorder]`` directory)."""
+    Outland link, or through an ArduSub autopilot with ``heading_source = "mavlink"`` and a
+    ``[mavlink]`` table, checked at load) and its flight recorder (``record`` overrides the
+    ``[recorder]`` directory)."""
     recorder = make_recorder(bf.recorder, record, note)
     if vehicle_of(bf) == "rover":
         rover = RoverVehicle(bridge_config(bf), nmea_url=nmea_url, mavlink_url=mavlink_url)
         return rover, recorder
     rcfg, base = rov_config(bf)
+    if rcfg.heading_source == "mavlink":
+        return ArduSubRovVehicle(rcfg), recorder  # MANUAL_CONTROL from [mavlink] pilot_system_id
     return OutlandRovVehicle(rcfg, base), recorder
 
 

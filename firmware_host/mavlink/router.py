@@ -517,6 +517,7 @@ class Router:
         self._texts: deque[tuple[int, str]] = deque(maxlen=64)
         self._values: dict[str, float] = {}
         self._listeners: dict[int, list[Callable[[MavFrame], None]]] = {}
+        self._intercepts: dict[int, list[Callable[[MavFrame], bool]]] = {}
         self._t0 = clock()
         self._next_hb = self._t0
         self._next_stats = self._t0
@@ -589,6 +590,12 @@ class Router:
         ``"ATTITUDE"``) that arrives from the autopilot. Register before :meth:`start`; the
         callback must be quick (it runs in the forwarding path) and must not raise."""
         self._listeners.setdefault(mio.message_id(message), []).append(callback)
+
+    def intercept(self, message: str, callback: Callable[[MavFrame], bool]) -> None:
+        """Hand each ``message`` from a ground station to ``callback`` (router thread) before
+        forwarding it; it is forwarded only when every callback returns True (the ArduSub ROV
+        merges the pilot's MANUAL_CONTROL with its yaw). Register before :meth:`start`."""
+        self._intercepts.setdefault(mio.message_id(message), []).append(callback)
 
     def set_named_value(self, name: str, value: float) -> None:
         """Latest value of a detector statistic, sent as NAMED_VALUE_FLOAT at ``stats_hz``."""
@@ -792,6 +799,10 @@ class Router:
         raw = frame.raw
         if self.tlog is not None:
             self.tlog.write(raw)
+        taps = self._intercepts.get(msgid) if src is not self.autopilot else None
+        if taps and not all([cb(frame) for cb in taps]):  # every tap sees it
+            self.stats.for_bridge += 1
+            return
         target = frame_target(frame, self._offsets)
         sent = False
         now = 0.0

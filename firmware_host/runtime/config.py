@@ -51,7 +51,7 @@ from fdi.rover import RoverDetectorParams
 from fdi.three_zone import ThreeZoneParams
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.config_mavlink import MavlinkConfig
-from firmware_host.runtime.config_rov import RovConfig
+from firmware_host.runtime.config_rov import RovConfig, heading_source_errors
 from firmware_host.runtime.recorder import RecorderConfig
 
 log = logging.getLogger("fdi_bridge.config")
@@ -271,7 +271,8 @@ def parse_bridge_file(table: dict[str, Any], file: str, path: Path | None = None
     """A :class:`BridgeFile` from a TOML table already read (``file`` names it in errors)."""
     bf = load_dataclass(BridgeFile, _migrate(table, file), file)
     bf = dataclasses.replace(bf, path=path)
-    raise_all(_derived_errors(bf, file))
+    raise_all(_derived_errors(bf, file) + heading_source_errors(bf.rov, bf.mavlink is not None,
+                                                                file))
     if bf.rov is not None:
         proto = resolve_protocol(bf.rov.link.protocol, bf.base_dir if path else None)
         load_protocol(proto)  # a protocol that does not load fails now, not at the first frame

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from drivers.transport import SerialSettings
+from fdi.errors import ConfigError
 from fdi.heading_ft import FtConfig
 from fdi.lms_fir import DetectorConfig
 from fdi.pid import PidConfig
@@ -32,6 +33,40 @@ class LinkConfig:
 
 
 Plant = Literal["nomoto", "nonlinear"]
+HeadingSource = Literal["outland", "mavlink"]
+
+# ArduSub's flight modes whose pilot yaw comes from MANUAL_CONTROL ``r`` (ArduSub's mode
+# handlers read ``channel_yaw``): the bridge may steer in these; in AUTO, GUIDED, CIRCLE and
+# SURFACE the autopilot owns the heading, and the bridge refuses to command.
+ARDUSUB_YAW_MODES = ("MANUAL", "STABILIZE", "ACRO", "ALT_HOLD", "POSHOLD")
+
+
+@dataclass(frozen=True)
+class ArduSubConfig:
+    """The ROV through an ArduSub autopilot (``[rov.ardusub]``, used when
+    ``heading_source = "mavlink"``; docs/rov-ardusub.md). The GCS system id the commands carry
+    is ``[mavlink] pilot_system_id`` (ArduSub's ``SYSID_MYGCS``)."""
+
+    vehicle_system_id: int = field(default=1, metadata={"ge": 1, "le": 255})
+    steer: bool = field(
+        default=True, metadata={"doc": "false: detect only, never send MANUAL_CONTROL"})
+    modes: tuple[str, ...] = field(
+        default=ARDUSUB_YAW_MODES, metadata={"doc": "modes the bridge may steer in"})
+    yaw_dead_band: int = field(
+        default=100, metadata={"ge": 0, "le": 1000, "doc": "pilot |r| above: the pilot steers"})
+    pilot_release_s: float = field(
+        default=2.0, metadata={"ge": 0.0, "doc": "pilot yaw centred this long: hand back"})
+    pilot_timeout_s: float = field(
+        default=1.0, metadata={"gt": 0.0, "lt": 3.0,
+                               "doc": "pilot MANUAL_CONTROL silent this long: stop sending"})
+    heartbeat_timeout_s: float = field(
+        default=3.0, metadata={"gt": 0.0, "doc": "autopilot HEARTBEAT older: not commanding"})
+
+    def __post_init__(self) -> None:
+        bad = [m for m in self.modes if m not in ARDUSUB_YAW_MODES]
+        if bad:
+            raise ValueError(f"modes: {', '.join(bad)} do not take MANUAL_CONTROL yaw "
+                             f"(one of {', '.join(ARDUSUB_YAW_MODES)})")
 
 
 @dataclass(frozen=True)
@@ -78,6 +113,9 @@ class RovConfig:
     """
 
     period_s: float = field(default=0.2, metadata={"gt": 0.0})
+    heading_source: HeadingSource = field(
+        default="outland",
+        metadata={"doc": "outland: the Outland link; mavlink: an ArduSub autopilot ([mavlink])"})
     setpoint_deg: float = field(default=150.0, metadata={"ge": 0.0, "lt": 360.0})
     surge_pct: float = field(default=0.0, metadata={"ge": -100.0, "le": 100.0})
     dropout_hold_s: float = field(default=1.0, metadata={"ge": 0.0})
@@ -86,4 +124,14 @@ class RovConfig:
     pid: PidConfig = field(default_factory=PidConfig)
     link: LinkConfig = field(default_factory=LinkConfig)
     sim: SimConfig = field(default_factory=SimConfig)
+    ardusub: ArduSubConfig = field(default_factory=ArduSubConfig)
     recorder: RecorderConfig = field(default_factory=RecorderConfig, metadata={"toml": False})
+
+
+def heading_source_errors(rov: RovConfig | None, has_mavlink: bool, file: str) -> list[ConfigError]:
+    """``heading_source = "mavlink"`` needs the router (a ``[mavlink]`` table) for its heading."""
+    if rov is not None and rov.heading_source == "mavlink" and not has_mavlink:
+        return [ConfigError(file, "rov.heading_source", 'a [mavlink] table with "mavlink" (the '
+                            "heading comes from the autopilot's ATTITUDE through the router)",
+                            '"mavlink" without [mavlink]')]
+    return []
