@@ -30,7 +30,8 @@ def vehicle_from_file(
     record: Path | None = None, note: str = "fdi-bridge run",
 ) -> tuple[Vehicle, FlightRecorder | None]:
     """The vehicle the file describes (``[rover]``: the rover; ``[rover]`` and ``[insgnss]``:
-    the live INS/GNSS; ``[rov]``: the ROV on the Outland link) and its flight recorder (``record`` overrides the ``[recorder]`` directory)."""
+    the live INS/GNSS; ``[rov]``: the ROV on the Outland link) and its flight recorder
+    (``record`` overrides the ``[recorder]`` directory)."""
     recorder = make_recorder(bf.recorder, record, note)
     if vehicle_of(bf) == "rover" and bf.insgnss is not None:  # [rover] + [insgnss]: live INS
         return InsGnssVehicle(bridge_config(bf), bf.insgnss, nmea_url=nmea_url,

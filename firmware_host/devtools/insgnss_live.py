@@ -17,19 +17,29 @@ vehicle is paced by its data, its IMU ordering by the samples' own stamps).
 from __future__ import annotations
 
 import calendar
+import json
 import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
 from drivers.mavlink.imu import MG_TO_M_S2, MRAD_TO_RAD
 from drivers.mavlink.io import MavPacker
+from drivers.ptypair import PtyPair
 from fdi.geodesy import LocalFrame
+from fdi.insgnss import InsGnssFilter, InsGnssParams, InsGnssStrategy
 from firmware_host.devtools.insgnss_sim import NavData
+from firmware_host.insgnss.vehicle import InsGnssVehicle
+from firmware_host.runtime.config import BridgeConfig
+from firmware_host.runtime.config_insgnss import InsGnssSetup
+from firmware_host.runtime.runner import Runner
 
 UTC0 = calendar.timegm((2026, 6, 1, 12, 0, 0))  # trajectory t = 0
 DATE0 = (2026, 6, 1)
@@ -148,3 +158,123 @@ def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer],
             if bufs[link]:
                 writers[link](bytes(bufs[link]))
     return i
+
+
+# ---------------------------------------------------------------- a whole live session
+
+
+@dataclass
+class LiveRun:
+    """One live session: the vehicle's summary and records, and its position errors at the
+    epochs the INS produced (``epochs``: GNSS epoch numbers)."""
+
+    summary: dict[str, Any]
+    records: list[dict[str, Any]]
+    epochs: npt.NDArray[np.int_]
+    pos_err: npt.NDArray[np.float64]
+    wall_s: float
+
+
+def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
+             imu_message: str = "HIGHRES_IMU", decimate: int = 1,
+             impair: LinkImpairment | None = None, seed: int = 0,
+             speed: float = 50.0) -> LiveRun:
+    """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
+    :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
+    ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``."""
+    lat = setup.filter.latitude_deg
+    events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
+                          impair=impair, seed=seed)
+    base = BridgeConfig()
+    rc = base.rover
+    rover = replace(rc, port=replace(rc.port, timeout_s=0.02),
+                    output=replace(rc.output, nmea_url="", mavlink_url=""))
+    with PtyPair() as gps, PtyPair() as imu:
+        cfg = replace(base, rover=replace(rover, port=replace(rover.port, url=gps.url)))
+        live = replace(setup, live=replace(setup.live, imu_url=imu.url,
+                                           imu_message=imu_message))  # type: ignore[arg-type]
+        vehicle = InsGnssVehicle(cfg, live)
+        done = threading.Event()
+        stop = threading.Event()
+
+        def feed() -> None:
+            time.sleep(0.2)  # the runner opens the ports first
+            try:
+                play(events, (imu.write, gps.write), speed=speed, stop=stop)
+            finally:
+                done.set()
+
+        ended: list[float] = []
+
+        def until() -> bool:
+            if not done.is_set():
+                return False
+            if not ended:
+                ended.append(time.monotonic())
+            return time.monotonic() - ended[0] > 0.5
+
+        thread = threading.Thread(target=feed, daemon=True)
+        t0 = time.monotonic()
+        thread.start()
+        try:
+            summary = Runner(vehicle, out_dir=out_dir, handle_signals=False).run(until=until)
+        finally:
+            stop.set()
+            thread.join(5.0)
+        wall = time.monotonic() - t0
+    records = [json.loads(line) for line in
+               (out_dir / "epochs.jsonl").read_text(encoding="utf-8").splitlines()]
+    epochs, errs = live_errors(records, data, lat, setup.sim.imu_rate_hz)
+    return LiveRun(summary, records, epochs, errs, wall)
+
+
+def live_errors(records: list[dict[str, Any]], data: NavData, latitude_deg: float,
+                rate_hz: int) -> tuple[npt.NDArray[np.int_], npt.NDArray[np.float64]]:
+    """Position error (E, N, U, m, against the truth in the simulator's frame) of every epoch
+    the INS produced."""
+    frame = frame_of(latitude_deg)
+    t_day0 = (UTC0 % 86400.0)
+    js: list[int] = []
+    errs: list[tuple[float, float, float]] = []
+    for r in records:
+        ins = r.get("ins")
+        if r.get("mode") != "ins" or not isinstance(ins, dict) or "lla" not in ins:
+            continue
+        j = round(float(r["t"]) - t_day0)
+        e, n, u = frame.to_enu(*ins["lla"])
+        p = data.traj.p[j * rate_hz]
+        js.append(j)
+        errs.append((e - float(p[0]), n - float(p[1]), u - float(p[2])))
+    return np.array(js, dtype=int), np.array(errs, dtype=float).reshape(-1, 3)
+
+
+def offline_aligned(data: NavData, params: InsGnssParams, j0: int,
+                    strategy: InsGnssStrategy | None = None) -> npt.NDArray[np.float64]:
+    """The offline filter on the same data, aligned as the live vehicle aligns (at GNSS epoch
+    ``j0``: the fix's position, the horizontal GNSS velocity along its course, level from the
+    mean specific force over the last second, heading from the course), position updates only;
+    its position errors at epochs ``j0 + 1 ..``."""
+    prm = replace(params, use_velocity=False, strategy=strategy or params.strategy)
+    rate = round(1.0 / float(data.traj.t[1] - data.traj.t[0]))
+    k0 = j0 * rate
+    f = data.accel[k0 - rate + 1:k0 + 1].mean(axis=0)
+    roll = math.atan2(-f[1], -f[2])
+    pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
+    v = data.gnss_v[j0]
+    yaw = math.atan2(float(v[0]), float(v[1]))
+    kf = InsGnssFilter(prm, float(data.gnss_t[j0]), data.gnss_p[j0],
+                       (float(v[0]), float(v[1]), 0.0), (roll, pitch, yaw))
+    t = data.traj.t.tolist()
+    gyro, accel = data.gyro.tolist(), data.accel.tolist()
+    out = []
+    for j in range(j0 + 1, len(data.gnss_t)):
+        for k in range((j - 1) * rate + 1, j * rate + 1):
+            kf.propagate(t[k], gyro[k], accel[k])
+        kf.update(float(data.gnss_t[j]), data.gnss_p[j])
+        out.append(kf.position - data.traj.p[j * rate])
+    return np.array(out)
+
+
+def rms(err: npt.NDArray[np.float64]) -> float:
+    """The 3D position RMS (m)."""
+    return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))

@@ -456,7 +456,7 @@ class InsGnssVehicle:
         enu = self._fix_enu(out)
         if enu is None:
             return "no 3D fix"
-        prev, self._prev_fix = self._prev_fix, (out.t_s or 0.0, enu, self._vel_en(out))
+        prev = self._prev_fix
         if prev is None:
             return "no previous fix"
         # The fix the filter starts from must agree with the previous one and the receiver's
@@ -505,6 +505,8 @@ class InsGnssVehicle:
 
     def _emit_rover(self, out: EpochOutcome, t_g: float | None, why: str) -> None:
         self.modes["rover"] += 1
+        enu = self._fix_enu(out)  # every epoch before the INS is the "previous fix" of the next
+        self._prev_fix = None if enu is None else (out.t_s or 0.0, enu, self._vel_en(out))
         record = self._base_record(out, t_g, "rover")
         record["why"] = why
         self.write_record(record)
