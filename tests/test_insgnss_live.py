@@ -70,16 +70,18 @@ def test_live_vehicle_is_the_offline_filter(scenario: sim.Scenario, seed: int,
 
 
 def test_a_telemetry_link_changes_little(tmp_path: Path) -> None:
-    """10 % of the IMU packets dropped, 1 % duplicated, bursts held 200 ms every 2 s: the
-    samples are put in order by their own stamps; the RMS moves by less than 20 %."""
+    """10 % of the IMU packets dropped, 1 % duplicated, bursts held 200 ms every 2 s and let go
+    in random order: the samples are put in order by their own stamps; the RMS moves by less
+    than 20 %."""
     setup = _setup()
     data = sim.generate(setup, "paper-single", 1)
     clean = run_live(setup, data, tmp_path / "clean", seed=1)
     bad = run_live(setup, data, tmp_path / "bad", seed=1,
                    impair=LinkImpairment(drop=0.1, duplicate=0.01, burst_every_s=2.0,
-                                         burst_s=0.2))
+                                         burst_s=0.2, shuffle_bursts=True))
     imu = bad.summary["ins"]["imu"]
     assert imu["duplicates"] > 0
+    assert imu["out_of_order"] > 0
     assert imu["integrated"] < clean.summary["ins"]["imu"]["integrated"] * 0.95
     assert bad.summary["ins"]["resets"] == {}
     assert list(bad.epochs) == list(clean.epochs)

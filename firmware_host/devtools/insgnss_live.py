@@ -56,6 +56,7 @@ class LinkImpairment:
     duplicate: float = 0.0
     burst_every_s: float = 0.0  # 0: no bursts
     burst_s: float = 0.2
+    shuffle_bursts: bool = False  # a held burst goes out in random order (a UDP link)
 
 
 def frame_of(latitude_deg: float) -> LocalFrame:
@@ -120,6 +121,8 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
             phase = tk % imp.burst_every_s
             if phase < imp.burst_s:
                 when = tk - phase + imp.burst_s  # held, then out together
+                if imp.shuffle_bursts:
+                    when += float(rng.random()) * 1e-3
         add(when, 0, raw)
         if imp.duplicate and rng.random() < imp.duplicate:
             add(when, 0, raw)
