@@ -9,8 +9,10 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from drivers.mavlink.io import MavEndpoint
 from firmware_host.commands.launch import vehicle_from_file
 from firmware_host.devtools import insgnss_sim as sim
 from firmware_host.devtools.insgnss_live import (
@@ -136,3 +138,35 @@ def test_the_records_depend_on_the_data_not_on_arrival(tmp_path: Path) -> None:
     a = (tmp_path / "a" / "epochs.jsonl").read_bytes()
     assert a.count(b"\n") == 40
     assert a == (tmp_path / "b" / "epochs.jsonl").read_bytes()
+
+
+def test_gps_input_carries_the_filter_covariance(tmp_path: Path) -> None:
+    """GPS_INPUT over a real UDP socket on 127.0.0.1: one per epoch, the INS epochs with the
+    accuracies of the filter's covariance, larger on the epochs whose fix was replaced."""
+    setup = replace(sim.load_setup(None), sim=replace(_setup().sim, epochs=40))
+    data = sim.generate(setup, "paper-single", 1)
+    with MavEndpoint("udpin:127.0.0.1:0") as rx:
+        addr = rx.local_address
+        assert addr is not None
+        lr = run_live(setup, data, tmp_path, seed=1, mavlink_url=f"udpout:127.0.0.1:{addr[1]}")
+        got = []
+        while (msg := rx.recv(timeout_s=0.2)) is not None:
+            if msg.get_type() == "GPS_INPUT":
+                got.append(msg)
+    ins = [r for r in lr.records if r["mode"] == "ins"]
+    sent = lr.records[:len(got)]
+    assert len(got) >= 38  # the last epoch(s) at shutdown are recorded, not sent
+    acc = {round(float(m.time_week_ms)): m for m in got}
+    assert len(acc) == len(got)
+    pairs = [(r, g) for r, g in zip(sent, got, strict=True) if r["mode"] == "ins"]
+    assert len(pairs) >= len(ins) - 2
+    for r, g in pairs:
+        assert g.horiz_accuracy == pytest.approx(r["ins"]["acc_h_m"], rel=1e-5)
+        assert g.vert_accuracy == pytest.approx(r["ins"]["acc_v_m"], rel=1e-5)
+        la, lo, _ = r["ins"]["lla"]
+        assert g.lat == round(la * 1e7) and g.lon == round(lo * 1e7)
+    replaced = [g.horiz_accuracy for r, g in pairs if "replace" in r["ins"]["actions"][:2]]
+    accepted = [g.horiz_accuracy for r, g in pairs if r["ins"]["actions"][:2] == ["accept"] * 2]
+    assert replaced and accepted
+    # sqrt(P⁻ + R) against sqrt(P⁺) (the first epochs after the alignment have a large P⁺)
+    assert min(replaced) > 2.0 * float(np.median(accepted))

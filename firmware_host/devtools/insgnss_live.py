@@ -181,17 +181,18 @@ class LiveRun:
 def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              imu_message: str = "HIGHRES_IMU", decimate: int = 1,
              impair: LinkImpairment | None = None, seed: int = 0,
-             speed: float = 50.0) -> LiveRun:
+             speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "") -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
-    ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``."""
+    ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
+    the vehicle's GPS_INPUT and corrected NMEA outputs."""
     lat = setup.filter.latitude_deg
     events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
                           impair=impair, seed=seed)
     base = BridgeConfig()
     rc = base.rover
     rover = replace(rc, port=replace(rc.port, timeout_s=0.02),
-                    output=replace(rc.output, nmea_url="", mavlink_url=""))
+                    output=replace(rc.output, nmea_url=nmea_url, mavlink_url=mavlink_url))
     with PtyPair() as gps, PtyPair() as imu:
         cfg = replace(base, rover=replace(rover, port=replace(rover.port, url=gps.url)))
         live = replace(setup, live=replace(setup.live, imu_url=imu.url,

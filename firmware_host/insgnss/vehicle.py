@@ -34,9 +34,11 @@ filter runs as the preset with ``use_velocity = false``.
 
 Outputs, per epoch: the corrected NMEA (GGA/RMC/VTG of the filter's position; quality 6 when
 the fix was not used as is) and GPS_INPUT with the horizontal/vertical accuracies from the
-filter's covariance (a replaced epoch's position is the INS prediction, whose covariance did
-not shrink: its accuracy is larger by construction; with ``fault_state`` the bias covariance
-is added while a fault is believed). One record per epoch in ``epochs.jsonl``.
+filter's covariance ``sqrt(P_ii)`` (with ``fault_state`` the bias covariance added while a
+fault is believed); an epoch whose fix was not used as is (replaced, down-weighted, rejected,
+or a fault believed) is raised to the innovation's scale ``sqrt(P⁻_ii + R_ii)``: the output is
+then mostly the INS prediction and the receiver disagreed with it. One record per epoch in
+``epochs.jsonl``.
 """
 
 from __future__ import annotations
@@ -175,6 +177,7 @@ class InsGnssVehicle:
         self.gate_actions: Counter[str] = Counter()
         self.sending = True
         self._idle_s = 0.0
+        self._prior_var = np.zeros(3)
 
     # ------------------------------------------------------------------ what it needs
 
@@ -403,6 +406,7 @@ class InsGnssVehicle:
                 kf.coast(t_g)
                 self._emit_ins(out, t_g, None)
                 return
+            self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
             rep = kf.update(t_g, enu)
         except EstimatorError as err:
             self.resets[str(err).split(" ")[0] or "error"] += 1
@@ -521,10 +525,17 @@ class InsGnssVehicle:
         P = kf.P
         sig = np.sqrt(np.maximum(np.diag(P)[:9], 0.0))
         bias_var = np.diag(kf._Pbb) if kf.bias_active else np.zeros(3)
-        acc_h = math.sqrt(max(P[0, 0] + bias_var[0], P[1, 1] + bias_var[1]))
-        acc_v = math.sqrt(P[2, 2] + bias_var[2])
         used = rep is not None and all(d.action is Action.ACCEPT for d in rep.decisions[:3]) \
             and not kf.bias_active
+        var = np.diag(P)[:3] + bias_var
+        if not used:
+            # the fix was not used as is: the output is (mostly) the INS prediction, and the
+            # receiver disagreed with it; say so with the innovation's scale, P⁻_ii + R_ii
+            prm = self.params
+            r = np.array([prm.gnss_sigma_h_m**2, prm.gnss_sigma_h_m**2, prm.gnss_sigma_v_m**2])
+            var = np.maximum(var, self._prior_var + r)
+        acc_h = math.sqrt(max(float(var[0]), float(var[1])))
+        acc_v = math.sqrt(float(var[2]))
         ins: dict[str, Any] = {
             "pos": [_r(x, 3) for x in p], "vel": [_r(x, 3) for x in kf.velocity],
             "rpy_deg": [_r(x / DEG, 3) for x in kf.attitude_rpy],
