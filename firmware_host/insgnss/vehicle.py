@@ -178,6 +178,7 @@ class InsGnssVehicle:
         self.sending = True
         self._idle_s = 0.0
         self._prior_var = np.zeros(3)
+        self.output_errors = 0
 
     # ------------------------------------------------------------------ what it needs
 
@@ -297,6 +298,8 @@ class InsGnssVehicle:
     def _add_sample(self, s: ImuSample) -> None:
         st = self.stats
         st.received += 1
+        if self.refused:
+            return  # counted, not kept: the rover detector alone
         key = round(s.t_s * 1e6)
         if key in self.buffer:
             st.duplicates += 1
@@ -574,6 +577,7 @@ class InsGnssVehicle:
             try:
                 sink.emit(out)
             except Exception as err:  # an output failing must not stop the filter
+                self.output_errors += 1
                 self.ratelog.warning(f"output {type(sink).__name__}", str(err))
 
     # ------------------------------------------------------------------ summary
@@ -592,7 +596,7 @@ class InsGnssVehicle:
             "imu": {"received": st.received, "integrated": st.integrated,
                     "duplicates": st.duplicates, "out_of_order": st.out_of_order,
                     "late": st.late, "no_data": st.no_data, "bad_packets": st.bad_packets},
-            "strategy": self.params.strategy,
+            "strategy": self.params.strategy, "output_errors": self.output_errors,
         }
         if self.failsafe is not None:
             s["failsafe"] = {"silences": self.failsafe.watchdog.episodes,
