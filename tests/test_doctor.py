@@ -143,4 +143,5 @@ def test_doctor_and_run_accept_the_same_files(
         assert any(o.startswith("config:") and f"(mavlink; tables {vehicle}, mavlink)" in o
                    for o in rep.ok)
         assert any("MAVLink autopilot" in line for line in rep.ok + rep.problems)
-    assert run_accepts == (not path.stem.startswith("insgnss"))  # an INS/GNSS file: sim only
+    # an INS/GNSS preset: sim only; with [rover] too (insgnss-live-*): the live INS/GNSS vehicle
+    assert run_accepts == (not path.stem.startswith("insgnss") or "rover" in read_toml(path))

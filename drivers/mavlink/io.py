@@ -314,6 +314,23 @@ class _Encoders:
         )
         return self._emit(msg)
 
+    def send_raw_imu(self, time_usec: int, acc: tuple[int, int, int],
+                     gyro: tuple[int, int, int], imu_id: int = 0) -> bytes:
+        """RAW_IMU in ArduPilot's scaling (mG, mrad/s; see drivers/mavlink/imu.py), no compass."""
+        msg = self._mav.raw_imu_encode(int(time_usec), *acc, *gyro, 0, 0, 0, int(imu_id), 0)
+        return self._emit(msg)
+
+    def send_highres_imu(self, time_usec: int, acc: tuple[float, float, float],
+                         gyro: tuple[float, float, float], imu_id: int = 0) -> bytes:
+        """HIGHRES_IMU (m/s², rad/s); fields_updated says accel and gyro only (bits 0-5)."""
+        msg = self._mav.highres_imu_encode(int(time_usec), *acc, *gyro, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                           0.0, 0.0, 0x3F, int(imu_id))
+        return self._emit(msg)
+
+    def send_system_time(self, time_unix_usec: int, time_boot_ms: int) -> bytes:
+        msg = self._mav.system_time_encode(int(time_unix_usec), int(time_boot_ms) & 0xFFFFFFFF)
+        return self._emit(msg)
+
     def send_named_value_float(self, name: str, value: float, time_boot_ms: int) -> bytes:
         """NAMED_VALUE_FLOAT; ``name`` is cut to 10 ASCII bytes."""
         raw = name.encode("ascii", errors="replace")[:NAMED_VALUE_NAME_LEN]

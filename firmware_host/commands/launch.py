@@ -13,6 +13,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from firmware_host.insgnss.vehicle import InsGnssVehicle
 from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.vehicle import OutlandRovVehicle
 from firmware_host.rover.vehicle import RoverVehicle
@@ -29,11 +30,14 @@ def vehicle_from_file(
     bf: BridgeFile, *, nmea_url: str | None = None, mavlink_url: str | None = None,
     record: Path | None = None, note: str = "fdi-bridge run",
 ) -> tuple[Vehicle, FlightRecorder | None]:
-    """The vehicle the file describes (``[rover]``: the rover; ``[rov]``: the ROV on the
-    Outland link, or through an ArduSub autopilot with ``heading_source = "mavlink"`` and a
-    ``[mavlink]`` table, checked at load) and its flight recorder (``record`` overrides the
-    ``[recorder]`` directory)."""
+    """The vehicle the file describes (``[rover]``: the rover; ``[rover]`` and ``[insgnss]``:
+    the live INS/GNSS; ``[rov]``: the ROV on the Outland link, or through an ArduSub autopilot
+    with ``heading_source = "mavlink"`` and a ``[mavlink]`` table, checked at load) and its
+    flight recorder (``record`` overrides the ``[recorder]`` directory)."""
     recorder = make_recorder(bf.recorder, record, note)
+    if vehicle_of(bf) == "rover" and bf.insgnss is not None:  # [rover] + [insgnss]: live INS
+        return InsGnssVehicle(bridge_config(bf), bf.insgnss, nmea_url=nmea_url,
+                              mavlink_url=mavlink_url), recorder
     if vehicle_of(bf) == "rover":
         rover = RoverVehicle(bridge_config(bf), nmea_url=nmea_url, mavlink_url=mavlink_url)
         return rover, recorder

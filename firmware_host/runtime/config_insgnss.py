@@ -6,6 +6,7 @@ Loading and validation: :func:`firmware_host.runtime.config.load_bridge_file`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 from fdi.insgnss import ImuErrorModel, InsGnssParams
 
@@ -33,8 +34,36 @@ class InsGnssSimParams:
 
 
 @dataclass(frozen=True)
+class InsGnssLiveParams:
+    """The live vehicle (``[insgnss.live]``, firmware_host/insgnss/vehicle.py): where the IMU
+    comes from and how its samples are put in order. The GNSS receiver is ``[rover]``'s port."""
+
+    imu_url: str = field(default="", metadata={
+        "doc": "the autopilot's MAVLink link carrying the IMU (a serial device, a pty, "
+               "socket://HOST:PORT); empty: no INS, the rover detector alone"})
+    imu_baudrate: int = field(default=921600, metadata={"gt": 0})
+    imu_message: Literal["RAW_IMU", "HIGHRES_IMU", "SCALED_IMU", "SCALED_IMU2",
+                         "SCALED_IMU3"] = "RAW_IMU"
+    hold_s: float = field(default=0.3, metadata={
+        "ge": 0.0, "doc": "an epoch waits for IMU samples stamped this long after it "
+                          "(late and out-of-order samples of a telemetry link)"})
+    max_wait_s: float = field(default=1.0, metadata={
+        "gt": 0.0, "doc": "wall-clock wait for those samples before the epoch goes without"})
+    rate_samples: int = field(default=50, metadata={
+        "ge": 10, "doc": "IMU samples whose median interval decides the rate check"})
+    align_s: float = field(default=1.0, metadata={
+        "gt": 0.0, "doc": "accelerometer averaging time for the levelling"})
+    align_max_gyro_deg_s: float = field(default=2.0, metadata={"gt": 0.0})
+    align_max_accel_dev_m_s2: float = field(default=0.5, metadata={"gt": 0.0})
+    align_min_speed_m_s: float = field(default=3.0, metadata={
+        "gt": 0.0, "doc": "GNSS speed from which its course is the heading"})
+    heading_source: Literal["gnss", "attitude"] = "gnss"
+
+
+@dataclass(frozen=True)
 class InsGnssSetup:
-    """The ``[insgnss]`` table: ``[insgnss.filter]`` and ``[insgnss.sim]``."""
+    """The ``[insgnss]`` table: ``[insgnss.filter]``, ``[insgnss.sim]``, ``[insgnss.live]``."""
 
     filter: InsGnssParams = field(default_factory=InsGnssParams)
     sim: InsGnssSimParams = field(default_factory=InsGnssSimParams)
+    live: InsGnssLiveParams = field(default_factory=InsGnssLiveParams)

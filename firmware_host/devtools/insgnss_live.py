@@ -1,0 +1,284 @@
+"""A simulated autopilot and receiver for the live INS/GNSS vehicle (firmware_host/insgnss/).
+
+The data of :func:`firmware_host.devtools.insgnss_sim.generate` (the same trajectory, IMU
+errors, GNSS noise and faults as ``fdi-bridge sim insgnss`` on the same seed) go out on real
+links: the IMU as MAVLink packets (``HIGHRES_IMU`` floats, or ``RAW_IMU`` in ArduPilot's mG and
+mrad/s integers) with a ``SYSTEM_TIME`` every second, encoded by :mod:`drivers.mavlink.io`,
+and the GNSS as NMEA (GGA + RMC, 1 Hz, ``gnss_latency_s`` after the epoch) on another link.
+Each link is a byte writer (a :class:`~drivers.ptypair.PtyPair`'s master side in the tests).
+
+The autopilot clock starts ``BOOT_S`` before the trajectory; UTC is :data:`UTC0` + t.
+:class:`LinkImpairment` makes the IMU link a telemetry link: packets dropped at random,
+duplicated, and held back in bursts (every ``burst_every_s`` the packets of ``burst_s`` wait and
+go out together). ``speed`` plays the events that many times faster than real time (the
+vehicle is paced by its data, its IMU ordering by the samples' own stamps).
+"""
+
+from __future__ import annotations
+
+import calendar
+import json
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
+from drivers.mavlink.imu import MG_TO_M_S2, MRAD_TO_RAD
+from drivers.mavlink.io import MavPacker
+from drivers.ptypair import PtyPair
+from fdi.geodesy import LocalFrame
+from fdi.insgnss import InsGnssFilter, InsGnssParams, InsGnssStrategy
+from firmware_host.devtools.insgnss_sim import NavData
+from firmware_host.insgnss.vehicle import InsGnssVehicle
+from firmware_host.runtime.config import BridgeConfig
+from firmware_host.runtime.config_insgnss import InsGnssSetup
+from firmware_host.runtime.runner import Runner
+
+UTC0 = calendar.timegm((2026, 6, 1, 12, 0, 0))  # trajectory t = 0
+DATE0 = (2026, 6, 1)
+BOOT_S = 120.0  # autopilot uptime at t = 0
+LON0_DEG = 8.5
+H0_M = 300.0
+KNOT_MPS = 1852.0 / 3600.0
+Writer = Callable[[bytes], object]
+
+
+@dataclass(frozen=True)
+class LinkImpairment:
+    drop: float = 0.0
+    duplicate: float = 0.0
+    burst_every_s: float = 0.0  # 0: no bursts
+    burst_s: float = 0.2
+    shuffle_bursts: bool = False  # a held burst goes out in random order (a UDP link)
+
+
+def frame_of(latitude_deg: float) -> LocalFrame:
+    """The simulator's tangent plane on the Earth (its origin)."""
+    return LocalFrame(latitude_deg, LON0_DEG, H0_M)
+
+
+def nmea_epoch(t_s: float, lla: tuple[float, float, float], v_enu: tuple[float, float]) -> bytes:
+    utc = (UTC0 + t_s) % 86400.0
+    ts = format_time(utc)
+    la, ns = format_lat(lla[0])
+    lo, ew = format_lon(lla[1])
+    speed = math.hypot(v_enu[0], v_enu[1])
+    course = math.degrees(math.atan2(v_enu[0], v_enu[1])) % 360.0
+    gga = f"GPGGA,{ts},{la},{ns},{lo},{ew},1,12,0.8,{lla[2]:.3f},M,0.000,M,,"
+    rmc = (f"GPRMC,{ts},A,{la},{ns},{lo},{ew},{speed / KNOT_MPS:.4f},{course:.3f},"
+           f"{format_date(DATE0)},,,A")
+    return with_checksum(gga) + with_checksum(rmc)
+
+
+def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGHRES_IMU",
+                 decimate: int = 1, impair: LinkImpairment | None = None, seed: int = 0,
+                 gnss_latency_s: float = 0.05) -> list[tuple[float, int, bytes]]:
+    """Every packet with its send time (s of trajectory time) and link (0 IMU, 1 GNSS), in
+    send order."""
+    imp = impair or LinkImpairment()
+    rng = np.random.default_rng(seed)
+    packer = MavPacker(source_system=1, source_component=1)
+    events: list[tuple[float, int, int, bytes]] = []
+    t = data.traj.t
+    n_seq = 0
+
+    def add(when: float, link: int, raw: bytes) -> None:
+        nonlocal n_seq
+        events.append((when, n_seq, link, raw))
+        n_seq += 1
+
+    end = float(t[-1])
+    for s in range(int(end) + 1):
+        add(float(s), 0, packer.send_system_time(round((UTC0 + s) * 1e6),
+                                                 round((BOOT_S + s) * 1e3)))
+    gyro, accel = data.gyro, data.accel
+    for k in range(1, len(t), decimate):
+        if decimate > 1:  # the mean over the longer interval (what an integrating IMU reports)
+            lo = max(1, k - decimate + 1)
+            g, a = gyro[lo:k + 1].mean(axis=0), accel[lo:k + 1].mean(axis=0)
+        else:
+            g, a = gyro[k], accel[k]
+        tk = float(t[k])
+        usec = round((BOOT_S + tk) * 1e6)
+        if imu_message == "RAW_IMU":
+            ai = (round(a[0] / MG_TO_M_S2), round(a[1] / MG_TO_M_S2), round(a[2] / MG_TO_M_S2))
+            gi = (round(g[0] / MRAD_TO_RAD), round(g[1] / MRAD_TO_RAD), round(g[2] / MRAD_TO_RAD))
+            raw = packer.send_raw_imu(usec, ai, gi)
+        else:
+            raw = packer.send_highres_imu(usec, (float(a[0]), float(a[1]), float(a[2])),
+                                          (float(g[0]), float(g[1]), float(g[2])))
+        if imp.drop and rng.random() < imp.drop:
+            continue
+        when = tk
+        if imp.burst_every_s > 0:
+            phase = tk % imp.burst_every_s
+            if phase < imp.burst_s:
+                when = tk - phase + imp.burst_s  # held, then out together
+                if imp.shuffle_bursts:
+                    when += float(rng.random()) * 1e-3
+        add(when, 0, raw)
+        if imp.duplicate and rng.random() < imp.duplicate:
+            add(when, 0, raw)
+    frame = frame_of(latitude_deg)
+    for j in range(len(data.gnss_t)):
+        p = data.gnss_p[j]
+        lla = frame.to_lla(float(p[0]), float(p[1]), float(p[2]))
+        v = data.gnss_v[j]
+        add(float(data.gnss_t[j]) + gnss_latency_s, 1,
+            nmea_epoch(float(data.gnss_t[j]), lla, (float(v[0]), float(v[1]))))
+    events.sort(key=lambda e: (e[0], e[1]))
+    return [(w, link, raw) for w, _, link, raw in events]
+
+
+def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer], *,
+         speed: float = 10.0, stop: threading.Event | None = None,
+         chunk_s: float = 0.01) -> int:
+    """Write the events to the two links, ``speed`` times faster than real time; returns how
+    many were written (fewer when ``stop`` is set)."""
+    t0 = time.monotonic()
+    i = 0
+    n = len(events)
+    while i < n:
+        if stop is not None and stop.is_set():
+            break
+        base = events[i][0]
+        bufs = [bytearray(), bytearray()]
+        while i < n and events[i][0] < base + chunk_s:
+            bufs[events[i][1]] += events[i][2]
+            i += 1
+        due = t0 + base / speed
+        wait = due - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        for link in (0, 1):
+            if bufs[link]:
+                writers[link](bytes(bufs[link]))
+    return i
+
+
+# ---------------------------------------------------------------- a whole live session
+
+
+@dataclass
+class LiveRun:
+    """One live session: the vehicle's summary and records, and its position errors at the
+    epochs the INS produced (``epochs``: GNSS epoch numbers)."""
+
+    summary: dict[str, Any]
+    records: list[dict[str, Any]]
+    epochs: npt.NDArray[np.int_]
+    pos_err: npt.NDArray[np.float64]
+    wall_s: float
+
+
+def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
+             imu_message: str = "HIGHRES_IMU", decimate: int = 1,
+             impair: LinkImpairment | None = None, seed: int = 0,
+             speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "") -> LiveRun:
+    """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
+    :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
+    ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
+    the vehicle's GPS_INPUT and corrected NMEA outputs."""
+    lat = setup.filter.latitude_deg
+    events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
+                          impair=impair, seed=seed)
+    base = BridgeConfig()
+    rc = base.rover
+    rover = replace(rc, port=replace(rc.port, timeout_s=0.02),
+                    output=replace(rc.output, nmea_url=nmea_url, mavlink_url=mavlink_url))
+    with PtyPair() as gps, PtyPair() as imu:
+        cfg = replace(base, rover=replace(rover, port=replace(rover.port, url=gps.url)))
+        live = replace(setup, live=replace(setup.live, imu_url=imu.url,
+                                           imu_message=imu_message))  # type: ignore[arg-type]
+        vehicle = InsGnssVehicle(cfg, live)
+        done = threading.Event()
+        stop = threading.Event()
+
+        def feed() -> None:
+            time.sleep(0.2)  # the runner opens the ports first
+            try:
+                play(events, (imu.write, gps.write), speed=speed, stop=stop)
+            finally:
+                done.set()
+
+        ended: list[float] = []
+
+        def until() -> bool:
+            if not done.is_set():
+                return False
+            if not ended:
+                ended.append(time.monotonic())
+            return time.monotonic() - ended[0] > 0.5
+
+        thread = threading.Thread(target=feed, daemon=True)
+        t0 = time.monotonic()
+        thread.start()
+        try:
+            summary = Runner(vehicle, out_dir=out_dir, handle_signals=False).run(until=until)
+        finally:
+            stop.set()
+            thread.join(5.0)
+        wall = time.monotonic() - t0
+    records = [json.loads(line) for line in
+               (out_dir / "epochs.jsonl").read_text(encoding="utf-8").splitlines()]
+    epochs, errs = live_errors(records, data, lat, setup.sim.imu_rate_hz)
+    return LiveRun(summary, records, epochs, errs, wall)
+
+
+def live_errors(records: list[dict[str, Any]], data: NavData, latitude_deg: float,
+                rate_hz: int) -> tuple[npt.NDArray[np.int_], npt.NDArray[np.float64]]:
+    """Position error (E, N, U, m, against the truth in the simulator's frame) of every epoch
+    the INS produced."""
+    frame = frame_of(latitude_deg)
+    t_day0 = (UTC0 % 86400.0)
+    js: list[int] = []
+    errs: list[tuple[float, float, float]] = []
+    for r in records:
+        ins = r.get("ins")
+        if r.get("mode") != "ins" or not isinstance(ins, dict) or "lla" not in ins:
+            continue
+        j = round(float(r["t"]) - t_day0)
+        e, n, u = frame.to_enu(*ins["lla"])
+        p = data.traj.p[j * rate_hz]
+        js.append(j)
+        errs.append((e - float(p[0]), n - float(p[1]), u - float(p[2])))
+    return np.array(js, dtype=int), np.array(errs, dtype=float).reshape(-1, 3)
+
+
+def offline_aligned(data: NavData, params: InsGnssParams, j0: int,
+                    strategy: InsGnssStrategy | None = None) -> npt.NDArray[np.float64]:
+    """The offline filter on the same data, aligned as the live vehicle aligns (at GNSS epoch
+    ``j0``: the fix's position, the horizontal GNSS velocity along its course, level from the
+    mean specific force over the last second, heading from the course), position updates only;
+    its position errors at epochs ``j0 + 1 ..``."""
+    prm = replace(params, use_velocity=False, strategy=strategy or params.strategy)
+    rate = round(1.0 / float(data.traj.t[1] - data.traj.t[0]))
+    k0 = j0 * rate
+    f = data.accel[k0 - rate + 1:k0 + 1].mean(axis=0)
+    roll = math.atan2(-f[1], -f[2])
+    pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
+    v = data.gnss_v[j0]
+    yaw = math.atan2(float(v[0]), float(v[1]))
+    kf = InsGnssFilter(prm, float(data.gnss_t[j0]), data.gnss_p[j0],
+                       (float(v[0]), float(v[1]), 0.0), (roll, pitch, yaw))
+    t = data.traj.t.tolist()
+    gyro, accel = data.gyro.tolist(), data.accel.tolist()
+    out = []
+    for j in range(j0 + 1, len(data.gnss_t)):
+        for k in range((j - 1) * rate + 1, j * rate + 1):
+            kf.propagate(t[k], gyro[k], accel[k])
+        kf.update(float(data.gnss_t[j]), data.gnss_p[j])
+        out.append(kf.position - data.traj.p[j * rate])
+    return np.array(out)
+
+
+def rms(err: npt.NDArray[np.float64]) -> float:
+    """The 3D position RMS (m)."""
+    return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))

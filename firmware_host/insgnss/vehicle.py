@@ -1,0 +1,609 @@
+"""Live INS/GNSS as a vehicle of the runtime: the autopilot's IMU over MAVLink, the NMEA
+receiver of ``[rover]``, the loosely coupled filter of :mod:`fdi.insgnss` (Cai & Shao's
+three-zone gate, or the preset's ``fault_state``) and the rover's outputs.
+
+Ports: ``gps`` (``[rover.port]``, the receiver, through the rover's own pipeline: every fix
+also goes through the rover detector) and ``imu`` (``[insgnss.live] imu_url``, the
+autopilot's MAVLink link: a serial device, a pty, ``socket://HOST:PORT``). Both are recorded
+by the flight recorder. Paced by data.
+
+IMU time (never arrival time): each sample carries the autopilot's ``time_usec`` /
+``time_boot_ms``; the autopilot time is mapped to GNSS time **once**, by the first
+``SYSTEM_TIME`` (``time_unix_usec − time_boot_ms``) when the receiver gives a date, else at the
+first GNSS epoch (the newest sample then is taken as the epoch's time). Samples are kept in a
+buffer keyed by their own stamp: a duplicate is dropped, an out-of-order one takes its place,
+one older than what the filter has integrated is counted late and dropped, a missing one
+makes a longer interval (up to ``max_imu_gap_s``). A GNSS epoch waits until a sample stamped
+``hold_s`` after it has arrived (or ``max_wait_s`` of wall clock), so that late bursts of a
+telemetry link are in the buffer before the filter passes the epoch.
+
+Rate: the median interval of the first ``rate_samples`` samples is checked against
+``min_imu_rate_hz`` (:func:`fdi.insgnss.check_imu_rate`); below it the INS is refused, said
+once in the log and in the summary, and the receiver's fixes go through the rover detector.
+
+Alignment: level from the mean specific force over ``align_s`` when the vehicle is steady
+(gyro below ``align_max_gyro_deg_s``, ``|f|`` within ``align_max_accel_dev_m_s2`` of g: at
+rest, or flying straight and level), heading from the GNSS course once the speed exceeds
+``align_min_speed_m_s`` (or the autopilot's ATTITUDE yaw, ``heading_source = "attitude"``),
+position from a fix the rover detector accepted. Until then, and after any filter error (an
+IMU gap it cannot bridge), the rover detector alone drives the outputs.
+
+GNSS observation: position only. NMEA gives horizontal speed and course but no vertical
+velocity, and the filter's velocity update takes the three components together, so the live
+filter runs as the preset with ``use_velocity = false``.
+
+Outputs, per epoch: the corrected NMEA (GGA/RMC/VTG of the filter's position; quality 6 when
+the fix was not used as is) and GPS_INPUT with the horizontal/vertical accuracies from the
+filter's covariance ``sqrt(P_ii)`` (with ``fault_state`` the bias covariance added while a
+fault is believed); an epoch whose fix was not used as is (replaced, down-weighted, rejected,
+or a fault believed) is raised to the innovation's scale ``sqrt(P⁻_ii + R_ii)``: the output is
+then mostly the INS prediction and the receiver disagreed with it. One record per epoch in
+``epochs.jsonl``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any, Literal
+
+import numpy as np
+
+from drivers.mavlink.framer import MavFramer
+from drivers.mavlink.imu import ImuSample, imu_from_message
+from drivers.mavlink.io import decode_packet
+from drivers.ratelog import RateLimitedLog
+from drivers.resilient import ResilientPort
+from drivers.transport import SerialSettings, open_port_nonblocking
+from fdi.errors import DecodeError, EstimatorError
+from fdi.insgnss import (
+    DEG,
+    InsGnssFilter,
+    InsGnssParams,
+    check_imu_rate,
+    measure_imu_rate,
+)
+from fdi.three_zone import Action
+from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
+from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
+from firmware_host.runtime.config import BridgeConfig
+from firmware_host.runtime.config_insgnss import InsGnssSetup
+from firmware_host.runtime.failsafe import RoverFailsafe
+from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
+
+log = logging.getLogger("fdi_bridge.insgnss")
+
+
+class _Discard:
+    """A text stream that keeps nothing (the rover pipeline builds its records only with one;
+    this vehicle writes its own)."""
+
+    def write(self, s: str) -> int:
+        return len(s)
+
+
+class _Collect:
+    """The rover pipeline's sink: every outcome is queued for the INS."""
+
+    def __init__(self) -> None:
+        self.queue: deque[tuple[EpochOutcome, float]] = deque()
+        self.clock: Callable[[], float] = time.monotonic
+
+    def emit(self, out: EpochOutcome) -> None:
+        self.queue.append((out, self.clock()))
+
+    def close(self) -> None:
+        return None
+
+
+class InsGpsSink(MavlinkGpsSink):
+    """GPS_INPUT of the INS solution: the rover's fields, the accuracies from the covariance
+    (``out.record["ins"]["acc_h_m"]`` / ``acc_v_m`` when the INS produced the epoch)."""
+
+    def build_fix(self, out: EpochOutcome) -> Any | None:
+        fix = super().build_fix(out)
+        ins = out.record.get("ins") if out.record else None
+        if fix is None or not isinstance(ins, dict) or "acc_h_m" not in ins:
+            return fix
+        return replace(fix, horiz_accuracy_m=float(ins["acc_h_m"]),
+                       vert_accuracy_m=float(ins["acc_v_m"]))
+
+
+@dataclass
+class _ImuStats:
+    received: int = 0
+    duplicates: int = 0
+    out_of_order: int = 0
+    late: int = 0
+    no_data: int = 0
+    bad_packets: int = 0
+    integrated: int = 0
+
+
+def _r(x: float, nd: int = 4) -> float | None:
+    return round(float(x), nd) if math.isfinite(x) else None
+
+
+class InsGnssVehicle:
+    """See the module docstring."""
+
+    name = "insgnss"
+    pacing: Literal["data"] = "data"
+    period_s = 0.05
+
+    def __init__(self, cfg: BridgeConfig, setup: InsGnssSetup, *, nmea_url: str | None = None,
+                 mavlink_url: str | None = None) -> None:
+        self.cfg = cfg
+        self.setup = setup
+        self.live = setup.live
+        # position-only updates (module docstring: NMEA has no vertical velocity)
+        self.params: InsGnssParams = replace(setup.filter, use_velocity=False)
+        out = cfg.rover.output
+        self.nmea_url = nmea_url if nmea_url is not None else out.nmea_url
+        self.mavlink_url = mavlink_url if mavlink_url is not None else out.mavlink_url
+        self.clock: Callable[[], float] = time.monotonic
+        self.gps: ResilientPort | None = None
+        self.imu: ResilientPort | None = None
+        self.pipeline: RoverPipeline | None = None
+        self.collect = _Collect()
+        self.sinks: list[EpochSink] = []
+        self.nmea: NmeaSink | None = None
+        self.failsafe: RoverFailsafe | None = None
+        self.write_record: Callable[[dict[str, Any]], None] = lambda r: None
+        self.ratelog = RateLimitedLog(log)
+        self.framer = MavFramer()
+        self.stats = _ImuStats()
+        self.buffer: dict[int, ImuSample] = {}  # by the sample's own stamp, µs
+        self.newest_us: int | None = None
+        self.rate_times: list[float] = []
+        self.rate_hz: float | None = None
+        self.refused = "" if self.live.imu_url else "no [insgnss.live] imu_url: rover only"
+        self.boot_unix_s: float | None = None  # SYSTEM_TIME: unix time at autopilot boot
+        self.offset_s: float | None = None  # GNSS time = autopilot time + offset
+        self.time_map = ""
+        self.midnight_unix: float | None = None
+        self.attitude_yaw: float | None = None
+        self._prev_fix: tuple[float, tuple[float, float, float],
+                              tuple[float, float] | None] | None = None
+        self.kf: InsGnssFilter | None = None
+        self.aligned_at: float | None = None
+        self.align_wait: Counter[str] = Counter()
+        self.resets: Counter[str] = Counter()
+        self.modes: Counter[str] = Counter()
+        self.gate_actions: Counter[str] = Counter()
+        self.sending = True
+        self._idle_s = 0.0
+        self._prior_var = np.zeros(3)
+        self.output_errors = 0
+
+    # ------------------------------------------------------------------ what it needs
+
+    def ports(self) -> list[PortSpec]:
+        rc = self.cfg.rover
+        specs = [PortSpec("gps", rc.port, rc.reconnect_max_s, opener=open_port_nonblocking)]
+        if self.live.imu_url:
+            s = SerialSettings(url=self.live.imu_url, baudrate=self.live.imu_baudrate,
+                               timeout_s=0.0)
+            specs.append(PortSpec("imu", s, rc.reconnect_max_s, opener=open_port_nonblocking))
+        return specs
+
+    def mavlink(self) -> MavlinkSpec | None:
+        if not self.mavlink_url:
+            return None
+        o, rc = self.cfg.rover.output, self.cfg.rover
+        return MavlinkSpec(self.mavlink_url, o.mavlink_baudrate, o.mavlink_system,
+                           o.mavlink_component, rc.reconnect_max_s)
+
+    def start(self, ctx: Context) -> None:
+        rc = self.cfg.rover
+        out = rc.output
+        self.clock = self.collect.clock = ctx.clock
+        self.gps = ctx.ports["gps"]
+        self.imu = ctx.ports.get("imu")
+        self.write_record = ctx.epochs.write
+        self.pipeline = RoverPipeline(rc, jsonl=_Discard(),  # type: ignore[arg-type]
+                                      sinks=[self.collect])
+        if self.nmea_url:
+            tap = ctx.tap("nmea tx", self.nmea_url, out.nmea_baudrate, "tx")
+            self.nmea = NmeaSink(self.nmea_url, out.nmea_baudrate, clock=ctx.clock,
+                                 backoff_max_s=rc.reconnect_max_s,
+                                 opener=open_port_nonblocking, tap=tap)
+            self.sinks.append(self.nmea)
+        if ctx.mavlink is not None:
+            rover = replace(rc, output=replace(out, mavlink_url=self.mavlink_url or "output"))
+            self.sinks.append(InsGpsSink(rover, endpoint=ctx.mavlink))
+        self.failsafe = RoverFailsafe(rc, ctx.mavlink, clock=ctx.clock)
+        self.sinks.append(self.failsafe)
+        if self.refused:
+            log.warning("INS/GNSS: %s", self.refused)
+
+    # ------------------------------------------------------------------ the loop's hooks
+
+    def step(self, t: float) -> int:
+        assert self.gps is not None and self.pipeline is not None
+        t0 = self.clock()
+        got = False
+        if self.imu is not None:
+            data = self.imu.read_some(65536)
+            if data:
+                got = True
+                self._feed_imu(data)
+        data = self.gps.read_some(65536)
+        if data:
+            got = True
+            self.pipeline.feed(data)
+        n = self._drain(force=False)
+        if got:
+            self._idle_s = 0.0
+        else:
+            wait = max(self.cfg.rover.port.timeout_s, 0.01)
+            self._idle_s = max(0.0, wait - (self.clock() - t0))
+        return n
+
+    def check(self, now: float) -> None:
+        if self.failsafe is not None:
+            self.failsafe.check()
+
+    def idle_s(self) -> float:
+        if self.gps is None:
+            return 0.0
+        if self.gps.up:
+            return self._idle_s
+        return max(self.gps.wait_s(), 0.01)
+
+    def finish(self) -> None:
+        """The pending epochs are recorded, not sent (as the rover's)."""
+        if self.pipeline is None:
+            return
+        self.sending = False
+        try:
+            self.pipeline.finish()
+            self._drain(force=True)
+        finally:
+            for sink in self.sinks:
+                sink.close()
+
+    # ------------------------------------------------------------------ IMU
+
+    def _feed_imu(self, data: bytes) -> None:
+        want = self.live.imu_message
+        for frame in self.framer.feed(data):
+            msg = decode_packet(frame.raw)
+            if msg is None:
+                self.stats.bad_packets += 1
+                continue
+            kind = msg.get_type()
+            if kind == "SYSTEM_TIME":
+                unix_us = int(getattr(msg, "time_unix_usec", 0) or 0)
+                if self.boot_unix_s is None and unix_us > 0:
+                    self.boot_unix_s = unix_us * 1e-6 - int(msg.time_boot_ms) * 1e-3
+            elif kind == "ATTITUDE":
+                self.attitude_yaw = float(msg.yaw)
+            elif kind == want:
+                try:
+                    sample = imu_from_message(msg)
+                except DecodeError as err:
+                    self.stats.bad_packets += 1
+                    self.ratelog.warning("imu decode", str(err))
+                    continue
+                if sample is None:
+                    self.stats.no_data += 1
+                    continue
+                self._add_sample(sample)
+
+    def _add_sample(self, s: ImuSample) -> None:
+        st = self.stats
+        st.received += 1
+        if self.refused:
+            return  # counted, not kept: the rover detector alone
+        key = round(s.t_s * 1e6)
+        if key in self.buffer:
+            st.duplicates += 1
+            return
+        kf = self.kf
+        if kf is not None and self.offset_s is not None and s.t_s + self.offset_s <= kf.t_s:
+            st.late += 1  # the filter has passed it; a duplicate of an integrated one lands here
+            return
+        if self.newest_us is not None and key < self.newest_us:
+            st.out_of_order += 1
+        self.buffer[key] = s
+        if self.newest_us is None or key > self.newest_us:
+            self.newest_us = key
+        if self.rate_hz is None:
+            self.rate_times.append(s.t_s)
+            if len(self.rate_times) >= self.live.rate_samples:
+                self._check_rate()
+        if len(self.buffer) > 20000:  # nothing consumes it (no GNSS): keep the newest
+            for k in sorted(self.buffer)[:10000]:
+                del self.buffer[k]
+
+    def _check_rate(self) -> None:
+        times = sorted(set(self.rate_times))
+        self.rate_hz = measure_imu_rate(times)
+        try:
+            check_imu_rate(self.rate_hz, self.params.min_imu_rate_hz,
+                           f"IMU ({self.live.imu_message})")
+        except EstimatorError as err:
+            self.refused = f"{err}; passing the receiver's fixes through the rover detector"
+            log.error("INS/GNSS: %s", self.refused)
+            self.buffer.clear()
+
+    # ------------------------------------------------------------------ epochs
+
+    def _gnss_time(self, out: EpochOutcome) -> float | None:
+        """The epoch's time on the filter's scale: seconds since midnight UTC of the first date
+        (the rover pipeline's epoch time)."""
+        if out.t_s is None:
+            return None
+        e = out.epoch
+        if self.midnight_unix is None and e.date is not None and e.utc_s is not None:
+            self.midnight_unix = unix_time(e.date, e.utc_s) - out.t_s
+        return out.t_s
+
+    def _map_time(self, t_g: float) -> None:
+        if self.offset_s is not None:
+            return
+        if self.boot_unix_s is not None and self.midnight_unix is not None:
+            self.offset_s = self.boot_unix_s - self.midnight_unix
+            self.time_map = "system_time"
+        elif self.newest_us is not None:
+            self.offset_s = t_g - self.newest_us * 1e-6
+            self.time_map = "first_epoch"
+        else:
+            return
+        log.info("INS/GNSS: autopilot time mapped to GNSS time by %s (offset %.3f s)",
+                 self.time_map, self.offset_s)
+
+    def _drain(self, *, force: bool) -> int:
+        q = self.collect.queue
+        n = 0
+        now = self.clock()
+        while q:
+            out, arrived = q[0]
+            t_g = self._gnss_time(out)
+            if self.refused or t_g is None or (not self.buffer and self.kf is None and not force):
+                q.popleft()
+                self._emit_rover(out, t_g, "no imu" if not self.refused else "refused")
+                n += 1
+                continue
+            self._map_time(t_g)
+            if self.offset_s is None:
+                q.popleft()
+                self._emit_rover(out, t_g, "no imu time")
+                n += 1
+                continue
+            newest = (self.newest_us or 0) * 1e-6 + self.offset_s
+            waited = now - arrived
+            if not force and newest < t_g + self.live.hold_s and waited < self.live.max_wait_s:
+                break  # wait for the samples of this epoch (and late ones)
+            q.popleft()
+            self._epoch(out, t_g)
+            n += 1
+        return n
+
+    def _take(self, until_gnss_s: float) -> list[tuple[float, ImuSample]]:
+        """The buffered samples stamped up to ``until_gnss_s`` (GNSS time), in time order."""
+        assert self.offset_s is not None
+        limit = round((until_gnss_s - self.offset_s) * 1e6)
+        keys = sorted(k for k in self.buffer if k <= limit)
+        return [(k * 1e-6 + self.offset_s, self.buffer.pop(k)) for k in keys]
+
+    def _epoch(self, out: EpochOutcome, t_g: float) -> None:
+        if self.kf is None:
+            self._try_align(out, t_g)
+            return
+        kf = self.kf
+        try:
+            for t, s in self._take(t_g):
+                if t <= kf.t_s:
+                    self.stats.late += 1
+                    continue
+                kf.propagate(t, s.gyro_rad_s, s.accel_m_s2)
+                self.stats.integrated += 1
+            enu = self._fix_enu(out)
+            if enu is None:
+                kf.coast(t_g)
+                self._emit_ins(out, t_g, None)
+                return
+            self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
+            rep = kf.update(t_g, enu)
+        except EstimatorError as err:
+            self.resets[str(err).split(" ")[0] or "error"] += 1
+            self.ratelog.warning("ins reset", f"{err}; realigning, rover detector meanwhile")
+            self.kf = None
+            self.aligned_at = None
+            self._emit_rover(out, t_g, "reset")
+            return
+        self._emit_ins(out, t_g, rep)
+
+    @staticmethod
+    def _fix_enu(out: EpochOutcome) -> tuple[float, float, float] | None:
+        rec = out.record or {}
+        r = (rec.get("e"), rec.get("n"), rec.get("u"))
+        if not out.epoch.valid or out.t_s is None or any(v is None for v in r):
+            return None
+        e, n, u = (float(v) for v in r)  # type: ignore[arg-type]
+        return (e, n, u) if math.isfinite(e + n + u) else None
+
+    def _try_align(self, out: EpochOutcome, t_g: float) -> None:
+        lv = self.live
+        samples = self._take(t_g)
+        window = [s for t, s in samples if t >= t_g - lv.align_s]
+        reason = self._align_reason(out, window)
+        if reason:
+            self.align_wait[reason] += 1
+            self._emit_rover(out, t_g, f"aligning: {reason}")
+            return
+        f = np.mean([s.accel_m_s2 for s in window], axis=0)
+        roll = math.atan2(-f[1], -f[2])  # FRD: at rest f = (0, 0, −g)
+        pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
+        if lv.heading_source == "attitude":
+            assert self.attitude_yaw is not None
+            yaw = self.attitude_yaw
+            speed = out.epoch.speed_mps or 0.0
+            course = (out.epoch.course_deg or 0.0) * DEG
+        else:
+            speed = float(out.epoch.speed_mps or 0.0)
+            course = yaw = float(out.epoch.course_deg or 0.0) * DEG
+        enu = self._fix_enu(out)
+        assert enu is not None
+        vel = (speed * math.sin(course), speed * math.cos(course), 0.0)
+        self.kf = InsGnssFilter(self.params, t_g, enu, vel, (roll, pitch, yaw))
+        self.aligned_at = t_g
+        log.info("INS/GNSS aligned at t = %.3f s: roll %.2f pitch %.2f yaw %.2f deg", t_g,
+                 roll / DEG, pitch / DEG, yaw / DEG)
+        self._emit_rover(out, t_g, "aligned")
+
+    def _align_reason(self, out: EpochOutcome, window: list[ImuSample]) -> str:
+        lv = self.live
+        enu = self._fix_enu(out)
+        if enu is None:
+            return "no 3D fix"
+        prev = self._prev_fix
+        if prev is None:
+            return "no previous fix"
+        # The fix the filter starts from must agree with the previous one and the receiver's
+        # velocity (a jump of a faulty fix would be the INS's origin): horizontal residual of
+        # p_j − p_{j−1} − (v_j + v_{j−1}) Δt / 2 within 3σ·√2.
+        dt = (out.t_s or 0.0) - prev[0]
+        v0, v1 = prev[2], self._vel_en(out)
+        if not 0.0 < dt <= 2.0 or v0 is None or v1 is None:
+            return "no consecutive fixes with velocity"
+        res = math.hypot(enu[0] - prev[1][0] - 0.5 * (v0[0] + v1[0]) * dt,
+                         enu[1] - prev[1][1] - 0.5 * (v0[1] + v1[1]) * dt)
+        if res > 3.0 * math.sqrt(2.0) * self.params.gnss_sigma_h_m:
+            return "fix inconsistent with the previous one"
+        n_need = int(lv.align_s * self.params.min_imu_rate_hz * 0.5)
+        if len(window) < max(n_need, 2):
+            return "too few IMU samples"
+        f = np.array([s.accel_m_s2 for s in window])
+        w = np.array([s.gyro_rad_s for s in window])
+        if float(np.max(np.linalg.norm(w, axis=1))) > lv.align_max_gyro_deg_s * DEG:
+            return "turning"
+        if abs(float(np.linalg.norm(f.mean(axis=0))) - self.params.earth.g0) > \
+                lv.align_max_accel_dev_m_s2:
+            return "accelerating"
+        if lv.heading_source == "attitude":
+            if self.attitude_yaw is None:
+                return "no ATTITUDE yet"
+        elif out.epoch.speed_mps is None or out.epoch.course_deg is None or \
+                out.epoch.speed_mps < lv.align_min_speed_m_s:
+            return "not moving (heading from GNSS course)"
+        return ""
+
+    @staticmethod
+    def _vel_en(out: EpochOutcome) -> tuple[float, float] | None:
+        sp, co = out.epoch.speed_mps, out.epoch.course_deg
+        if sp is None or co is None:
+            return None
+        return (sp * math.sin(co * DEG), sp * math.cos(co * DEG))
+
+    # ------------------------------------------------------------------ outputs
+
+    def _base_record(self, out: EpochOutcome, t_g: float | None, mode: str) -> dict[str, Any]:
+        """The rover's record of the epoch (the same keys as the rover's ``epochs.jsonl``),
+        with ``t``, ``mode`` ("ins": the filter's solution went out, "rover": the detector's)."""
+        return {**(out.record or {}), "t": None if t_g is None else round(t_g, 3),
+                "mode": mode}
+
+    def _emit_rover(self, out: EpochOutcome, t_g: float | None, why: str) -> None:
+        self.modes["rover"] += 1
+        enu = self._fix_enu(out)  # every epoch before the INS is the "previous fix" of the next
+        self._prev_fix = None if enu is None else (out.t_s or 0.0, enu, self._vel_en(out))
+        record = self._base_record(out, t_g, "rover")
+        record["why"] = why
+        self.write_record(record)
+        self._send(out)
+
+    def _emit_ins(self, out: EpochOutcome, t_g: float, rep: Any | None) -> None:
+        kf = self.kf
+        pipeline = self.pipeline
+        assert kf is not None and pipeline is not None
+        self.modes["ins"] += 1
+        p = kf.position
+        P = kf.P
+        sig = np.sqrt(np.maximum(np.diag(P)[:9], 0.0))
+        bias_var = np.diag(kf._Pbb) if kf.bias_active else np.zeros(3)
+        used = rep is not None and all(d.action is Action.ACCEPT for d in rep.decisions[:3]) \
+            and not kf.bias_active
+        var = np.diag(P)[:3] + bias_var
+        if not used:
+            # the fix was not used as is: the output is (mostly) the INS prediction, and the
+            # receiver disagreed with it; say so with the innovation's scale, P⁻_ii + R_ii
+            prm = self.params
+            r = np.array([prm.gnss_sigma_h_m**2, prm.gnss_sigma_h_m**2, prm.gnss_sigma_v_m**2])
+            var = np.maximum(var, self._prior_var + r)
+        acc_h = math.sqrt(max(float(var[0]), float(var[1])))
+        acc_v = math.sqrt(float(var[2]))
+        ins: dict[str, Any] = {
+            "pos": [_r(x, 3) for x in p], "vel": [_r(x, 3) for x in kf.velocity],
+            "rpy_deg": [_r(x / DEG, 3) for x in kf.attitude_rpy],
+            "sigma_pos": [_r(x, 3) for x in sig[0:3]], "sigma_vel": [_r(x, 4) for x in sig[3:6]],
+            "sigma_att_deg": [_r(x / DEG, 4) for x in sig[6:9]],
+            "acc_h_m": round(acc_h, 3), "acc_v_m": round(acc_v, 3),
+            "bias_active": kf.bias_active,
+        }
+        if rep is not None:
+            ins["zones"] = [int(d.zone.value) for d in rep.decisions]
+            ins["dm"] = [_r(d.dm) for d in rep.decisions]
+            ins["actions"] = [d.action.value for d in rep.decisions]
+            ins["innov"] = [_r(float(x), 3) for x in kf.y]
+            if rep.verdict is not None:
+                ins["verdict"] = rep.verdict.value
+            for d in rep.decisions:
+                self.gate_actions[d.action.value] += 1
+        lat = lon = alt = None
+        frame = pipeline.frame
+        if frame is not None:
+            lat, lon, h = frame.to_lla(float(p[0]), float(p[1]), float(p[2]))
+            alt = h - (out.epoch.geoid_sep_m or 0.0)
+            ins["lla"] = [round(lat, 9), round(lon, 9), round(h, 3)]
+        record = self._base_record(out, t_g, "ins")
+        record["ins"] = ins
+        self.write_record(record)
+        decision = replace(out.decision, action="accept" if used else "replace",
+                           out_enu=(float(p[0]), float(p[1]), float(p[2])))
+        self._send(EpochOutcome(out.epoch, decision, lat, lon, alt, out.t_s,
+                                {**(out.record or {}), "ins": ins}))
+
+    def _send(self, out: EpochOutcome) -> None:
+        if not self.sending:
+            return
+        for sink in self.sinks:
+            try:
+                sink.emit(out)
+            except Exception as err:  # an output failing must not stop the filter
+                self.output_errors += 1
+                self.ratelog.warning(f"output {type(sink).__name__}", str(err))
+
+    # ------------------------------------------------------------------ summary
+
+    def summary(self) -> dict[str, Any]:
+        if self.pipeline is None:
+            return {}
+        s = self.pipeline.summary()
+        st = self.stats
+        s["ins"] = {
+            "refused": self.refused, "imu_rate_hz": None if self.rate_hz is None
+            else round(self.rate_hz, 2), "time_map": self.time_map,
+            "aligned_at": self.aligned_at, "epochs": dict(self.modes),
+            "align_wait": dict(self.align_wait), "resets": dict(self.resets),
+            "gate_actions": dict(self.gate_actions),
+            "imu": {"received": st.received, "integrated": st.integrated,
+                    "duplicates": st.duplicates, "out_of_order": st.out_of_order,
+                    "late": st.late, "no_data": st.no_data, "bad_packets": st.bad_packets},
+            "strategy": self.params.strategy, "output_errors": self.output_errors,
+        }
+        if self.failsafe is not None:
+            s["failsafe"] = {"silences": self.failsafe.watchdog.episodes,
+                             "no_fix_sent": self.failsafe.no_fix_sent,
+                             "statustexts": self.failsafe.statustexts}
+        if self.nmea is not None:
+            w = self.nmea.writer
+            s["nmea_out"] = w.port.counters() if w.port is not None else {
+                "dropped": w.dropped_bytes}
+        return s

@@ -1,0 +1,172 @@
+"""The live INS/GNSS vehicle end to end: a simulated autopilot writes real MAVLink IMU packets to
+one pty and NMEA to another (firmware_host/devtools/insgnss_live.py), the vehicle runs on the
+Runner and writes epochs.jsonl / summary.json. Runs are shortened (150 of the paper's 501
+epochs) and played 50x faster than real time to keep the wall time modest."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drivers.mavlink.io import MavEndpoint
+from firmware_host.commands.launch import vehicle_from_file
+from firmware_host.devtools import insgnss_sim as sim
+from firmware_host.devtools.insgnss_live import (
+    LinkImpairment,
+    LiveRun,
+    offline_aligned,
+    rms,
+    run_live,
+)
+from firmware_host.insgnss.vehicle import InsGnssVehicle
+from firmware_host.runtime.config import CONFIG_DIR, load_bridge_file
+
+EPOCHS = 150
+
+
+def _setup() -> sim.InsGnssSetup:
+    setup = sim.load_setup(None)  # the paper preset, as `sim insgnss` by default
+    # paper-random keeps the paper's density of faults: 100 in 500 epochs
+    return replace(setup, sim=replace(setup.sim, epochs=EPOCHS,
+                                      random_faults=round(100 * (EPOCHS - 1) / 500)))
+
+
+def _check_records(lr: LiveRun) -> None:
+    modes = [r["mode"] for r in lr.records]
+    assert modes[:2] == ["rover", "rover"]  # aligning: the rover detector alone
+    assert modes.count("ins") >= EPOCHS - 4
+    ins = next(r for r in lr.records if r["mode"] == "ins")
+    for key in ("zones", "dm", "actions", "innov", "pos", "vel", "rpy_deg", "sigma_pos",
+                "sigma_att_deg", "acc_h_m", "acc_v_m", "lla"):
+        assert key in ins["ins"], key
+    assert "action" in ins and "utc" in ins  # the rover's record keys too
+    summary = lr.summary
+    assert summary["vehicle"] == "insgnss"
+    assert summary["ins"]["time_map"] == "system_time"
+    assert summary["ins"]["refused"] == ""
+
+
+@pytest.mark.parametrize("scenario,seed", [("paper-single", 1), ("paper-single", 2),
+                                           ("paper-random", 1), ("paper-random", 3)])
+def test_live_vehicle_is_the_offline_filter(scenario: sim.Scenario, seed: int,
+                                            tmp_path: Path) -> None:
+    """Over real ptys the live vehicle gives the offline filter's result on the same data with
+    the same alignment (its timing, ordering and time mapping add nothing), and the gate beats
+    no gate by far."""
+    setup = _setup()
+    data = sim.generate(setup, scenario, seed)
+    lr = run_live(setup, data, tmp_path, seed=seed)
+    _check_records(lr)
+    j0 = int(lr.epochs[0]) - 1  # the alignment epoch
+    ref = offline_aligned(data, setup.filter, j0)
+    none = offline_aligned(data, setup.filter, j0, "none")
+    assert len(ref) == len(lr.pos_err)
+    assert rms(lr.pos_err) == pytest.approx(rms(ref), rel=0.01)
+    assert rms(lr.pos_err) < rms(none) / 3.0
+    on_disk = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
+    assert on_disk["ins"]["epochs"] == lr.summary["ins"]["epochs"]
+
+
+def test_a_telemetry_link_changes_little(tmp_path: Path) -> None:
+    """10 % of the IMU packets dropped, 1 % duplicated, bursts held 200 ms every 2 s and let go
+    in random order: the samples are put in order by their own stamps; the RMS moves by less
+    than 20 %."""
+    setup = _setup()
+    data = sim.generate(setup, "paper-single", 1)
+    clean = run_live(setup, data, tmp_path / "clean", seed=1)
+    bad = run_live(setup, data, tmp_path / "bad", seed=1,
+                   impair=LinkImpairment(drop=0.1, duplicate=0.01, burst_every_s=2.0,
+                                         burst_s=0.2, shuffle_bursts=True))
+    imu = bad.summary["ins"]["imu"]
+    assert imu["duplicates"] > 0
+    assert imu["out_of_order"] > 0
+    assert imu["integrated"] < clean.summary["ins"]["imu"]["integrated"] * 0.95
+    assert bad.summary["ins"]["resets"] == {}
+    assert list(bad.epochs) == list(clean.epochs)
+    assert abs(rms(bad.pos_err) / rms(clean.pos_err) - 1.0) < 0.2
+
+
+def test_raw_imu_integers_work_too(tmp_path: Path) -> None:
+    """RAW_IMU in ArduPilot's mG / mrad/s integers (quantised): still far better than no gate."""
+    setup = replace(sim.load_setup(None), sim=replace(_setup().sim, epochs=80))
+    data = sim.generate(setup, "paper-single", 2)
+    lr = run_live(setup, data, tmp_path, imu_message="RAW_IMU", seed=2)
+    assert lr.summary["ins"]["epochs"].get("ins", 0) >= 76
+    none = offline_aligned(data, setup.filter, int(lr.epochs[0]) - 1, "none")
+    assert rms(lr.pos_err) < rms(none) / 3.0
+
+
+def test_a_slow_imu_is_refused_and_the_rover_detector_runs(tmp_path: Path,
+                                                           caplog: pytest.LogCaptureFixture
+                                                           ) -> None:
+    """10 Hz IMU (below the 20 Hz minimum): refused once, said in the summary, every epoch
+    through the rover detector."""
+    setup = replace(sim.load_setup(None), sim=replace(_setup().sim, epochs=30))
+    data = sim.generate(setup, "clean", 1)
+    with caplog.at_level("ERROR", logger="fdi_bridge.insgnss"):
+        lr = run_live(setup, data, tmp_path, decimate=10, seed=1)
+    ins = lr.summary["ins"]
+    assert "below the 20 Hz" in ins["refused"]
+    assert ins["epochs"] == {"rover": 30}
+    assert {r["mode"] for r in lr.records} == {"rover"}
+    assert sum("below the 20 Hz" in r.getMessage() for r in caplog.records) == 1
+
+
+def test_the_example_config_is_the_live_vehicle() -> None:
+    bf = load_bridge_file(CONFIG_DIR / "insgnss-live-example.toml")
+    vehicle, recorder = vehicle_from_file(bf)
+    assert isinstance(vehicle, InsGnssVehicle)
+    assert recorder is None
+    assert [p.name for p in vehicle.ports()] == ["gps", "imu"]
+    assert vehicle.live.imu_message == "RAW_IMU"
+    assert "127.0.0.1" in vehicle.live.imu_url
+    assert vehicle.params.use_velocity is False
+
+
+def test_the_records_depend_on_the_data_not_on_arrival(tmp_path: Path) -> None:
+    """The same data played twice, once at 50x and once at 20x real time: byte-identical
+    epochs.jsonl (what a replay of the recording needs; the replay command itself does not
+    drive this vehicle yet)."""
+    setup = replace(sim.load_setup(None), sim=replace(_setup().sim, epochs=40))
+    data = sim.generate(setup, "paper-single", 3)
+    run_live(setup, data, tmp_path / "a", seed=3, speed=50.0)
+    run_live(setup, data, tmp_path / "b", seed=3, speed=20.0)
+    a = (tmp_path / "a" / "epochs.jsonl").read_bytes()
+    assert a.count(b"\n") == 40
+    assert a == (tmp_path / "b" / "epochs.jsonl").read_bytes()
+
+
+def test_gps_input_carries_the_filter_covariance(tmp_path: Path) -> None:
+    """GPS_INPUT over a real UDP socket on 127.0.0.1: one per epoch, the INS epochs with the
+    accuracies of the filter's covariance, larger on the epochs whose fix was replaced."""
+    setup = replace(sim.load_setup(None), sim=replace(_setup().sim, epochs=40))
+    data = sim.generate(setup, "paper-single", 1)
+    with MavEndpoint("udpin:127.0.0.1:0") as rx:
+        addr = rx.local_address
+        assert addr is not None
+        lr = run_live(setup, data, tmp_path, seed=1, mavlink_url=f"udpout:127.0.0.1:{addr[1]}")
+        got = []
+        while (msg := rx.recv(timeout_s=0.2)) is not None:
+            if msg.get_type() == "GPS_INPUT":
+                got.append(msg)
+    ins = [r for r in lr.records if r["mode"] == "ins"]
+    sent = lr.records[:len(got)]
+    assert len(got) >= 38  # the last epoch(s) at shutdown are recorded, not sent
+    acc = {round(float(m.time_week_ms)): m for m in got}
+    assert len(acc) == len(got)
+    pairs = [(r, g) for r, g in zip(sent, got, strict=True) if r["mode"] == "ins"]
+    assert len(pairs) >= len(ins) - 2
+    for r, g in pairs:
+        assert g.horiz_accuracy == pytest.approx(r["ins"]["acc_h_m"], rel=1e-5)
+        assert g.vert_accuracy == pytest.approx(r["ins"]["acc_v_m"], rel=1e-5)
+        la, lo, _ = r["ins"]["lla"]
+        assert g.lat == round(la * 1e7) and g.lon == round(lo * 1e7)
+    replaced = [g.horiz_accuracy for r, g in pairs if "replace" in r["ins"]["actions"][:2]]
+    accepted = [g.horiz_accuracy for r, g in pairs if r["ins"]["actions"][:2] == ["accept"] * 2]
+    assert replaced and accepted
+    # sqrt(P⁻ + R) against sqrt(P⁺) (the first epochs after the alignment have a large P⁺)
+    assert min(replaced) > 2.0 * float(np.median(accepted))
