@@ -137,5 +137,5 @@ def run(args: argparse.Namespace) -> int:
             print(fields([("stopped by", stopped, f"after {out['runtime']['elapsed_s']:.1f} s"),
                           ("tlog", out["router"].get("tlog_packets", "none"),
                            "packets" if "tlog_packets" in out["router"] else "")]))
-            print(router_table(out["router"]), flush=True)
+            print("\n" + router_table(out["router"]), flush=True)
     return 0
