@@ -5,13 +5,24 @@ know the receiver's fault periods."""
 from __future__ import annotations
 
 import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from firmware_host.cli import main
+from firmware_host.devtools import eval as eval_mod
+from firmware_host.devtools import insgnss_report
 from firmware_host.devtools.insgnss_sim import fault_spans
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_soak_prints_tables_and_json_on_request(capsys: pytest.CaptureFixture[str],
@@ -66,3 +77,68 @@ def test_fault_spans_cover_consecutive_faulty_epochs() -> None:
     faulty = np.array([0, 1, 1, 0, 0, 1, 0, 0, 1, 1], dtype=bool)
     assert fault_spans(t, faulty) == [(0.5, 2.5), (4.5, 5.5), (7.5, 9.5)]
     assert fault_spans(t, np.zeros(10, dtype=bool)) == []
+
+
+# ---------------------------------------------------------------- ^C writes what it has
+
+
+def test_eval_suite_interrupted_writes_what_it_has(monkeypatch: pytest.MonkeyPatch,
+                                                   tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """^C while the ROV part runs: the rover tables done so far, in eval.json/eval.md marked
+    partial, on stdout too; exit 130."""
+    def interrupted() -> Any:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(eval_mod, "rov_suite", interrupted)
+    rc = main(["eval", "--suite", "--quick", "--no-plots", "--duration", "60",
+               "--out", str(tmp_path)])
+    cap = capsys.readouterr()
+    assert rc == 130 and "interrupted: partial results written" in cap.err
+    doc = json.loads((tmp_path / "eval.json").read_text())
+    assert doc["partial"] is True and "rov" not in doc and "insgnss" not in doc
+    n = len(list(eval_mod.rover_cases(True)))
+    assert len(doc["rover"]) == n  # every rover case was done before the ROV part
+    md = (tmp_path / "eval.md").read_text()
+    assert md.startswith(f"**Partial (interrupted):** only what was done before ^C ({n} rover")
+    assert md.strip() in cap.out
+
+
+def test_insgnss_report_interrupted_keeps_the_runs_done(monkeypatch: pytest.MonkeyPatch,
+                                                        tmp_path: Path) -> None:
+    calls = {"n": 0}
+    real = insgnss_report.run_scenario
+
+    def third_interrupts(*a: Any, **kw: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real(*a, **kw)
+
+    monkeypatch.setattr(insgnss_report, "run_scenario", third_interrupts)
+    out = tmp_path / "report.md"
+    rc = main(["sim", "insgnss-report", "--seeds", "1,2,3", "--scenario", "paper-single",
+               "--out", str(out)])
+    text = out.read_text()
+    assert rc == 130
+    assert text.startswith(f"{insgnss_report.PARTIAL} only the runs done before ^C")
+    rows = [x for x in text.splitlines()
+            if re.match(r"\| insgnss-paper \| paper-single \| \d \|", x)]
+    assert len(rows) == 2  # seeds 1 and 2 of the 3-D RMS table; the third was interrupted
+
+
+def test_insgnss_report_sigint_as_a_user_sends_it(tmp_path: Path) -> None:
+    """A real SIGINT to the command: exit 130, the report file written and marked partial."""
+    out = tmp_path / "report.md"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.cli", "sim", "insgnss-report",
+                             "--seeds", "1,2,3,4,5", "--out", str(out)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    time.sleep(10.0)  # imports and the first runs (the whole report: about 2 min)
+    assert proc.poll() is None, "the report finished before the signal"
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert b"Traceback" not in stderr and b"partial report written" in stderr
+    text = out.read_text()
+    assert text.startswith(insgnss_report.PARTIAL) and stdout.decode() == text

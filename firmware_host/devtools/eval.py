@@ -28,6 +28,7 @@ import argparse
 import io
 import json
 import math
+import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
@@ -505,24 +506,39 @@ def run_suite(
 ) -> dict[str, Any]:
     """The whole suite; returns the JSON document (also written under ``out``).
     ``progress(label)`` after each rover case, the ROV and the INS/GNSS part (a progress bar:
-    :func:`suite_steps` of them)."""
+    :func:`suite_steps` of them). ^C: the document of the parts done so far, with
+    ``"partial": true`` (and a line saying so at the top of the Markdown), is written and
+    returned."""
     done = progress or (lambda label: None)
     cfg = cfg or load_config("rover")
     t0 = time.perf_counter()
     comps: list[RoverComparison] = []
     figures: list[str] = []
-    for case in rover_cases(quick):
-        data, truth = generate_case(case, duration_s, seed)
-        want_plot = plots and out is not None
-        comp, recs = compare_rover(case.name, data, truth, cfg, rate_hz=case.rate_hz,
-                                   keep_records=want_plot)
-        comps.append(comp)
-        if want_plot and out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            p = plot_comparison(comp, recs, truth, out / f"{case.name}.png")
-            if p is not None:
-                figures.append(str(p))
-        done(case.name)
+    rov: Any = None
+    ins: Any = None
+    partial = False
+    try:
+        for case in rover_cases(quick):
+            data, truth = generate_case(case, duration_s, seed)
+            want_plot = plots and out is not None
+            comp, recs = compare_rover(case.name, data, truth, cfg, rate_hz=case.rate_hz,
+                                       keep_records=want_plot)
+            comps.append(comp)
+            if want_plot and out is not None:
+                out.mkdir(parents=True, exist_ok=True)
+                p = plot_comparison(comp, recs, truth, out / f"{case.name}.png")
+                if p is not None:
+                    figures.append(str(p))
+            done(case.name)
+        if include_rov:
+            rov = rov_suite()
+            done("rov")
+        if include_insgnss:
+            ins = insgnss_suite(seed, ["paper-single"] if quick else None,
+                                [INSGNSS_EVAL_SEEDS[0] + seed - 1] if quick else None)
+            done("insgnss")
+    except KeyboardInterrupt:
+        partial = True
     doc: dict[str, Any] = {
         "config": cfg.name,
         "duration_s": duration_s,
@@ -531,18 +547,20 @@ def run_suite(
         "losses": [loss for c in comps for loss in c.losses()],
         "figures": figures,
     }
-    md = ["## Rover: every baseline beside each of our strategies (same data)", "",
-          rover_table(comps), ""]
-    if include_rov:
-        rov = rov_suite()
-        done("rov")
+    md = []
+    if partial:
+        doc["partial"] = True
+        md += [f"**Partial (interrupted):** only what was done before ^C "
+               f"({len(comps)} rover scenarios"
+               f"{', the ROV' if rov is not None else ''}"
+               f"{', INS/GNSS' if ins is not None else ''}).", ""]
+    md += ["## Rover: every baseline beside each of our strategies (same data)", "",
+           rover_table(comps), ""]
+    if rov is not None:
         doc["rov"] = rov
         md += ["## ROV compass (both plants, with and without a yaw gyro)", "", rov_table(rov),
                ""]
-    if include_insgnss:
-        ins = insgnss_suite(seed, ["paper-single"] if quick else None,
-                            [INSGNSS_EVAL_SEEDS[0] + seed - 1] if quick else None)
-        done("insgnss")
+    if ins is not None:
         doc["insgnss"] = ins
         md += ["## INS/GNSS (paper scenarios, default preset, held-out seeds)", "",
                insgnss_table(ins), ""]
@@ -636,14 +654,19 @@ def run(args: argparse.Namespace) -> int:
             doc = run_suite(args.out, quick=args.quick, plots=not args.no_plots,
                             duration_s=args.duration, seed=args.seed, cfg=cfg,
                             progress=bar.step)
+        status = 130 if doc.get("partial") else 0
+        if status:
+            where = f" ({args.out}, marked partial)" if args.out is not None else ""
+            print(f"fdi-bridge eval: interrupted: partial results written{where}",
+                  file=sys.stderr)
         if args.json:
             print(json.dumps(_clean({k: v for k, v in doc.items() if k != "markdown"})))
-            return 0
+            return status
         print(doc["markdown"])
         print(f"\n{len(doc['rover'])} rover scenarios in {doc['seconds']} s")
         if args.out is not None:
             print(f"wrote {args.out / 'eval.json'} and {args.out / 'eval.md'}")
-        return 0
+        return status
     if args.epochs is None:
         raise UsageError("give EPOCHS (and --truth), or --suite")
     epochs = args.epochs / "epochs.jsonl" if args.epochs.is_dir() else args.epochs
