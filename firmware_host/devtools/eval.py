@@ -35,6 +35,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
+
 from fdi.baselines import BASELINES, BaselineParams, make_baseline
 from fdi.errors import UsageError
 from fdi.geodesy import LocalFrame
@@ -47,7 +49,7 @@ from firmware_host.commands.checks import (
 )
 from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import load_input
-from firmware_host.devtools.insgnss_sim import load_setup, run_scenario
+from firmware_host.devtools.insgnss_sim import fault_spans, load_setup, run_scenario
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
@@ -459,7 +461,7 @@ def plot_comparison(c: RoverComparison, records: dict[str, list[dict[str, Any]]]
     frame = LocalFrame(ref["true_lat"], ref["true_lon"], ref["true_alt"])
     tr_by = {round(t["utc"] * 1000): t for t in truth}
     t0 = truth[0]["utc"]
-    fig, axes = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
+    series: dict[str, tuple[list[float], list[float]]] = {}
     for name, recs in records.items():
         ts, errs = [], []
         for r in recs:
@@ -469,23 +471,42 @@ def plot_comparison(c: RoverComparison, records: dict[str, list[dict[str, Any]]]
             te, tn, _ = frame.to_enu(tr["true_lat"], tr["true_lon"], tr["true_alt"])
             oe, on, _ = frame.to_enu(r["lat"], r["lon"], tr["true_alt"])
             ts.append(r["utc"] - t0)
-            errs.append(math.hypot(oe - te, on - tn))
-        style = "-" if name.startswith("ours") else "--"
-        axes[0].plot(ts, errs, style, lw=0.7, label=name)
-    faulty = [t["utc"] - t0 for t in truth if t["fault"]]
-    for ax in axes:
-        ax.plot(faulty, [0.0] * len(faulty), "k|", ms=8, alpha=0.3)
-    axes[0].set_ylabel("output horizontal error (m)")
-    axes[0].set_yscale("symlog", linthresh=0.5)
-    axes[0].legend(loc="upper right", fontsize=7, ncol=2)
-    axes[0].set_title(c.scenario)
-    names = [m.name for m in c.methods]
-    for i, name in enumerate(names):
+            errs.append(max(math.hypot(oe - te, on - tn), 1e-3))  # a log axis
+        series[name] = (ts, errs)
+    # Small multiples: one panel a method, the others faint behind it, the same axes.
+    names = list(series)
+    cols = 2
+    rows = max(1, math.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(12, 1.9 * rows + 1.2), sharex=True,
+                             sharey=True, squeeze=False)
+    tt = [t["utc"] - t0 for t in truth]
+    spans = fault_spans(np.asarray(tt, dtype=float),
+                        np.array([bool(t["fault"]) for t in truth]))
+    pad = (max(tt) - min(tt)) / 400 if tt else 0.0
+    for k, ax in enumerate(axes.flat):
+        if k >= len(names):
+            ax.set_visible(False)
+            continue
+        name = names[k]
+        for a, b in spans:
+            ax.axvspan(a - pad, b + pad, color="tab:red", alpha=0.15, lw=0)
+        for other in names:
+            if other != name:
+                ax.plot(*series[other], "-", color="0.75", lw=0.4)
+        ax.plot(*series[name], "-", color="tab:blue" if name.startswith("ours") else "tab:purple",
+                lw=0.7)
         flagged = [r["utc"] - t0 for r in records.get(name, []) if r.get("fault")]
-        axes[1].plot(flagged, [i] * len(flagged), "|", ms=6)
-    axes[1].set_yticks(range(len(names)), names, fontsize=7)
-    axes[1].set_xlabel("time (s)")
-    axes[1].set_title("flagged epochs (ticks at y = 0: injected faults)")
+        ax.plot(flagged, [0.04] * len(flagged), "|", color="k", ms=5,
+                transform=ax.get_xaxis_transform())  # at the bottom, whatever the y range
+        ax.set_yscale("log")
+        ax.set_title(name, fontsize=9, loc="left")
+        ax.grid(True, lw=0.3, alpha=0.5)
+        if k % cols == 0:
+            ax.set_ylabel("error (m)")
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    fig.suptitle(f"{c.scenario}: output horizontal error per method (others in grey); injected "
+                 "faults shaded, flagged epochs as ticks at the bottom", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
