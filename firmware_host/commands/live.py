@@ -200,7 +200,7 @@ def run_summary_text(s: dict[str, Any]) -> str:
     if isinstance(fs, dict):
         rows.append(("failsafe", _counts(fs), ""))
     if "steps" in s:
-        rows.append(("steps", s.get("steps"), f"{fmt(s.get('overruns', 0))} overruns"))
+        rows.append(("steps", s.get("steps"), f"({fmt(s.get('overruns', 0))} overruns)"))
     if "output_errors" in s:
         rows.append(("output errors", s.get("output_errors"), ""))
     rec = s.get("recorder")
