@@ -185,6 +185,7 @@ def run(args: argparse.Namespace) -> int:
         extra = ["--seconds", str(args.duration)] if args.duration else []
         margs = rparser.parse_args(["--config", str(bf.path), *extra])
         margs.bridge_file = bf  # read once
+        margs.json = bool(getattr(args, "json", False))
         return int(mavlink_cmd.run(margs))
     view = console_status(args.config, bf)
     try:
