@@ -127,11 +127,11 @@ def test_the_mavlink_command_runs_a_vehicle_file_on_the_runtime(
         '[mavlink]\n[mavlink.autopilot]\nurl = "udpin:127.0.0.1:0"\n'
         '[[mavlink.gcs]]\nurl = "udpin:127.0.0.1:0"\n'
         f'[rover]\nreconnect_max_s = 0.2\n[rover.port]\nurl = "{tmp_path / "no-gps"}"\n')
-    assert main(["mavlink", "--config", str(cfg), "--seconds", "1.0"]) == 0
+    assert main(["mavlink", "--config", str(cfg), "--seconds", "1.0", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["vehicle"] == "rover" and "autopilot" in summary["router"]
     assert summary["port"]["open_failures"] >= 5  # 0.1, 0.2, 0.2 ... s apart (5 s cap: 4)
     alone = tmp_path / "router.toml"
     alone.write_text(cfg.read_text().split("[rover]")[0])
-    assert main(["mavlink", "--config", str(alone), "--seconds", "0.3"]) == 0
-    assert set(json.loads(capsys.readouterr().out)) == {"router"}
+    assert main(["mavlink", "--config", str(alone), "--seconds", "0.3", "--json"]) == 0
+    assert set(json.loads(capsys.readouterr().out)) == {"router", "runtime"}

@@ -62,30 +62,46 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     ep = runs[True]
     t = [e["t"] for e in ep]
-    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    ax[0].plot(t, [e["e2"] for e in ep], label="e²(k)")
+    t_end = t[-1] if t else 130.0
+
+    def shade(a: Any) -> None:  # the injected drift: from its start to the end of the run
+        for k, f in enumerate(faults):
+            end = t_end if f.end_s is None else min(f.end_s, t_end)
+            a.axvspan(f.start_s, end, color="tab:red", alpha=0.12, lw=0,
+                      label="compass fault" if k == 0 else None)
+
+    def legend(a: Any) -> None:  # beside the axes: it covers no data
+        a.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+
+    fig, ax = plt.subplots(2, 1, figsize=(9.5, 6), sharex=True)
+    shade(ax[0])
+    # e² cannot be negative: a log axis (a zero floored at 1e-4 deg², below the plot's range).
+    ax[0].semilogy(t, [max(e["e2"], 1e-4) for e in ep], lw=0.9, label="e²(k)")
     ax[0].axhline(cfg.detector.theta_deg2, color="r", ls="--", label="θ")
-    ax[0].set_ylabel("deg²")
-    ax[0].set_yscale("symlog", linthresh=10.0)
-    ax[0].legend()
+    ax[0].set_ylabel("e² (deg²)")
+    ax[0].set_ylim(bottom=1e-3)
+    legend(ax[0])
+    shade(ax[1])
     ax[1].plot(t, [e["V"] for e in ep], label="V")
     ax[1].plot(t, [e["snr"] for e in ep], label="R(k)")
     ax[1].axhline(cfg.detector.n0, color="r", ls="--", label="n₀")
     ax[1].set_xlabel("t (s)")
-    ax[1].legend()
+    legend(ax[1])
     fig.suptitle(f"Fault detection, {args.drift:g}° drift at t = 70 s (cf. paper Fig. 3)")
+    fig.tight_layout()
     fig.savefig(out / "rov_fig3_detection.png", dpi=100)
     plt.close(fig)
-    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, ax = plt.subplots(2, 1, figsize=(9.5, 6), sharex=True)
     for i, ft in enumerate((False, True)):
         e_ = runs[ft]
+        shade(ax[i])
         ax[i].plot(t, [e["heading_meas"] for e in e_], lw=0.7, label="compass (faulty)")
         ax[i].plot(t, [e["heading_used"] for e in e_], lw=0.7, label="heading used")
         ax[i].plot(t, [e["heading_true"] for e in e_], lw=1.2, label="true heading")
-        ax[i].axhline(cfg.setpoint_deg, color="k", ls=":")
+        ax[i].axhline(cfg.setpoint_deg, color="k", ls=":", label="setpoint")
         ax[i].set_ylabel("deg")
         ax[i].set_title("with fault tolerance" if ft else "without fault tolerance")
-        ax[i].legend(fontsize=7)
+        legend(ax[i])
     ax[1].set_xlabel("t (s)")
     fig.tight_layout()
     fig.savefig(out / "rov_fig4_heading.png", dpi=100)

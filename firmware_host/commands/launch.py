@@ -21,6 +21,7 @@ from firmware_host.runtime.config import BridgeFile, bridge_config, rov_config, 
 from firmware_host.runtime.config_mavlink import MavlinkConfig
 from firmware_host.runtime.recorder import FlightRecorder
 from firmware_host.runtime.runner import Runner, make_recorder
+from firmware_host.runtime.status import StatusSink
 from firmware_host.runtime.vehicle import Vehicle
 
 log = logging.getLogger("fdi_bridge.run")
@@ -51,6 +52,7 @@ def run_file(
     bf: BridgeFile, *, mavlink: MavlinkConfig | None, out: Path | None = None,
     record: Path | None = None, duration_s: float | None = None,
     nmea_url: str | None = None, mavlink_url: str | None = None, note: str = "fdi-bridge run",
+    status: StatusSink | None = None,
 ) -> dict[str, Any]:
     """Run the vehicle of the file on the runtime until a signal or ``duration_s``; with
     ``mavlink``, behind the router. Returns the summary."""
@@ -60,7 +62,7 @@ def run_file(
         log.warning("--mavlink %s ignored: the [mavlink] router is the MAVLink output",
                     mavlink_url)
     runner = Runner(vehicle, out_dir=out, recorder=recorder, mavlink=mavlink,
-                    duration_s=duration_s)
+                    duration_s=duration_s, status=status)
     summary = runner.run()
     log.info("summary %s", json.dumps(_brief(summary), separators=(",", ":")))
     return summary

@@ -17,9 +17,11 @@ import argparse
 import dataclasses
 import json
 import logging
+import sys
 import time
 from typing import Any
 
+import firmware_host
 from fdi.errors import UsageError
 from firmware_host.commands.checks import (
     mavlink_url_arg,
@@ -29,6 +31,8 @@ from firmware_host.commands.checks import (
     positive_int,
 )
 from firmware_host.commands.launch import run_file
+from firmware_host.commands.live import console_status, router_table, run_summary_text
+from firmware_host.commands.tables import fields
 from firmware_host.devtools.router_bench import bench_forwarding
 from firmware_host.mavlink.params import ParamStore
 from firmware_host.mavlink.router import Router
@@ -56,6 +60,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bench-seconds", type=positive_float, default=5.0,
                         help="seconds per run")
     parser.add_argument("--bench-runs", type=positive_int, default=1, help="runs per rate")
+    parser.add_argument("--json", action="store_true",
+                        help="print the end summary as JSON (default: a table)")
 
 
 def config_from_args(args: argparse.Namespace, bf: BridgeFile) -> MavlinkConfig:
@@ -85,26 +91,51 @@ def run(args: argparse.Namespace) -> int:
     if bf is None and not (args.config or args.autopilot or args.gcs):
         raise UsageError("give --config FILE, or --autopilot URL and --gcs URL (the defaults "
                          "would route udpin:127.0.0.1:14555 <-> udpin:127.0.0.1:14550 silently)")
+    as_json = bool(getattr(args, "json", False))
     if bf is None:
         bf = load_bridge_file(args.config) if args.config else BridgeFile()
     cfg = config_from_args(args, bf)
     if bf.rover is not None or bf.rov is not None:  # the vehicle, on the runtime
-        summary = run_file(bf, mavlink=cfg, duration_s=args.seconds if args.seconds > 0 else None,
-                           note=f"fdi-bridge mavlink --config {args.config}")
-        print(json.dumps(summary))
+        view = console_status(args.config, bf)
+        try:
+            summary = run_file(bf, mavlink=cfg,
+                               duration_s=args.seconds if args.seconds > 0 else None,
+                               note=f"fdi-bridge mavlink --config {args.config}", status=view)
+        finally:
+            view.close()
+        if as_json:
+            print(json.dumps(summary))
+        else:
+            print(run_summary_text(summary), flush=True)
         return 0
     params = ParamStore(cfg.param_file or None)
     router = Router(cfg, params=params)
     log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
-    deadline = time.monotonic() + args.seconds if args.seconds > 0 else None
+    quiet = logging.getLogger().getEffectiveLevel() > logging.WARNING
+    if not quiet:
+        gcs = ", ".join(g.url for g in cfg.gcs) or "no ground station"
+        tlog = f", tlog in {cfg.tlog_dir}" if cfg.tlog_dir else ""
+        until = f"for {args.seconds:g} s" if args.seconds > 0 else "until ^C"
+        print(f"fdi-bridge {firmware_host.__version__}: routing {cfg.autopilot.url} <-> {gcs}"
+              f"{tlog}, {until}", file=sys.stderr, flush=True)
+    t0 = time.monotonic()
+    deadline = t0 + args.seconds if args.seconds > 0 else None
     out: dict[str, Any] = {}
+    stopped = "duration" if deadline is not None else "end"
     try:
         while deadline is None or time.monotonic() < deadline:
             router.poll(0.05)
     except KeyboardInterrupt:
-        pass
+        stopped = "SIGINT"
     finally:
         router.close()
         out["router"] = router.summary()
-        print(json.dumps(out))
+        out["runtime"] = {"stopped_by": stopped, "elapsed_s": round(time.monotonic() - t0, 3)}
+        if as_json:
+            print(json.dumps(out))
+        else:
+            print(fields([("stopped by", stopped, f"after {out['runtime']['elapsed_s']:.1f} s"),
+                          ("tlog", out["router"].get("tlog_packets", "none"),
+                           "packets" if "tlog_packets" in out["router"] else "")]))
+            print("\n" + router_table(out["router"]), flush=True)
     return 0

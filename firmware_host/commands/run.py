@@ -30,6 +30,7 @@ Every vehicle runs on the one runtime, :class:`~firmware_host.runtime.runner.Run
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import threading
 import time
@@ -46,10 +47,16 @@ from firmware_host.commands.checks import (
     positive_float,
 )
 from firmware_host.commands.launch import run_file
+from firmware_host.commands.live import console_status, run_summary_text
 from firmware_host.rov.vehicle import OutlandRovVehicle
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.rover.vehicle import RoverVehicle
-from firmware_host.runtime.config import BridgeConfig, BridgeFile, load_bridge_file, rov_config
+from firmware_host.runtime.config import (
+    BridgeConfig,
+    BridgeFile,
+    load_bridge_file,
+    rov_config,
+)
 from firmware_host.runtime.config import Vehicle as Vehicle
 from firmware_host.runtime.config import resolve_config_path as resolve_config_path
 from firmware_host.runtime.config import vehicle_of as vehicle_of
@@ -166,6 +173,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="flight recorder directory (overrides [recorder] dir)")
     parser.add_argument("--duration", type=positive_float, default=None,
                         help="stop after this many seconds (default: until SIGTERM or ^C)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the end summary as JSON (default: a table)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -176,8 +185,23 @@ def run(args: argparse.Namespace) -> int:
         extra = ["--seconds", str(args.duration)] if args.duration else []
         margs = rparser.parse_args(["--config", str(bf.path), *extra])
         margs.bridge_file = bf  # read once
+        margs.json = bool(getattr(args, "json", False))
         return int(mavlink_cmd.run(margs))
-    run_file(bf, mavlink=bf.mavlink, out=args.out, record=args.record, duration_s=args.duration,
-             nmea_url=args.nmea_out, mavlink_url=args.mavlink,
-             note=f"fdi-bridge run --config {args.config}")
+    view = console_status(args.config, bf)
+    try:
+        summary = run_file(bf, mavlink=bf.mavlink, out=args.out, record=args.record,
+                           duration_s=args.duration, nmea_url=args.nmea_out,
+                           mavlink_url=args.mavlink, status=view,
+                           note=f"fdi-bridge run --config {args.config}")
+    finally:
+        view.close()
+    print_run_summary(summary, as_json=bool(getattr(args, "json", False)))
     return 0
+
+
+def print_run_summary(summary: dict[str, Any], *, as_json: bool) -> None:
+    """The end summary on stdout: a table, or the summary as JSON with ``--json``."""
+    if as_json:
+        print(json.dumps(summary))
+    else:
+        print(run_summary_text(summary), flush=True)

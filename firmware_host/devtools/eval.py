@@ -28,11 +28,14 @@ import argparse
 import io
 import json
 import math
+import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
+
+import numpy as np
 
 from fdi.baselines import BASELINES, BaselineParams, make_baseline
 from fdi.errors import UsageError
@@ -46,7 +49,7 @@ from firmware_host.commands.checks import (
 )
 from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import load_input
-from firmware_host.devtools.insgnss_sim import load_setup, run_scenario
+from firmware_host.devtools.insgnss_sim import fault_spans, load_setup, run_scenario
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
@@ -458,7 +461,7 @@ def plot_comparison(c: RoverComparison, records: dict[str, list[dict[str, Any]]]
     frame = LocalFrame(ref["true_lat"], ref["true_lon"], ref["true_alt"])
     tr_by = {round(t["utc"] * 1000): t for t in truth}
     t0 = truth[0]["utc"]
-    fig, axes = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
+    series: dict[str, tuple[list[float], list[float]]] = {}
     for name, recs in records.items():
         ts, errs = [], []
         for r in recs:
@@ -468,23 +471,42 @@ def plot_comparison(c: RoverComparison, records: dict[str, list[dict[str, Any]]]
             te, tn, _ = frame.to_enu(tr["true_lat"], tr["true_lon"], tr["true_alt"])
             oe, on, _ = frame.to_enu(r["lat"], r["lon"], tr["true_alt"])
             ts.append(r["utc"] - t0)
-            errs.append(math.hypot(oe - te, on - tn))
-        style = "-" if name.startswith("ours") else "--"
-        axes[0].plot(ts, errs, style, lw=0.7, label=name)
-    faulty = [t["utc"] - t0 for t in truth if t["fault"]]
-    for ax in axes:
-        ax.plot(faulty, [0.0] * len(faulty), "k|", ms=8, alpha=0.3)
-    axes[0].set_ylabel("output horizontal error (m)")
-    axes[0].set_yscale("symlog", linthresh=0.5)
-    axes[0].legend(loc="upper right", fontsize=7, ncol=2)
-    axes[0].set_title(c.scenario)
-    names = [m.name for m in c.methods]
-    for i, name in enumerate(names):
+            errs.append(max(math.hypot(oe - te, on - tn), 1e-3))  # a log axis
+        series[name] = (ts, errs)
+    # Small multiples: one panel a method, the others faint behind it, the same axes.
+    names = list(series)
+    cols = 2
+    rows = max(1, math.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(12, 1.9 * rows + 1.2), sharex=True,
+                             sharey=True, squeeze=False)
+    tt = [t["utc"] - t0 for t in truth]
+    spans = fault_spans(np.asarray(tt, dtype=float),
+                        np.array([bool(t["fault"]) for t in truth]))
+    pad = (max(tt) - min(tt)) / 400 if tt else 0.0
+    for k, ax in enumerate(axes.flat):
+        if k >= len(names):
+            ax.set_visible(False)
+            continue
+        name = names[k]
+        for a, b in spans:
+            ax.axvspan(a - pad, b + pad, color="tab:red", alpha=0.15, lw=0)
+        for other in names:
+            if other != name:
+                ax.plot(*series[other], "-", color="0.75", lw=0.4)
+        ax.plot(*series[name], "-", color="tab:blue" if name.startswith("ours") else "tab:purple",
+                lw=0.7)
         flagged = [r["utc"] - t0 for r in records.get(name, []) if r.get("fault")]
-        axes[1].plot(flagged, [i] * len(flagged), "|", ms=6)
-    axes[1].set_yticks(range(len(names)), names, fontsize=7)
-    axes[1].set_xlabel("time (s)")
-    axes[1].set_title("flagged epochs (ticks at y = 0: injected faults)")
+        ax.plot(flagged, [0.04] * len(flagged), "|", color="k", ms=5,
+                transform=ax.get_xaxis_transform())  # at the bottom, whatever the y range
+        ax.set_yscale("log")
+        ax.set_title(name, fontsize=9, loc="left")
+        ax.grid(True, lw=0.3, alpha=0.5)
+        if k % cols == 0:
+            ax.set_ylabel("error (m)")
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    fig.suptitle(f"{c.scenario}: output horizontal error per method (others in grey); injected "
+                 "faults shaded, flagged epochs as ticks at the bottom", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -505,24 +527,39 @@ def run_suite(
 ) -> dict[str, Any]:
     """The whole suite; returns the JSON document (also written under ``out``).
     ``progress(label)`` after each rover case, the ROV and the INS/GNSS part (a progress bar:
-    :func:`suite_steps` of them)."""
+    :func:`suite_steps` of them). ^C: the document of the parts done so far, with
+    ``"partial": true`` (and a line saying so at the top of the Markdown), is written and
+    returned."""
     done = progress or (lambda label: None)
     cfg = cfg or load_config("rover")
     t0 = time.perf_counter()
     comps: list[RoverComparison] = []
     figures: list[str] = []
-    for case in rover_cases(quick):
-        data, truth = generate_case(case, duration_s, seed)
-        want_plot = plots and out is not None
-        comp, recs = compare_rover(case.name, data, truth, cfg, rate_hz=case.rate_hz,
-                                   keep_records=want_plot)
-        comps.append(comp)
-        if want_plot and out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            p = plot_comparison(comp, recs, truth, out / f"{case.name}.png")
-            if p is not None:
-                figures.append(str(p))
-        done(case.name)
+    rov: Any = None
+    ins: Any = None
+    partial = False
+    try:
+        for case in rover_cases(quick):
+            data, truth = generate_case(case, duration_s, seed)
+            want_plot = plots and out is not None
+            comp, recs = compare_rover(case.name, data, truth, cfg, rate_hz=case.rate_hz,
+                                       keep_records=want_plot)
+            comps.append(comp)
+            if want_plot and out is not None:
+                out.mkdir(parents=True, exist_ok=True)
+                p = plot_comparison(comp, recs, truth, out / f"{case.name}.png")
+                if p is not None:
+                    figures.append(str(p))
+            done(case.name)
+        if include_rov:
+            rov = rov_suite()
+            done("rov")
+        if include_insgnss:
+            ins = insgnss_suite(seed, ["paper-single"] if quick else None,
+                                [INSGNSS_EVAL_SEEDS[0] + seed - 1] if quick else None)
+            done("insgnss")
+    except KeyboardInterrupt:
+        partial = True
     doc: dict[str, Any] = {
         "config": cfg.name,
         "duration_s": duration_s,
@@ -531,18 +568,20 @@ def run_suite(
         "losses": [loss for c in comps for loss in c.losses()],
         "figures": figures,
     }
-    md = ["## Rover: every baseline beside each of our strategies (same data)", "",
-          rover_table(comps), ""]
-    if include_rov:
-        rov = rov_suite()
-        done("rov")
+    md = []
+    if partial:
+        doc["partial"] = True
+        md += [f"**Partial (interrupted):** only what was done before ^C "
+               f"({len(comps)} rover scenarios"
+               f"{', the ROV' if rov is not None else ''}"
+               f"{', INS/GNSS' if ins is not None else ''}).", ""]
+    md += ["## Rover: every baseline beside each of our strategies (same data)", "",
+           rover_table(comps), ""]
+    if rov is not None:
         doc["rov"] = rov
         md += ["## ROV compass (both plants, with and without a yaw gyro)", "", rov_table(rov),
                ""]
-    if include_insgnss:
-        ins = insgnss_suite(seed, ["paper-single"] if quick else None,
-                            [INSGNSS_EVAL_SEEDS[0] + seed - 1] if quick else None)
-        done("insgnss")
+    if ins is not None:
         doc["insgnss"] = ins
         md += ["## INS/GNSS (paper scenarios, default preset, held-out seeds)", "",
                insgnss_table(ins), ""]
@@ -636,14 +675,19 @@ def run(args: argparse.Namespace) -> int:
             doc = run_suite(args.out, quick=args.quick, plots=not args.no_plots,
                             duration_s=args.duration, seed=args.seed, cfg=cfg,
                             progress=bar.step)
+        status = 130 if doc.get("partial") else 0
+        if status:
+            where = f" ({args.out}, marked partial)" if args.out is not None else ""
+            print(f"fdi-bridge eval: interrupted: partial results written{where}",
+                  file=sys.stderr)
         if args.json:
             print(json.dumps(_clean({k: v for k, v in doc.items() if k != "markdown"})))
-            return 0
+            return status
         print(doc["markdown"])
         print(f"\n{len(doc['rover'])} rover scenarios in {doc['seconds']} s")
         if args.out is not None:
             print(f"wrote {args.out / 'eval.json'} and {args.out / 'eval.md'}")
-        return 0
+        return status
     if args.epochs is None:
         raise UsageError("give EPOCHS (and --truth), or --suite")
     epochs = args.epochs / "epochs.jsonl" if args.epochs.is_dir() else args.epochs

@@ -105,15 +105,20 @@ def range_verdict(pos: dict[str, dict[str, float]], axis: str) -> str:
 def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
            sweep: Sequence[float], scenarios: Sequence[Scenario] = PAPER_SCENARIOS,
            progress: Callable[[str], None] | None = None) -> str:
-    """The Markdown; ``progress(label)`` after each run (a progress bar)."""
+    """The Markdown; ``progress(label)`` after each run (a progress bar). ^C: the tables of
+    the runs done so far, the text starting with :data:`PARTIAL` (the command exits 130)."""
     done = progress or (lambda label: None)
     rows: list[tuple[str, str, int, dict[str, Any]]] = []
-    for name, setup in presets:
-        for scenario in scenarios:
-            for seed in seeds:
-                summary, _data, _runs = run_scenario(setup, scenario, seed)
-                done(f"{name} {scenario} seed {seed}")
-                rows.append((name, scenario, seed, summary["methods"]))
+    interrupted = False
+    try:
+        for name, setup in presets:
+            for scenario in scenarios:
+                for seed in seeds:
+                    summary, _data, _runs = run_scenario(setup, scenario, seed)
+                    done(f"{name} {scenario} seed {seed}")
+                    rows.append((name, scenario, seed, summary["methods"]))
+    except KeyboardInterrupt:
+        interrupted = True
     out = ["### 3-D position RMS (m), every seed", "",
            "| preset | scenario | seed | none | downweight | replace | three_zone | fault_state "
            "| three_zone max horiz. (m) | fault_state max horiz. (m) |",
@@ -145,24 +150,32 @@ def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
         cells = " | ".join(range_verdict(tz, a) for a in AXES)
         out.append(f"| {name} | {seed} | {cells} "
                    f"| {none['up']['min']:.2f} … {none['up']['max']:.2f} |")
-    if sweep:
+    if sweep and not interrupted:
         name, setup = presets[0]
         out += ["", f"### paper-deviation up range against the vertical GNSS noise ({name})", "",
                 "| σ up (m) | seed | three_zone up | no robust filtering, up "
                 "| three_zone up RMS | none up RMS |",
                 "|---:|---|---|---|---:|---:|"]
-        for sv in sweep:
-            for seed in seeds:
-                summary, _d, _r = run_scenario(with_sigma_v(setup, sv), "paper-deviation", seed,
-                                               ("none", "three_zone"))
-                done(f"sigma_v {sv:g} seed {seed}")
-                tz = summary["methods"]["three_zone"]["position_m"]
-                none = summary["methods"]["none"]["position_m"]
-                out.append(f"| {sv:g} | {seed} | {range_verdict(tz, 'up')} "
-                           f"| {none['up']['min']:.2f} … {none['up']['max']:.2f} "
-                           f"| {tz['up']['rms']:.2f} | {none['up']['rms']:.2f} |")
+        try:
+            for sv in sweep:
+                for seed in seeds:
+                    summary, _d, _r = run_scenario(with_sigma_v(setup, sv), "paper-deviation",
+                                                   seed, ("none", "three_zone"))
+                    done(f"sigma_v {sv:g} seed {seed}")
+                    tz = summary["methods"]["three_zone"]["position_m"]
+                    none = summary["methods"]["none"]["position_m"]
+                    out.append(f"| {sv:g} | {seed} | {range_verdict(tz, 'up')} "
+                               f"| {none['up']['min']:.2f} … {none['up']['max']:.2f} "
+                               f"| {tz['up']['rms']:.2f} | {none['up']['rms']:.2f} |")
+        except KeyboardInterrupt:
+            interrupted = True
+    if interrupted:
+        out = [f"{PARTIAL} only the runs done before ^C are in these tables "
+               f"({len(rows)} scenario runs).", "", *out]
     return "\n".join(out) + "\n"
 
+
+PARTIAL = "**Partial (interrupted):**"
 
 FAULT_ROWS = slice(9, 200)  # paper-continuous: epochs 10..200 (pos_err row k is epoch k + 1)
 OTHER_SCENARIOS: tuple[Scenario, ...] = ("paper-random", "paper-single", "paper-deviation")
@@ -378,4 +391,9 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         args.out.write_text(text, encoding="utf-8")
     sys.stdout.write(text)
+    if text.startswith(PARTIAL):
+        where = f" ({args.out}, marked partial)" if args.out is not None else ""
+        print(f"fdi-bridge sim insgnss-report: interrupted: partial report written{where}",
+              file=sys.stderr)
+        return 130
     return 0

@@ -55,6 +55,7 @@ from fdi.insgnss import (
 )
 from fdi.three_zone import Action, Zone
 from firmware_host.commands.checks import input_file_arg, output_dir_arg
+from firmware_host.commands.tables import table
 from firmware_host.runtime.config import CONFIG_DIR as CONFIG_DIR
 from firmware_host.runtime.config import insgnss_setup, load_bridge_file
 from firmware_host.runtime.config_insgnss import InsGnssSetup as InsGnssSetup
@@ -423,8 +424,28 @@ def run_scenario(setup: InsGnssSetup, scenario: Scenario, seed: int,
     return summarize(data, runs, scenario, seed, setup), data, runs
 
 
-def write_plots(out: Path, scenario: str, runs: dict[str, MethodRun]) -> list[Path]:
-    """PNGs like the paper's Fig. 9–18 (errors against time per method); [] without matplotlib."""
+def fault_spans(t: FloatArray, faulty: npt.NDArray[np.bool_]) -> list[tuple[float, float]]:
+    """The time spans of consecutive faulty epochs (each epoch covers half a period either
+    side), for shading the plots."""
+    spans: list[tuple[float, float]] = []
+    if len(t) == 0:
+        return spans
+    half = 0.5 * float(np.median(np.diff(t))) if len(t) > 1 else 0.5
+    start: float | None = None
+    for k in range(len(t)):
+        if faulty[k] and start is None:
+            start = float(t[k]) - half
+        if start is not None and (not faulty[k] or k == len(t) - 1):
+            end = float(t[k]) + half if faulty[k] else float(t[k - 1]) + half
+            spans.append((start, end))
+            start = None
+    return spans
+
+
+def write_plots(out: Path, scenario: str, runs: dict[str, MethodRun],
+                data: NavData | None = None) -> list[Path]:
+    """PNGs like the paper's Fig. 9–18 (errors against time per method), the receiver's fault
+    periods shaded (with ``data``); [] without matplotlib."""
     try:
         import matplotlib
 
@@ -433,20 +454,30 @@ def write_plots(out: Path, scenario: str, runs: dict[str, MethodRun]) -> list[Pa
     except ImportError:
         return []
     files = []
+    spans: list[tuple[float, float]] = []
+    if data is not None:
+        spans = fault_spans(data.gnss_t[1:], np.any(data.fault[1:] != 0, axis=1))
     for kind, unit in (("position", "m"), ("velocity", "m/s")):
-        fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+        fig, axes = plt.subplots(3, 1, figsize=(9, 8.4), sharex=True)
         for i, axis in enumerate(("east", "north", "up")):
             ax = axes[i]
+            for k, (a, b) in enumerate(spans):
+                ax.axvspan(a, b, color="tab:red", alpha=0.15, lw=0,
+                           label="GNSS fault" if k == 0 else None)
             for name, r in runs.items():
                 err = r.pos_err if kind == "position" else r.vel_err
                 ax.plot(r.t, err[:, i], lw=0.8, label=name)
             ax.set_ylabel(f"{axis} error / {unit}")
             ax.grid(True, lw=0.3)
-        axes[0].legend(loc="upper right", fontsize=8, ncol=4)
-        axes[0].set_title(f"{scenario}: {kind} error (estimate − truth)")
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.suptitle(f"{scenario}: {kind} error (estimate − truth)"
+                     + (", GNSS fault periods shaded" if spans else ""))
+        # The legend in its own row above the plots: it covers no data.
+        fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.96),
+                   ncol=len(labels), fontsize=8, frameon=False)
         axes[-1].set_xlabel("t / s")
         path = out / f"{kind}_errors.png"
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0, 1, 0.94))
         fig.savefig(path, dpi=110)
         plt.close(fig)
         files.append(path)
@@ -499,6 +530,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"preset TOML (default {PAPER_PRESET.relative_to(CONFIG_DIR.parent)})",
     )
     parser.add_argument("--no-plots", action="store_true", help="do not write PNGs")
+    parser.add_argument("--json", action="store_true",
+                        help="print summary.json instead of the result table")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -508,14 +541,31 @@ def run(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ConfigError(str(out), "--out", "a writable directory", str(err)) from err
-    summary, _data, runs = run_scenario(setup, args.scenario, args.seed)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    pngs = [] if args.no_plots else write_plots(out, args.scenario, runs)
-    for name, m in summary["methods"].items():
-        p = m["position_m"]
-        log.info(
-            "%s %-10s RMS E %.2f N %.2f U %.2f m", args.scenario, name,
-            p["east"]["rms"], p["north"]["rms"], p["up"]["rms"],
-        )
-    log.info("wrote %s%s", out / "summary.json", f" and {len(pngs)} PNGs" if pngs else "")
+    summary, data, runs = run_scenario(setup, args.scenario, args.seed)
+    text = json.dumps(summary, indent=2) + "\n"
+    (out / "summary.json").write_text(text, encoding="utf-8")
+    pngs = [] if args.no_plots else write_plots(out, args.scenario, runs, data)
+    if getattr(args, "json", False):
+        print(text, end="")
+        return 0
+    print(result_text(summary))
+    written = [out / "summary.json", *pngs]
+    print("wrote " + ", ".join(str(p) for p in written))
     return 0
+
+
+def result_text(summary: dict[str, Any]) -> str:
+    """``sim insgnss``'s result for a human: the run, then one row a method (position RMS per
+    axis and 3-D, the worst horizontal error, velocity RMS, epochs flagged)."""
+    head = (f"{summary['scenario']}, seed {summary['seed']}: {summary['epochs']} GNSS epochs, "
+            f"{summary['fault_epochs']} with a fault")
+    rows = []
+    for name, m in summary["methods"].items():
+        p, v = m["position_m"], m["velocity_m_s"]
+        vrms = math.sqrt(sum(v[a]["rms"] ** 2 for a in ("east", "north", "up")))
+        rows.append([name, p["east"]["rms"], p["north"]["rms"], p["up"]["rms"],
+                     m["position_rms_3d_m"], m["max_horizontal_error_m"], vrms,
+                     m["fault_epochs_flagged"], m["clean_epochs_flagged"]])
+    return head + "\n\n" + table(
+        ["method", "RMS E m", "RMS N m", "RMS U m", "RMS 3D m", "max horiz m", "vel RMS m/s",
+         "faulty flagged", "clean flagged"], rows)

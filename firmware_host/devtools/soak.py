@@ -48,6 +48,8 @@ from drivers.outland.framecodec import load_protocol
 from drivers.transport import SerialSettings
 from fdi.errors import PortError
 from firmware_host.commands.checks import output_dir_arg, output_file_arg, positive_float
+from firmware_host.commands.progress import Progress
+from firmware_host.commands.tables import fields, fmt, table
 from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.rov.config import load_rov_config, protocol_path
@@ -405,22 +407,76 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="keep the flight recordings here (default: a temporary directory)")
     parser.add_argument("--out", type=output_file_arg, default=None,
                         help="write the figures as JSON to this file")
+    parser.add_argument("--json", action="store_true",
+                        help="print the figures as JSON (default: tables)")
+
+
+def _counts(d: Any) -> str:
+    if not isinstance(d, dict) or not d:
+        return "-"
+    return ", ".join(f"{k} {fmt(v)}" for k, v in d.items())
+
+
+def _spans(spans: Any) -> str:
+    return ", ".join(f"{fmt(a)}-{fmt(b)} s" for a, b in spans) if spans else "-"
+
+
+def soak_text(r: dict[str, Any]) -> str:
+    """The soak's figures for a human: the verdict, one column a vehicle, the recorder, the
+    memory and the byte-accounting checks."""
+    ro, rv = r["rover"], r["rov"]
+    rp, vp = ro["port"], rv["port"]
+    verdict = "ok" if r["ok"] else "FAILED"
+    head = (f"soak: {fmt(r['simulated_s'] / 60)} min simulated in {fmt(r.get('real_s'))} s, "
+            f"seed {r['seed']}: {verdict}")
+    rows: list[list[Any]] = [
+        ["epochs / steps", ro["epochs"], rv["steps"], ""],
+        ["faults", ro["faults"], len(rv["faults"]), "rover: epochs flagged; rov: injected"],
+        ["alarms", ro["alarms"], None, ""],
+        ["actions", _counts(ro["actions"]), _counts(rv["actions"]), ""],
+        ["bytes generated", ro["bytes_generated"], rv["bytes_generated"], ""],
+        ["bytes read", rp["bytes_rx"], vp["bytes_rx"], ""],
+        ["bytes lost unplugged", ro["bytes_lost_unplugged"], rv["bytes_lost_unplugged"], ""],
+        ["unplugged", _spans(ro["unplugged"]), _spans(rv["unplugged"]), ""],
+        ["port losses / reopens", f"{rp['losses']} / {rp['reopens']}",
+         f"{vp['losses']} / {vp['reopens']}", ""],
+        ["noise injected", _counts(ro["noise"]), _counts(rv["noise"]), ""],
+        ["input rejected", ro["input"].get("rejected_total"),
+         sum(rv["rejects"].values()), "lines / frames"],
+        ["failsafe", _counts(ro["failsafe"]),
+         f"episodes {rv['failsafe_episodes']}, neutral {rv['neutral_episodes']}", ""],
+        ["overruns", ro["overruns"], rv["overruns"], ""],
+        ["worst step", ro["worst_step_ms"], rv["worst_step_ms"], "ms"],
+    ]
+    rec, mem = r["recorder"], r["memory"]
+    recorder = fields([
+        ("recorder records", rec.get("records"), f"in {fmt(rec.get('files_opened'))} files"),
+        ("write errors", rec.get("write_errors"), ""),
+        ("lost bytes", rec.get("lost_bytes"), ""),
+        ("max flush", rec.get("max_flush_ms"), "ms"),
+        ("memory", mem["rss_end_mb"], f"MB at the end ({fmt(mem['growth_mb'])} MB growth "
+                                      "after warm-up, limit 10)"),
+    ])
+    checks = table(["check", "result"],
+                   [[name, "pass" if ok else "FAIL"] for name, ok in r["checks"].items()])
+    return "\n\n".join([head, table(["", "rover", "rov", "unit"], rows), recorder, checks])
 
 
 def run(args: argparse.Namespace) -> int:
-    import sys
-
     t0 = time.perf_counter()
+    with Progress(max(1, round(args.minutes)), "soak", unit="min") as bar:
+        done = [0]
 
-    def progress(t: float) -> None:
-        print(f"  simulated {t / 60:.0f} min, {time.perf_counter() - t0:.0f} s real",
-              file=sys.stderr)
+        def progress(t: float) -> None:
+            minute = int(t // 60)
+            bar.step(n=max(0, minute - done[0]))
+            done[0] = max(done[0], minute)
 
-    result = run_soak(args.minutes, seed=args.seed, record_dir=args.record_dir,
-                      progress=progress)
+        result = run_soak(args.minutes, seed=args.seed, record_dir=args.record_dir,
+                          progress=progress)
     result["real_s"] = round(time.perf_counter() - t0, 1)
     text = json.dumps(result, indent=2)
-    print(text)
+    print(text if args.json else soak_text(result))
     if args.out is not None:
         args.out.write_text(text + "\n")
     return 0 if result["ok"] else 1

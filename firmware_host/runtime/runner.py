@@ -19,7 +19,11 @@ The runner owns, once for every vehicle and every mode:
   closed here), else from the vehicle's own URL, tapped into the recorder;
 * **files**: ``epochs.jsonl`` and ``summary.json`` (:mod:`firmware_host.runtime.records`);
 * **failsafes**: the vehicle's ``check`` (silence watchdogs) on every iteration, whatever the
-  input does.
+  input does;
+* **status**: with a ``status`` sink (:mod:`firmware_host.runtime.status`), a
+  :class:`~firmware_host.runtime.status.Banner` once everything is open and a
+  :class:`~firmware_host.runtime.status.Snapshot` every ``status_period_s`` (epochs, faults,
+  alarms, each port's state and byte rate, the last record's age); the runner prints nothing.
 
 ``run()`` is ``start()``, the paced loop, ``close()``. The soak drives two runners by hand on
 one fake clock with ``start``/``step``/``close``.
@@ -46,6 +50,7 @@ from firmware_host.runtime.loop import FixedRateLoop
 from firmware_host.runtime.mavout import MavlinkOutput, open_mavlink_output, router_output
 from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
 from firmware_host.runtime.records import EpochLog
+from firmware_host.runtime.status import Banner, PortInfo, PortStatus, Snapshot, StatusSink
 from firmware_host.runtime.vehicle import Context, PortSpec, Tap, Vehicle
 
 log = logging.getLogger("fdi_bridge.runner")
@@ -97,6 +102,8 @@ class Runner:
         sleep: Sleep | None = None,
         opener: Opener | None = None,
         handle_signals: bool = True,
+        status: StatusSink | None = None,
+        status_period_s: float = 1.0,
     ) -> None:
         self.vehicle = vehicle
         self.out_dir = out_dir
@@ -123,6 +130,12 @@ class Runner:
         self._closed = False
         self._summary: dict[str, Any] = {}
         self.t0 = 0.0
+        self.status = status
+        self.status_period_s = status_period_s
+        self.records = 0
+        self._last_record_t: float | None = None
+        self._next_status = 0.0
+        self._status_prev: tuple[float, dict[str, tuple[int, int]]] | None = None
 
     # ------------------------------------------------------------------ control
 
@@ -212,16 +225,92 @@ class Runner:
         v.start(ctx)
         if self._own_router and self.router is not None:
             self.router.start()
+        if self.status is not None:
+            self.status.banner(self.banner())
+            self._next_status = self.t0 + self.status_period_s
 
     def step(self, t: float | None = None) -> int:
         """One iteration: the vehicle's step (at ``t``, default now), its failsafes, the
         recorder's flush when due."""
         self.iterations += 1
         n = self.vehicle.step(self.clock() if t is None else t)
-        self.vehicle.check(self.clock())
+        now = self.clock()
+        if n > 0:
+            self.records += n
+            self._last_record_t = now
+        self.vehicle.check(now)
         if self.recorder is not None:
             self.recorder.poll()
+        if self.status is not None and now >= self._next_status:
+            self._next_status = now + self.status_period_s
+            self.status.update(self.snapshot(now))
         return n
+
+    # ------------------------------------------------------------------ status
+
+    def banner(self) -> Banner:
+        """What is open: the vehicle, its ports, its outputs, the recorder, the router."""
+        v = self.vehicle
+        ports = tuple(PortInfo(name, p.settings.url, p.settings.baudrate)
+                      for name, p in self.ports.items())
+        outputs: list[str] = []
+        nmea = getattr(v, "nmea_url", None)  # the rover's corrected NMEA (duck-typed)
+        if nmea:
+            outputs.append(f"NMEA {nmea}")
+        router: list[str] = []
+        if self.router is not None and self.mavlink_cfg is not None:
+            cfg = self.mavlink_cfg
+            outputs.append("MAVLink through the router")
+            router.append(f"autopilot {cfg.autopilot.url}")
+            router += [f"gcs {g.url}" for g in cfg.gcs]
+            if cfg.tlog_dir:
+                router.append(f"tlog {cfg.tlog_dir}")
+        elif self.router is not None:
+            outputs.append("MAVLink through the router")
+        elif self._own_output:
+            mav = v.mavlink()
+            if mav is not None:
+                outputs.append(f"MAVLink {mav.url}")
+        elif self.mavlink_output is not None:
+            outputs.append("MAVLink (the caller's output)")
+        rec = self.recorder
+        return Banner(vehicle=v.name, ports=ports, outputs=tuple(outputs),
+                      recorder=None if rec is None else str(rec.dir),
+                      router=tuple(router),
+                      out_dir=None if self.out_dir is None else str(self.out_dir),
+                      duration_s=self.duration_s)
+
+    def snapshot(self, now: float | None = None) -> Snapshot:
+        """The live status now; byte rates since the previous snapshot."""
+        now = self.clock() if now is None else now
+        counts = {name: (p.bytes_rx, p.bytes_tx) for name, p in self.ports.items()}
+        prev_t, prev = self._status_prev if self._status_prev is not None else (self.t0, {})
+        dt = max(now - prev_t, 1e-9)
+        ports = []
+        for name, p in self.ports.items():
+            rx0, tx0 = prev.get(name, (0, 0))
+            rx, tx = counts[name]
+            down = getattr(p, "_down_since", None)
+            ports.append(PortStatus(name=name, up=p.up, rx_bps=(rx - rx0) / dt,
+                                    tx_bps=(tx - tx0) / dt, losses=p.losses,
+                                    down_s=None if p.up or down is None else now - down))
+        self._status_prev = (now, counts)
+        vs = self.vehicle.summary()
+        epochs = vs.get("epochs")
+        faults, alarms = vs.get("faults"), vs.get("alarms")
+        extra: dict[str, Any] = {}
+        actions = vs.get("actions")
+        if faults is None and isinstance(actions, dict):  # the ROV: its control actions
+            extra = {k: actions[k] for k in sorted(actions) if actions[k]}
+        return Snapshot(
+            elapsed_s=now - self.t0,
+            epochs=int(epochs) if isinstance(epochs, int) else self.records,
+            faults=faults if isinstance(faults, int) else None,
+            alarms=alarms if isinstance(alarms, int) else None,
+            ports=tuple(ports),
+            last_record_age_s=None if self._last_record_t is None
+            else now - self._last_record_t,
+            extra=extra)
 
     def close(self) -> dict[str, Any]:
         """Finish the vehicle, close everything, write ``summary.json``; returns the summary."""
