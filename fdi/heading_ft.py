@@ -141,9 +141,16 @@ class FaultTolerantHeading:
         heading_meas: float | None,
         yaw_rate_dps: float | None = None,
         dt: float = 0.2,
+        heading_suspect: bool = False,
     ) -> HeadingDecision:
         """One period: the command sent in the last one (%), the compass (deg or None) and,
-        when the vehicle has one, its yaw-rate gyro (deg/s or None)."""
+        when the vehicle has one, its yaw-rate gyro (deg/s or None).
+
+        ``heading_suspect``: the driver flagged this reading as a jump faster than the vehicle
+        can turn. Without a gyro it opens criterion 1 at once (:meth:`DualCriterionDetector.step`)
+        and this sample is substituted by the model-predicted heading even when
+        ``substitute_while_suspect`` is off; confirmation still needs criterion 2. With a gyro
+        the witness's own jump test judges (``jump_sigmas``) and the flag is not used."""
         rate = yaw_rate_dps
         if rate is not None and not math.isfinite(rate):
             rate = None
@@ -157,9 +164,11 @@ class FaultTolerantHeading:
                 return self._step_gyro(u_prev, heading_meas, rate, dt)
             if self._gyro_mode:
                 self._leave_gyro()
-        return self._step_fir(u_prev, heading_meas)
+        return self._step_fir(u_prev, heading_meas, heading_suspect)
 
-    def _step_fir(self, u_prev: float, heading_meas: float | None) -> HeadingDecision:
+    def _step_fir(
+        self, u_prev: float, heading_meas: float | None, flagged: bool = False
+    ) -> HeadingDecision:
         det = self.det
         det.push_command(u_prev)
         substituting = self.state != "normal"
@@ -199,7 +208,7 @@ class FaultTolerantHeading:
             self._run_pred += d_live
         else:
             self._run = 0
-        r = det.step(dy)
+        r = det.step(dy, flagged)
         if self.state == "normal":
             # Substitution starts from a smoothed heading, not from one noisy reading:
             # hf(k) = hf(k-1) + d(k) + L (y(k) - hf(k-1) - d(k)).
@@ -235,7 +244,7 @@ class FaultTolerantHeading:
             self._offset = []
             self._ok = 0
             event = "stuck"
-        return self._decide(self._y, r.d_deg, r.e2, r.snr, r.V, event)
+        return self._decide(self._y, r.d_deg, r.e2, r.snr, r.V, event, flagged)
 
     # ------------------------------------------------------------------ with a yaw gyro
 
@@ -458,10 +467,11 @@ class FaultTolerantHeading:
         return ""
 
     def _decide(
-        self, y: float | None, d: float, e2: float, snr: float, V: float, event: str
+        self, y: float | None, d: float, e2: float, snr: float, V: float, event: str,
+        flagged: bool = False,
     ) -> HeadingDecision:
         substituting = self.enabled and self.state != "normal"
-        if not self.cfg.substitute_while_suspect and self.state == "suspect":
+        if not self.cfg.substitute_while_suspect and self.state == "suspect" and not flagged:
             substituting = False
         used: float | None
         source: Source

@@ -286,8 +286,12 @@ class DualCriterionDetector:
     def predict_deg(self) -> float:
         return self.fir.predict() * self.cfg.y_scale
 
-    def step(self, dy_deg: float | None) -> DetectorStep:
-        """One period: ``dy_deg`` is the measured heading increment, None when no reading."""
+    def step(self, dy_deg: float | None, flagged: bool = False) -> DetectorStep:
+        """One period: ``dy_deg`` is the measured heading increment, None when no reading.
+
+        ``flagged``: the driver found this increment faster than the vehicle can turn (its
+        protocol's ``max_rate``); it counts as an e^2 exceedance (criterion 1, eq. (7)) even
+        when e^2 <= theta or during warm-up. Confirmation (criterion 2) is unchanged."""
         cfg = self.cfg
         d = self.fir.predict()
         if dy_deg is None:
@@ -299,7 +303,7 @@ class DualCriterionDetector:
         self._trained += 1
         self._cum_e += e_deg
         self.short.push(self._cum_e)  # its first differences are e itself
-        exceed = e2 > self.theta and self._trained > cfg.warmup_samples
+        exceed = flagged or (e2 > self.theta and self._trained > cfg.warmup_samples)
         if exceed and not self.suspect_open and not self.frozen:
             # Store the weights at the suspect instant (before this sample trains them); with
             # store_average_samples, their recent average: the instantaneous C_k carries the

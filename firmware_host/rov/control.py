@@ -35,15 +35,20 @@ class RovController:
         self._ratelog = RateLimitedLog(log)
 
     def step(
-        self, heading_meas: float | None, dt: float, yaw_rate_dps: float | None = None
+        self, heading_meas: float | None, dt: float, yaw_rate_dps: float | None = None,
+        heading_suspect: bool = False,
     ) -> tuple[ThrusterCommand, HeadingDecision]:
         """``heading_meas`` (deg) from this period's telemetry, None when none arrived.
 
         ``yaw_rate_dps``: the vehicle's yaw-rate gyro for this period (deg/s, positive in the
         direction of increasing heading), None when the vehicle has none or it did not arrive;
         with it the compass is cross-checked against the integrated rate (:mod:`fdi.heading_ft`).
+        ``heading_suspect``: the driver's flag (``Telemetry.heading_suspect``: a jump faster
+        than the protocol's ``max_rate``); it opens a suspect at once, so this sample is not
+        steered on (:meth:`fdi.heading_ft.FaultTolerantHeading.step`).
         """
-        dec = self.heading.step(self.command.yaw_pct, heading_meas, yaw_rate_dps, dt)
+        dec = self.heading.step(self.command.yaw_pct, heading_meas, yaw_rate_dps, dt,
+                                heading_suspect=heading_suspect)
         if heading_meas is None:
             self._since_telemetry += dt
             if self._since_telemetry <= self.cfg.dropout_hold_s + 1e-9:
@@ -80,8 +85,12 @@ def epoch_record(
     cmd: ThrusterCommand,
     dec: HeadingDecision,
     action: str,
+    heading_suspect: bool = False,
 ) -> dict[str, Any]:
-    """One line of ``epochs.jsonl`` (the issue's contract; degrees, deg^2, %)."""
+    """One line of ``epochs.jsonl`` (the issue's contract; degrees, deg^2, %).
+
+    ``heading_suspect``: the driver flagged this period's reading (a jump faster than the
+    vehicle can turn); False where no driver flags (ArduSub, the in-process experiment)."""
     return {
         "t": round(t, 3),
         "heading_true": None if heading_true is None else round(heading_true % 360.0, 4),
@@ -101,4 +110,5 @@ def epoch_record(
         "starboard_pct": round(cmd.starboard_pct, 3),
         "lateral_pct": round(cmd.lateral_pct, 3),
         "vertical_pct": round(cmd.vertical_pct, 3),
+        "heading_suspect": heading_suspect,
     }

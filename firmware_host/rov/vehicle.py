@@ -44,10 +44,12 @@ def link_step(
         got = link.read_telemetry()
         tel = got[-1] if got else None
     meas = None if tel is None else tel.heading_deg
-    cmd, dec = ctl.step(meas, dt)
+    flagged = tel is not None and tel.heading_suspect
+    cmd, dec = ctl.step(meas, dt, heading_suspect=flagged)
     if link.wiring == "rs232":
         link.send_command(cmd)
-    return tel, epoch_record(0.0, None, meas, ctl.setpoint_deg, cmd, dec, ctl.action)
+    return tel, epoch_record(0.0, None, meas, ctl.setpoint_deg, cmd, dec, ctl.action,
+                             heading_suspect=flagged)
 
 
 def link_settings(cfg: RovConfig) -> SerialSettings:
