@@ -6,6 +6,13 @@ ones carrying the same fix time. :class:`EpochAssembler` collects a burst into o
 learned, as soon as the sentence type that ends the receiver's bursts arrives (the "cycle ender":
 the last type seen before the time changed, two epochs in a row), so an epoch is processed
 without waiting for the next one's first sentence.
+
+True heading (HDT, THS) carries no time: it belongs to the epoch it arrives in, and takes no
+part in grouping (it is not among an epoch's ``sentences``, does not vote for the cycle ender,
+and never opens or closes an epoch), so the epochs of a receiver are the same with and without
+its heading sentences. One that arrives between epochs (after the previous one closed on the
+learned ender) belongs to the next epoch. A THS whose mode is not A (autonomous) means "no
+heading" for its epoch, whatever an HDT of the same epoch said.
 """
 
 from __future__ import annotations
@@ -13,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
-from drivers.gps.nmea import Gga, Gll, Gsa, Gst, NmeaMessage, Rmc, Vtg, Zda
+from drivers.gps.nmea import Gga, Gll, Gsa, Gst, Hdt, NmeaMessage, Rmc, Ths, Vtg, Zda
 
 TIME_EPS_S = 1e-3
 
@@ -41,6 +48,7 @@ class GpsEpoch:
     sd_alt_m: float | None
     talker: str
     sentences: tuple[str, ...]
+    heading_deg: float | None = None  # true heading (HDT, or THS in mode A) of this epoch
 
 
 @dataclass(slots=True)
@@ -54,6 +62,14 @@ class _Pending:
     gsa: Gsa | None = None
     gst: Gst | None = None
     zda: Zda | None = None
+    heading_deg: float | None = None
+    heading_refused: bool = False  # a THS of this epoch said its heading is not valid
+
+    def add_heading(self, msg: Hdt | Ths) -> None:
+        if isinstance(msg, Ths) and not msg.valid:
+            self.heading_refused = True
+        elif self.heading_deg is None and msg.heading_deg is not None:
+            self.heading_deg = msg.heading_deg  # the first heading of the epoch
 
     def build(self, last_date: tuple[int, int, int] | None) -> GpsEpoch:
         gga, rmc, gll = self.gga, self.rmc, self.gll
@@ -122,6 +138,7 @@ class _Pending:
             gst.sd_alt_m if gst is not None else None,  # sd_alt_m
             talker,
             tuple(self.types),  # sentences
+            None if self.heading_refused else self.heading_deg,  # heading_deg
         )
 
 
@@ -148,6 +165,7 @@ class EpochAssembler:
         self._last_closed: float | None = None
         self._last_closed_types: tuple[str, ...] = ()
         self._banned: set[str] = set()
+        self._early_heading: list[Hdt | Ths] = []  # arrived between epochs: the next one's
 
     @property
     def ender(self) -> str | None:
@@ -159,6 +177,12 @@ class EpochAssembler:
 
     def push(self, msg: NmeaMessage) -> tuple[GpsEpoch, ...]:
         """:meth:`feed` without the generator: the epochs ``msg`` completes (usually none)."""
+        if isinstance(msg, (Hdt, Ths)):
+            if self._cur is not None:
+                self._cur.add_heading(msg)
+            elif len(self._early_heading) < 4:
+                self._early_heading.append(msg)
+            return ()
         kind, slot, timed = _KINDS[type(msg)]
         msg_time: float | None = getattr(msg, "time_s", None) if timed else None
         cur = self._cur
@@ -201,6 +225,10 @@ class EpochAssembler:
                 cur = None
         if cur is None:
             cur = self._cur = _Pending(utc_s=msg_time)
+            if self._early_heading:
+                for heading in self._early_heading:
+                    cur.add_heading(heading)
+                self._early_heading.clear()
         elif cur.utc_s is None and msg_time is not None:
             cur.utc_s = msg_time
         if getattr(cur, slot) is not None:
