@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from drivers.gps.epochs import EpochAssembler, GpsEpoch
-from drivers.gps.nmea import Gga, Hdt, NmeaMessage, Ths, parse_sentence, with_checksum
+from drivers.gps.nmea import Gga, Hdt, NmeaMessage, Rmc, Ths, parse_sentence, with_checksum
 from drivers.gps.stream import NmeaStream
 from fdi.errors import DecodeError
 
@@ -99,16 +99,29 @@ def test_ths_not_valid_means_no_heading_for_its_epoch() -> None:
     assert [e.heading_deg for e in epochs] == [10.0, None, None]
 
 
-def test_heading_between_epochs_goes_to_the_next() -> None:
-    """Once the ender is learned the epoch closes on it; a heading after it is the next one's."""
+def _rmc(t: float) -> Rmc:
+    return Rmc("GP", t, True, 32.0, 118.0, 1.0, 45.0, (2024, 6, 3), "A")
+
+
+def test_trailing_heading_is_learned_as_the_ender() -> None:
+    """GGA, RMC, HDT: the epoch waits for its HDT (the learned ender), even when some bursts
+    have none; without this the RMC would be learned and each HDT go to the next epoch."""
     msgs: list[NmeaMessage] = []
-    for i in range(6):
-        msgs += [Hdt("GP", 10.0 * i), _gga(float(i))]
-    epochs = _feed(msgs)
-    assert len(epochs) == 6
-    # The first epochs close on the next GGA's new time: their HDT arrived while they were
-    # open (the previous epoch's). With the ender (GGA) learned, each HDT leads its epoch.
-    assert epochs[-1].heading_deg == 50.0
+    for i in range(12):
+        msgs += [_gga(float(i)), _rmc(float(i))]
+        if i % 3 != 1:
+            msgs.append(Hdt("GP", 10.0 * i))
+    asm = EpochAssembler()
+    epochs = [e for m in msgs for e in asm.feed(m)] + list(asm.flush())
+    assert asm.ender == "HDT"
+    assert [e.utc_s for e in epochs] == [float(i) for i in range(12)]
+    assert [e.heading_deg for e in epochs] == [None if i % 3 == 1 else 10.0 * i
+                                               for i in range(12)]
+
+
+def test_heading_before_the_first_epoch_goes_to_it() -> None:
+    epochs = _feed([Hdt("GP", 5.0), _gga(1.0), _gga(2.0)])
+    assert [e.heading_deg for e in epochs] == [5.0, None]
 
 
 def test_hemisphere_log_headings_and_grouping(corpus: Path) -> None:

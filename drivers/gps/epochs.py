@@ -7,12 +7,17 @@ learned, as soon as the sentence type that ends the receiver's bursts arrives (t
 the last type seen before the time changed, two epochs in a row), so an epoch is processed
 without waiting for the next one's first sentence.
 
-True heading (HDT, THS) carries no time: it belongs to the epoch it arrives in, and takes no
-part in grouping (it is not among an epoch's ``sentences``, does not vote for the cycle ender,
-and never opens or closes an epoch), so the epochs of a receiver are the same with and without
-its heading sentences. One that arrives between epochs (after the previous one closed on the
-learned ender) belongs to the next epoch. A THS whose mode is not A (autonomous) means "no
-heading" for its epoch, whatever an HDT of the same epoch said.
+True heading (HDT, THS) carries no time: it belongs to the epoch it arrives in. It is not
+among an epoch's ``sentences`` and never opens an epoch, so the epochs of a receiver hold the
+same sentences with and without its heading sentences. The one part it takes in grouping: a
+heading that is the last sentence of the receiver's bursts (GGA, RMC, HDT) is learned as the
+cycle ender like any other type, so the epoch waits for it rather than closing on the RMC and
+handing the heading to the next epoch (and, once learned, an epoch whose heading is missing
+closes when the time changes rather than on the sentence before it). A heading that arrives
+between epochs (a receiver that sends it first in its burst) belongs to the next epoch. Without
+a time the two orders cannot be told apart before the ender is learned: a heading between two
+bursts then goes to the open (earlier) one, as GSA does. A THS whose mode is not A
+(autonomous) means "no heading" for its epoch, whatever an HDT of the same epoch said.
 """
 
 from __future__ import annotations
@@ -64,6 +69,8 @@ class _Pending:
     zda: Zda | None = None
     heading_deg: float | None = None
     heading_refused: bool = False  # a THS of this epoch said its heading is not valid
+    heading_kinds: list[str] = field(default_factory=list)  # HDT/THS, in order
+    trailing: str | None = None  # the heading type when it is the last sentence so far
 
     def add_heading(self, msg: Hdt | Ths) -> None:
         if isinstance(msg, Ths) and not msg.valid:
@@ -151,6 +158,9 @@ _KINDS: dict[type, tuple[str, str, bool]] = {
 }
 
 
+_HEADING_NAMES = frozenset({"HDT", "THS"})
+
+
 class EpochAssembler:
     """Feed typed messages; iterate complete :class:`GpsEpoch` objects."""
 
@@ -165,6 +175,7 @@ class EpochAssembler:
         self._last_closed: float | None = None
         self._last_closed_types: tuple[str, ...] = ()
         self._banned: set[str] = set()
+        self._heading_trails = False  # a heading type was learned as the ender
         self._early_heading: list[Hdt | Ths] = []  # arrived between epochs: the next one's
 
     @property
@@ -178,10 +189,17 @@ class EpochAssembler:
     def push(self, msg: NmeaMessage) -> tuple[GpsEpoch, ...]:
         """:meth:`feed` without the generator: the epochs ``msg`` completes (usually none)."""
         if isinstance(msg, (Hdt, Ths)):
-            if self._cur is not None:
-                self._cur.add_heading(msg)
-            elif len(self._early_heading) < 4:
-                self._early_heading.append(msg)
+            cur = self._cur
+            if cur is None:
+                if len(self._early_heading) < 4:
+                    self._early_heading.append(msg)
+                return ()
+            heading_kind = "HDT" if isinstance(msg, Hdt) else "THS"
+            cur.add_heading(msg)
+            cur.heading_kinds.append(heading_kind)
+            cur.trailing = heading_kind
+            if self._ender == heading_kind and cur.utc_s is not None:
+                return (self._close(),)
             return ()
         kind, slot, timed = _KINDS[type(msg)]
         msg_time: float | None = getattr(msg, "time_s", None) if timed else None
@@ -215,7 +233,11 @@ class EpochAssembler:
             untimed_repeat = (msg_time is None or cur.utc_s is None) and kind in cur.types
             timed_after_untimed = msg_time is not None and cur.utc_s is None and bool(cur.types)
             if new_time or untimed_repeat or timed_after_untimed:
-                if new_time and cur.types and cur.types.count(cur.types[-1]) == 1:
+                trailing = cur.trailing
+                if new_time and trailing is not None:
+                    if cur.heading_kinds.count(trailing) == 1:
+                        self._vote_ender(trailing)
+                elif new_time and cur.types and cur.types.count(cur.types[-1]) == 1:
                     self._vote_ender(cur.types[-1])
                 if cur.utc_s is None and not any(t in _TIMED_NAMES for t in cur.types):
                     self.orphans += len(cur.types)  # VTG/GSA with no fix of their own
@@ -236,6 +258,7 @@ class EpochAssembler:
         else:
             setattr(cur, slot, msg)
         cur.types.append(kind)
+        cur.trailing = None
         if self._ender is not None and kind == self._ender and cur.utc_s is not None:
             return (*closed, self._close())
         return closed
@@ -262,8 +285,13 @@ class EpochAssembler:
     def _vote_ender(self, kind: str) -> None:
         if kind in self._banned:
             return
+        if self._heading_trails and kind not in _HEADING_NAMES:
+            # The receiver's heading ends its bursts: an epoch without one (an intermittent
+            # heading) closes when the time changes, never on the sentence before the heading.
+            return
         candidate, votes = self._ender_votes
         votes = votes + 1 if candidate == kind else 1
         self._ender_votes = (kind, votes)
         if votes >= 2:
             self._ender = kind
+            self._heading_trails = self._heading_trails or kind in _HEADING_NAMES
