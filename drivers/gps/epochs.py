@@ -7,17 +7,17 @@ learned, as soon as the sentence type that ends the receiver's bursts arrives (t
 the last type seen before the time changed, two epochs in a row), so an epoch is processed
 without waiting for the next one's first sentence.
 
-True heading (HDT, THS) carries no time: it belongs to the epoch it arrives in. It is not
-among an epoch's ``sentences`` and never opens an epoch, so the epochs of a receiver hold the
-same sentences with and without its heading sentences. The one part it takes in grouping: a
-heading that is the last sentence of the receiver's bursts (GGA, RMC, HDT) is learned as the
-cycle ender like any other type, so the epoch waits for it rather than closing on the RMC and
-handing the heading to the next epoch (and, once learned, an epoch whose heading is missing
-closes when the time changes rather than on the sentence before it). A heading that arrives
-between epochs (a receiver that sends it first in its burst) belongs to the next epoch. Without
-a time the two orders cannot be told apart before the ender is learned: a heading between two
-bursts then goes to the open (earlier) one, as GSA does. A THS whose mode is not A
-(autonomous) means "no heading" for its epoch, whatever an HDT of the same epoch said.
+True heading (HDT, THS) carries no time: it belongs to the epoch that is open when it
+arrives, as GSA does. It is not among an epoch's ``sentences`` and never opens an epoch, so an
+epoch holds the same sentences with and without the receiver's heading sentences. Its one part
+in grouping: a heading that is the last sentence of the bursts (GGA, RMC, HDT) is learned as
+the cycle ender like any other type, so the epoch waits for it instead of closing on the RMC
+and handing the heading to the next epoch; once learned, an epoch whose heading is missing
+closes when the time changes. A heading before the first epoch goes to that epoch. Limit:
+without a time, "last of burst N" and "first of burst N+1" are the same position in the
+stream, so a receiver that sends its heading first (gpsd's hemi.log order) has it assigned to
+the epoch before (one epoch period old). A THS whose mode is not A (autonomous) means "no
+heading" for its epoch, whatever an HDT of the same epoch said.
 """
 
 from __future__ import annotations
