@@ -428,7 +428,7 @@ def test_short(body: str) -> None:
          "proprietary", "PSTI"),
         (line("GPGSV,3,1,11,03,03,111,00,04,15,270,00,06,01,010,00,13,06,292,00"),
          "unknown_sentence", "GPGSV"),
-        (line("GPHDT,274.07,T"), "unknown_sentence", "GPHDT"),
+        (line("HEROT,0.52,A"), "unknown_sentence", "HEROT"),  # GPHDT is decoded now (issue 16)
     ],
 )
 def test_ignored(raw: bytes, why: str, kind: str) -> None:

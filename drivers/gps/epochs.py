@@ -6,6 +6,18 @@ ones carrying the same fix time. :class:`EpochAssembler` collects a burst into o
 learned, as soon as the sentence type that ends the receiver's bursts arrives (the "cycle ender":
 the last type seen before the time changed, two epochs in a row), so an epoch is processed
 without waiting for the next one's first sentence.
+
+True heading (HDT, THS) carries no time: it belongs to the epoch that is open when it
+arrives, as GSA does. It is not among an epoch's ``sentences`` and never opens an epoch, so an
+epoch holds the same sentences with and without the receiver's heading sentences. Its one part
+in grouping: a heading that is the last sentence of the bursts (GGA, RMC, HDT) is learned as
+the cycle ender like any other type, so the epoch waits for it instead of closing on the RMC
+and handing the heading to the next epoch; once learned, an epoch whose heading is missing
+closes when the time changes. A heading before the first epoch goes to that epoch. Limit:
+without a time, "last of burst N" and "first of burst N+1" are the same position in the
+stream, so a receiver that sends its heading first (gpsd's hemi.log order) has it assigned to
+the epoch before (one epoch period old). A THS whose mode is not A (autonomous) means "no
+heading" for its epoch, whatever an HDT of the same epoch said.
 """
 
 from __future__ import annotations
@@ -13,7 +25,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
-from drivers.gps.nmea import Gga, Gll, Gsa, Gst, NmeaMessage, Rmc, Vtg, Zda
+from drivers.gps.nmea import Gga, Gll, Gsa, Gst, Hdt, NmeaMessage, Rmc, Ths, Vtg, Zda
 
 TIME_EPS_S = 1e-3
 
@@ -41,6 +53,7 @@ class GpsEpoch:
     sd_alt_m: float | None
     talker: str
     sentences: tuple[str, ...]
+    heading_deg: float | None = None  # true heading (HDT, or THS in mode A) of this epoch
 
 
 @dataclass(slots=True)
@@ -54,6 +67,16 @@ class _Pending:
     gsa: Gsa | None = None
     gst: Gst | None = None
     zda: Zda | None = None
+    heading_deg: float | None = None
+    heading_refused: bool = False  # a THS of this epoch said its heading is not valid
+    heading_kinds: list[str] = field(default_factory=list)  # HDT/THS, in order
+    trailing: str | None = None  # the heading type when it is the last sentence so far
+
+    def add_heading(self, msg: Hdt | Ths) -> None:
+        if isinstance(msg, Ths) and not msg.valid:
+            self.heading_refused = True
+        elif self.heading_deg is None and msg.heading_deg is not None:
+            self.heading_deg = msg.heading_deg  # the first heading of the epoch
 
     def build(self, last_date: tuple[int, int, int] | None) -> GpsEpoch:
         gga, rmc, gll = self.gga, self.rmc, self.gll
@@ -122,6 +145,7 @@ class _Pending:
             gst.sd_alt_m if gst is not None else None,  # sd_alt_m
             talker,
             tuple(self.types),  # sentences
+            None if self.heading_refused else self.heading_deg,  # heading_deg
         )
 
 
@@ -132,6 +156,9 @@ _KINDS: dict[type, tuple[str, str, bool]] = {
     t: (t.__name__.upper(), t.__name__.lower(), t in _TIMED)
     for t in (Gga, Rmc, Gll, Gst, Zda, Vtg, Gsa)
 }
+
+
+_HEADING_NAMES = frozenset({"HDT", "THS"})
 
 
 class EpochAssembler:
@@ -148,6 +175,8 @@ class EpochAssembler:
         self._last_closed: float | None = None
         self._last_closed_types: tuple[str, ...] = ()
         self._banned: set[str] = set()
+        self._heading_trails = False  # a heading type was learned as the ender
+        self._early_heading: list[Hdt | Ths] = []  # arrived between epochs: the next one's
 
     @property
     def ender(self) -> str | None:
@@ -159,6 +188,19 @@ class EpochAssembler:
 
     def push(self, msg: NmeaMessage) -> tuple[GpsEpoch, ...]:
         """:meth:`feed` without the generator: the epochs ``msg`` completes (usually none)."""
+        if isinstance(msg, (Hdt, Ths)):
+            cur = self._cur
+            if cur is None:
+                if len(self._early_heading) < 4:
+                    self._early_heading.append(msg)
+                return ()
+            heading_kind = "HDT" if isinstance(msg, Hdt) else "THS"
+            cur.add_heading(msg)
+            cur.heading_kinds.append(heading_kind)
+            cur.trailing = heading_kind
+            if self._ender == heading_kind and cur.utc_s is not None:
+                return (self._close(),)
+            return ()
         kind, slot, timed = _KINDS[type(msg)]
         msg_time: float | None = getattr(msg, "time_s", None) if timed else None
         cur = self._cur
@@ -191,7 +233,11 @@ class EpochAssembler:
             untimed_repeat = (msg_time is None or cur.utc_s is None) and kind in cur.types
             timed_after_untimed = msg_time is not None and cur.utc_s is None and bool(cur.types)
             if new_time or untimed_repeat or timed_after_untimed:
-                if new_time and cur.types and cur.types.count(cur.types[-1]) == 1:
+                trailing = cur.trailing
+                if new_time and trailing is not None:
+                    if cur.heading_kinds.count(trailing) == 1:
+                        self._vote_ender(trailing)
+                elif new_time and cur.types and cur.types.count(cur.types[-1]) == 1:
                     self._vote_ender(cur.types[-1])
                 if cur.utc_s is None and not any(t in _TIMED_NAMES for t in cur.types):
                     self.orphans += len(cur.types)  # VTG/GSA with no fix of their own
@@ -201,6 +247,10 @@ class EpochAssembler:
                 cur = None
         if cur is None:
             cur = self._cur = _Pending(utc_s=msg_time)
+            if self._early_heading:
+                for heading in self._early_heading:
+                    cur.add_heading(heading)
+                self._early_heading.clear()
         elif cur.utc_s is None and msg_time is not None:
             cur.utc_s = msg_time
         if getattr(cur, slot) is not None:
@@ -208,6 +258,7 @@ class EpochAssembler:
         else:
             setattr(cur, slot, msg)
         cur.types.append(kind)
+        cur.trailing = None
         if self._ender is not None and kind == self._ender and cur.utc_s is not None:
             return (*closed, self._close())
         return closed
@@ -234,8 +285,13 @@ class EpochAssembler:
     def _vote_ender(self, kind: str) -> None:
         if kind in self._banned:
             return
+        if self._heading_trails and kind not in _HEADING_NAMES:
+            # The receiver's heading ends its bursts: an epoch without one (an intermittent
+            # heading) closes when the time changes, never on the sentence before the heading.
+            return
         candidate, votes = self._ender_votes
         votes = votes + 1 if candidate == kind else 1
         self._ender_votes = (kind, votes)
         if votes >= 2:
             self._ender = kind
+            self._heading_trails = self._heading_trails or kind in _HEADING_NAMES

@@ -6,12 +6,14 @@ Two layers, kept apart (pynmeagps style):
   ``$``, caps a line's length *before* collecting more of it, and reports every rejected piece
   with a reason (``garbage``, ``too_long``, ``truncated``, ``bad_chars``).
 * :func:`parse_sentence` is a pure function from one line to a frozen dataclass (:class:`Gga`,
-  :class:`Rmc`, :class:`Vtg`, :class:`Gsa`, :class:`Gst`, :class:`Zda`, :class:`Gll`). It
-  requires a valid checksum, uses pynmea2 (``check=True``) only to split and identify the
-  sentence, and converts every field itself with range checks: pynmea2 coerces bad fields
-  silently, so none of its conversions reach the estimators. A bad sentence raises
-  :class:`~fdi.errors.DecodeError` with a short reason; proprietary (``$P...``) and unknown
-  sentences raise :class:`Ignored` so the caller counts them without calling them errors.
+  :class:`Rmc`, :class:`Vtg`, :class:`Gsa`, :class:`Gst`, :class:`Zda`, :class:`Gll`, and the
+  true headings :class:`Hdt` and :class:`Ths`). It requires a valid checksum, uses pynmea2
+  (``check=True``) only to split and identify the sentence (HDT and THS are split here:
+  pynmea2 does not know THS), and converts every field itself with range checks: pynmea2
+  coerces bad fields silently, so none of its conversions reach the estimators. A bad sentence
+  raises :class:`~fdi.errors.DecodeError` with a short reason; proprietary (``$P...``) and
+  unknown sentences raise :class:`Ignored` so the caller counts them without calling them
+  errors.
 
 Units are in the field names: degrees, metres, metres per second, seconds of day (UTC).
 """
@@ -32,7 +34,9 @@ KNOT_MPS = 1852.0 / 3600.0
 KMH_MPS = 1000.0 / 3600.0
 MAX_LINE = 120  # NMEA 0183 says 82 characters; receivers in the wild send a little more
 
-SUPPORTED = frozenset({"GGA", "RMC", "VTG", "GSA", "GST", "ZDA", "GLL"})
+SUPPORTED = frozenset({"GGA", "RMC", "VTG", "GSA", "GST", "ZDA", "GLL", "HDT", "THS"})
+# Sentences pynmea2 does not know (THS) are split here; so is HDT, to keep the two alike.
+_OWN_SPLIT = frozenset({"HDT", "THS"})
 _LINE_STOP = re.compile(rb"[\r\n$]")
 _LINE_END = re.compile(rb"[\r\n]")
 _NON_PRINTABLE = re.compile(rb"[^\x20-\x7e]")
@@ -251,7 +255,29 @@ class Gll:
     lon_deg: float | None
 
 
-NmeaMessage = Gga | Rmc | Vtg | Gsa | Gst | Zda | Gll
+@dataclass(frozen=True, slots=True)
+class Hdt:
+    """True heading (a dual-antenna or gyro receiver); ``heading_deg`` None when not known."""
+
+    talker: str
+    heading_deg: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class Ths:
+    """True heading with its mode (A autonomous, E estimated, M manual, S simulator, V not
+    valid). ``heading_deg`` is kept as sent; only mode A is a heading to use (:attr:`valid`)."""
+
+    talker: str
+    heading_deg: float | None
+    mode: str | None
+
+    @property
+    def valid(self) -> bool:
+        return self.mode == "A" and self.heading_deg is not None
+
+
+NmeaMessage = Gga | Rmc | Vtg | Gsa | Gst | Zda | Gll | Hdt | Ths
 
 
 # --------------------------------------------------------------------------- field helpers
@@ -399,6 +425,11 @@ def parse_sentence(line: bytes) -> NmeaMessage:
     talker = address[:2]
     if not talker.isalpha():
         raise DecodeError("parse_error", f"address {address!r}")
+    if kind in _OWN_SPLIT:
+        if checksum(line[1:star]) != _given(line, star):
+            raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
+        fields = text[comma + 1 : star].split(",") if comma > 0 else []
+        return decoder(talker, fields + _PAD, len(fields))
     # pynmea2 splits the sentence and, with check=True, verifies the checksum (once: we do
     # not compute it again on this path). Its field conversions are not used.
     try:
@@ -557,6 +588,35 @@ def _gll(talker: str, d: list[str], n: int) -> Gll:
     return Gll(talker=talker, time_s=_time(d[4]), valid=valid, lat_deg=lat, lon_deg=lon)
 
 
+def _heading(text: str) -> float | None:
+    heading = _float(text, "heading")
+    if heading is not None and not 0.0 <= heading <= 360.0:
+        raise DecodeError("bad_field", f"heading={heading}")
+    return heading
+
+
+def _hdt(talker: str, d: list[str], n: int) -> Hdt:
+    # $--HDT,x.x,T*hh
+    if n < 2:
+        raise DecodeError("short", f"HDT has {n} fields")
+    if d[1] not in ("T", ""):
+        raise DecodeError("bad_field", f"HDT reference={d[1]!r}")
+    return Hdt(talker, _heading(d[0]))
+
+
+_THS_MODES = frozenset("AEMSV")
+
+
+def _ths(talker: str, d: list[str], n: int) -> Ths:
+    # $--THS,x.x,a*hh (NMEA 0183 4.x): heading, mode indicator
+    if n < 2:
+        raise DecodeError("short", f"THS has {n} fields")
+    mode = d[1] or None
+    if mode is not None and mode not in _THS_MODES:
+        raise DecodeError("bad_field", f"THS mode={mode!r}")
+    return Ths(talker, _heading(d[0]), mode)
+
+
 _DECODERS: dict[str, Callable[[str, list[str], int], NmeaMessage]] = {
     "GGA": _gga,
     "RMC": _rmc,
@@ -565,6 +625,8 @@ _DECODERS: dict[str, Callable[[str, list[str], int], NmeaMessage]] = {
     "GST": _gst,
     "ZDA": _zda,
     "GLL": _gll,
+    "HDT": _hdt,
+    "THS": _ths,
 }
 
 

@@ -253,7 +253,11 @@ class MavlinkGpsSink:
       date at all, from the system clock's date when it is set (after 2020), else week 0 and
       the UTC time of day in ``time_week_ms`` (ArduPilot accepts week 0; it then skips its
       jitter correction);
-    * ``gps_id`` from ``[rover.output] gps_id`` (1 feeds GPS2).
+    * ``gps_id`` from ``[rover.output] gps_id`` (1 feeds GPS2);
+    * **yaw**: the receiver's true heading of this epoch (HDT, or THS in mode A), in
+      centidegrees with north as 36000; 0 ("not available", AP_GPS_MAV's ``have_yaw``) when
+      the receiver gave none in this epoch, when its THS said not valid, and on a no-fix
+      message. A replaced fix keeps the epoch's heading; an earlier heading is never held.
     """
 
     wall_clock: Callable[[], float] = staticmethod(time.time)
@@ -357,6 +361,7 @@ class MavlinkGpsSink:
             vert_accuracy_m=v_acc,
             satellites_visible=e.num_sats or 0,
             gps_id=self.cfg.output.gps_id,
+            yaw_deg=out.heading_deg if valid else None,
         )
 
     def stats(self) -> dict[str, int]:

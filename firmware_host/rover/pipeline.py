@@ -58,6 +58,9 @@ class EpochOutcome:
     alt: float | None
     t_s: float | None
     record: dict[str, Any]
+    # The receiver's true heading in this epoch (HDT, THS mode A), carried to the outputs; it
+    # takes no part in detection. None when the receiver gave none in this epoch.
+    heading_deg: float | None = None
 
 
 def _r(x: float | None, nd: int = 4) -> float | None:
@@ -174,7 +177,7 @@ class RoverPipeline:
                 alt = gh - (epoch.geoid_sep_m or 0.0) if alt_msl is not None else None
         jsonl = self.jsonl
         record = self._record(epoch, d, enu, lat, lon, alt) if jsonl is not None else {}
-        outcome = EpochOutcome(epoch, d, lat, lon, alt, t_s, record)
+        outcome = EpochOutcome(epoch, d, lat, lon, alt, t_s, record, epoch.heading_deg)
         self.last_outcome = outcome
         # Counters.
         self.epochs += 1
