@@ -568,7 +568,8 @@ class InsGnssVehicle:
         decision = replace(out.decision, action="accept" if used else "replace",
                            out_enu=(float(p[0]), float(p[1]), float(p[2])))
         self._send(EpochOutcome(out.epoch, decision, lat, lon, alt, out.t_s,
-                                {**(out.record or {}), "ins": ins}))
+                                {**(out.record or {}), "ins": ins},
+                                heading_deg=out.heading_deg))
 
     def _send(self, out: EpochOutcome) -> None:
         if not self.sending:
