@@ -18,10 +18,12 @@ from drivers.capture import CaptureReader, CaptureWriter, Channel
 from drivers.outland.framecodec import load_protocol
 from drivers.ptypair import PtyPair
 from firmware_host.cli import main
+from firmware_host.commands import replay as replay_cmd
 from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault, serve_pty
+from firmware_host.rov import replay as rov_replay
 from firmware_host.rov.config import SimConfig
 from firmware_host.rov.replay import is_rov_capture, replay_rov
-from firmware_host.rov.vehicle import TICK, OutlandRovVehicle
+from firmware_host.rov.vehicle import LINK, TICK, OutlandRovVehicle
 from firmware_host.runtime.config import load_bridge_file, rov_config
 from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
 from firmware_host.runtime.runner import Runner
@@ -108,3 +110,10 @@ def test_rov_capture_without_ticks_or_config(tmp_path: Path,
     assert main(["replay", str(ticked), "--out", str(tmp_path / "n")]) != 0
     err = capsys.readouterr().err
     assert "--config" in err and "Traceback" not in err
+
+
+def test_the_command_knows_the_vehicle_channel_names() -> None:
+    """``commands/replay.py`` names the channels itself (so that a rover replay imports no ROV
+    code); they must be the vehicle's."""
+    assert (TICK, f"{LINK} rx") == (replay_cmd.ROV_TICK, replay_cmd.ROV_LINK_RX)
+    assert rov_replay.__name__ == replay_cmd.ROV_REPLAY

@@ -15,6 +15,7 @@ and ``OUT/summary.json``.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import re
 import sys
@@ -32,17 +33,13 @@ from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
 from firmware_host.commands.port_checks import check_port_opens, output_urls
 from firmware_host.commands.replay_args import add_arguments as add_arguments
 from firmware_host.commands.summaries import replay_problems, replay_text
-from firmware_host.rov.replay import has_rov_link, is_rov_capture, replay_rov
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
-from firmware_host.runtime.config import (
-    BridgeConfig,
-    load_bridge_file,
-    load_config,
-    rov_config,
-    vehicle_of,
-)
+from firmware_host.runtime.config import BridgeConfig, load_config
 
+# An ROV recording (firmware_host.rov.vehicle's TICK and LINK channels) goes to the ROV's
+# replay, loaded only then (as the CLI loads a command): the rover's replay stays light.
+ROV_TICK, ROV_LINK_RX, ROV_REPLAY = "rov tick", "rov link rx", "firmware_host.rov.replay"
 _TIME_RE = re.compile(rb"^\$..(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
 
 
@@ -317,35 +314,24 @@ def print_summary(s: dict[str, Any], stream: TextIO) -> None:
 # --------------------------------------------------------------------------- CLI
 
 
-def run_rov(args: argparse.Namespace) -> int:
-    """An ROV recording: re-run its steps (:mod:`firmware_host.rov.replay`) with the ``[rov]``
-    file given by ``--config`` (the one it was recorded with)."""
-    if args.config is None:
-        raise FdiBridgeError(f"{args.capture} is an ROV recording: give --config with the "
-                             "[rov] file it was recorded with")
-    bf = load_bridge_file(args.config)
-    if vehicle_of(bf) != "rov":
-        raise FdiBridgeError(f"{args.capture} is an ROV recording, but {args.config} has no "
-                             "[rov] table")
-    rcfg, base = rov_config(bf)
-    summary = replay_rov(rcfg, base, args.capture, args.out, config_name=str(args.config))
+def _print_rov(args: argparse.Namespace, summary: dict[str, Any]) -> int:
     if args.json:
         print(json.dumps(summary))
-    else:
-        r = summary["replay"]
-        print(f"ROV replay: {r['steps']} steps, {summary['epochs']} epochs, "
-              f"commands {'as recorded' if r['tx_match'] else 'DIFFER from the recording'} "
-              f"({r['tx_steps_same']} steps same, {r['tx_steps_differ']} differ)")
-        print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
+        return 0
+    r = summary["replay"]
+    print(f"ROV replay: {r['steps']} steps, {summary['epochs']} epochs, commands "
+          f"{'as recorded' if r['tx_match'] else 'DIFFERENT from the recording'} "
+          f"({r['tx_steps_same']} steps same, {r['tx_steps_differ']} differ)")
+    print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
     return 0
 
 
 def run(args: argparse.Namespace) -> int:
     if is_capture(args.capture):
-        reader = CaptureReader(args.capture)
-        if is_rov_capture(reader):
-            return run_rov(args)
-        if has_rov_link(reader):
+        names = {c.name for c in CaptureReader(args.capture).channels}
+        if {ROV_TICK, ROV_LINK_RX} <= names:
+            return _print_rov(args, importlib.import_module(ROV_REPLAY).run(args))
+        if ROV_LINK_RX in names:
             raise FdiBridgeError(f"{args.capture}: an ROV recording without step ticks (made "
                                  "before they were recorded): it cannot be replayed step by "
                                  "step")

@@ -20,6 +20,7 @@ jump judged at the very limit could be judged the other way.
 
 from __future__ import annotations
 
+import argparse
 import json
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -28,9 +29,10 @@ from typing import Any, cast
 
 from drivers.capture import CaptureReader
 from drivers.resilient import ResilientPort
-from fdi.errors import CaptureFormatError
+from fdi.errors import CaptureFormatError, FdiBridgeError
 from firmware_host.rov.config import RovConfig
 from firmware_host.rov.vehicle import LINK, TICK, OutlandRovVehicle, link_settings
+from firmware_host.runtime.config import load_bridge_file, rov_config, vehicle_of
 from firmware_host.runtime.loop import FakeClock
 from firmware_host.runtime.records import EpochLog
 from firmware_host.runtime.vehicle import Context
@@ -204,3 +206,18 @@ def replay_rov(cfg: RovConfig, base_dir: Path, capture: Path, out_dir: Path,
     }
     epochs.write_summary(summary)
     return summary
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """``fdi-bridge replay`` of an ROV recording (from :mod:`firmware_host.commands.replay`,
+    which prints): its steps re-run with the ``[rov]`` file of ``--config`` (the one it was
+    recorded with); returns the summary."""
+    if args.config is None:
+        raise FdiBridgeError(f"{args.capture} is an ROV recording: give --config with the "
+                             "[rov] file it was recorded with")
+    bf = load_bridge_file(args.config)
+    if vehicle_of(bf) != "rov":
+        raise FdiBridgeError(f"{args.capture} is an ROV recording, but {args.config} has no "
+                             "[rov] table")
+    rcfg, base = rov_config(bf)
+    return replay_rov(rcfg, base, args.capture, args.out, config_name=str(args.config))
