@@ -256,6 +256,21 @@ def test_rov_with_operator_link(tmp_path: Path) -> None:
     assert rec["rov link tx"] == summary["port"]["bytes_tx"] > 0
     tlogs = sorted((tmp_path / "tlog").glob("*.tlog"))
     assert tlogs and any(m.get_type() == "STATUSTEXT" for m in read_tlog(tlogs[0]))
+    # The recording replays step by step to the same records (issue 11: the ROV on a pty).
+    caps = sorted((tmp_path / "rec").glob("*.cap"))
+    assert len(caps) == 1
+    assert main(["replay", str(caps[0]), "--config", str(cfg),
+                 "--out", str(tmp_path / "replay")]) == 0
+    live = (tmp_path / "live" / "epochs.jsonl").read_bytes()
+    assert live.count(b"\n") == len(lines) >= 30  # 0.1 s steps through a 2 s dropout
+    assert (tmp_path / "replay" / "epochs.jsonl").read_bytes() == live
+    again = json.loads((tmp_path / "replay" / "summary.json").read_text())
+    r = again["replay"]
+    assert r["steps"] == len(lines) and r["rx_unread"] == 0
+    assert r["bytes_rx"] == summary["port"]["bytes_rx"]
+    assert r["tx_match"] and r["bytes_tx"] == summary["port"]["bytes_tx"]
+    assert again["failsafe"] == summary["failsafe"] and again["counts"] == summary["counts"]
+    assert again["actions"] == summary["actions"]
 
 
 @pytest.mark.parametrize("n_epochs", [1, 2, 25])

@@ -15,6 +15,7 @@ and ``OUT/summary.json``.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import re
 import sys
@@ -36,6 +37,9 @@ from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 
+# An ROV recording (firmware_host.rov.vehicle's TICK and LINK channels) goes to the ROV's
+# replay, loaded only then (as the CLI loads a command): the rover's replay stays light.
+ROV_TICK, ROV_LINK_RX, ROV_REPLAY = "rov tick", "rov link rx", "firmware_host.rov.replay"
 _TIME_RE = re.compile(rb"^\$..(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
 
 
@@ -310,7 +314,27 @@ def print_summary(s: dict[str, Any], stream: TextIO) -> None:
 # --------------------------------------------------------------------------- CLI
 
 
+def _print_rov(args: argparse.Namespace, summary: dict[str, Any]) -> int:
+    if args.json:
+        print(json.dumps(summary))
+        return 0
+    r = summary["replay"]
+    print(f"ROV replay: {r['steps']} steps, {summary['epochs']} epochs, commands "
+          f"{'as recorded' if r['tx_match'] else 'DIFFERENT from the recording'} "
+          f"({r['tx_steps_same']} steps same, {r['tx_steps_differ']} differ)")
+    print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if is_capture(args.capture):
+        names = {c.name for c in CaptureReader(args.capture).channels}
+        if {ROV_TICK, ROV_LINK_RX} <= names:
+            return _print_rov(args, importlib.import_module(ROV_REPLAY).run(args))
+        if ROV_LINK_RX in names:
+            raise FdiBridgeError(f"{args.capture}: an ROV recording without step ticks (made "
+                                 "before they were recorded): it cannot be replayed step by "
+                                 "step")
     cfg = load_config(args.config)
     nmea_url, _mav_url = output_urls(cfg, args.nmea_out, args.mavlink)
     if nmea_url and not nmea_url.startswith("pty:"):  # a wrong port must not look like success

@@ -9,10 +9,16 @@ then neutral thrust; :class:`~firmware_host.runtime.failsafe.RovFailsafeMonitor`
 episodes and says when telemetry is back. With a ``[mavlink]`` router, the operator gets the
 corrected heading, the statistics and the events
 (:class:`~firmware_host.rov.ardusub.RovOperatorSink`).
+
+With a flight recorder, each step first writes one record on the ``rov tick`` channel
+(:data:`TICK`, ``{"k": step, "t": seconds since start}``), so the link's bytes of a step lie
+between its tick and the next one: ``fdi-bridge replay`` re-runs the steps with exactly those
+bytes (:mod:`firmware_host.rov.replay`).
 """
 
 from __future__ import annotations
 
+import json
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import replace
@@ -27,9 +33,10 @@ from firmware_host.rov.config import RovConfig, protocol_path
 from firmware_host.rov.control import RovController, epoch_record
 from firmware_host.runtime.failsafe import RovFailsafeMonitor
 from firmware_host.runtime.records import EpochLog
-from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
+from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec, Tap
 
 LINK = "rov link"
+TICK = "rov tick"  # the recorder channel of the step marks (docs/capture-format.md)
 EpochCallback = Callable[[dict[str, Any]], None]
 
 
@@ -81,6 +88,8 @@ class OutlandRovVehicle:
         self.epochs = EpochLog(None)
         self.actions: Counter[str] = Counter()
         self.t0 = 0.0
+        self.tick: Tap | None = None
+        self.steps = 0
 
     def ports(self) -> list[PortSpec]:
         return [PortSpec(LINK, link_settings(self.cfg), self.cfg.link.reconnect_max_s,
@@ -96,10 +105,14 @@ class OutlandRovVehicle:
         if ctx.mavlink is not None:
             self.operator = RovOperatorSink(ctx.mavlink)
         self.epochs = ctx.epochs
+        self.tick = ctx.tap(TICK, "", 0, "tx")
         self.t0 = ctx.clock()
 
     def step(self, t: float) -> int:
         assert self.link is not None
+        if self.tick is not None:  # before any read: the step's bytes follow its mark
+            self.tick(json.dumps({"k": self.steps, "t": t - self.t0}).encode("ascii"))
+        self.steps += 1
         _, rec = link_step(self.link, self.ctl, self.cfg.period_s)
         rec["t"] = round(t - self.t0, 3)
         self.monitor.observe(rec)
