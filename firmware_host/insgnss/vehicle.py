@@ -68,7 +68,7 @@ from fdi.insgnss import (
     measure_imu_rate,
 )
 from fdi.three_zone import Action
-from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, rover_mavlink_spec, unix_time
+from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.config_insgnss import InsGnssSetup
@@ -192,7 +192,11 @@ class InsGnssVehicle:
         return specs
 
     def mavlink(self) -> MavlinkSpec | None:
-        return rover_mavlink_spec(self.cfg, self.mavlink_url)
+        if not self.mavlink_url:
+            return None
+        o, rc = self.cfg.rover.output, self.cfg.rover
+        return MavlinkSpec(self.mavlink_url, o.mavlink_baudrate, o.mavlink_system,
+                           o.mavlink_component, rc.reconnect_max_s)
 
     def start(self, ctx: Context) -> None:
         rc = self.cfg.rover

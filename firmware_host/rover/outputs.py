@@ -29,9 +29,8 @@ from drivers.ptypair import PtyPair
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
 from firmware_host.rover.pipeline import EpochOutcome
-from firmware_host.runtime.config import BridgeConfig, RoverConfig
+from firmware_host.runtime.config import RoverConfig
 from firmware_host.runtime.mavout import MavlinkOutput, open_mavlink_output
-from firmware_host.runtime.vehicle import MavlinkSpec
 
 KNOT_MPS = 1852.0 / 3600.0
 GPS_EPOCH_UNIX = 315964800  # 1980-01-06T00:00:00Z
@@ -439,14 +438,3 @@ class _GpsInputState:
                 return north / dt, east / dt, acc
         self.vel_unknown += 1
         return 0.0, 0.0, UNKNOWN_SPEED_ACC_MPS
-
-
-def rover_mavlink_spec(cfg: BridgeConfig, url: str | None) -> MavlinkSpec | None:
-    """The MAVLink output of a vehicle on the rover's receiver (the rover, the live INS/GNSS):
-    ``url`` (none when empty) with ``[rover.output]``'s ids and baud rate and the rover's
-    reopen backoff."""
-    if not url:
-        return None
-    o, rc = cfg.rover.output, cfg.rover
-    return MavlinkSpec(url, o.mavlink_baudrate, o.mavlink_system, o.mavlink_component,
-                       rc.reconnect_max_s)

@@ -26,7 +26,7 @@ from typing import Any, Literal
 from drivers.resilient import ResilientPort
 from drivers.transport import open_port_nonblocking
 from firmware_host.mavlink.rover import attach_rover
-from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, rover_mavlink_spec
+from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.failsafe import RoverFailsafe
@@ -63,7 +63,11 @@ class RoverVehicle:
         return [PortSpec("gps", rc.port, rc.reconnect_max_s, opener=open_port_nonblocking)]
 
     def mavlink(self) -> MavlinkSpec | None:
-        return rover_mavlink_spec(self.cfg, self.mavlink_url)
+        if not self.mavlink_url:
+            return None
+        o, rc = self.cfg.rover.output, self.cfg.rover
+        return MavlinkSpec(self.mavlink_url, o.mavlink_baudrate, o.mavlink_system,
+                           o.mavlink_component, rc.reconnect_max_s)
 
     def start(self, ctx: Context) -> None:
         rc = self.cfg.rover
