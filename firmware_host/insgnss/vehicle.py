@@ -70,6 +70,7 @@ from fdi.insgnss import (
 from fdi.three_zone import Action
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
+from firmware_host.rover.vehicle import rover_mavlink_spec
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.failsafe import RoverFailsafe
@@ -192,11 +193,7 @@ class InsGnssVehicle:
         return specs
 
     def mavlink(self) -> MavlinkSpec | None:
-        if not self.mavlink_url:
-            return None
-        o, rc = self.cfg.rover.output, self.cfg.rover
-        return MavlinkSpec(self.mavlink_url, o.mavlink_baudrate, o.mavlink_system,
-                           o.mavlink_component, rc.reconnect_max_s)
+        return rover_mavlink_spec(self.cfg, self.mavlink_url)
 
     def start(self, ctx: Context) -> None:
         rc = self.cfg.rover

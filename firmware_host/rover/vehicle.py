@@ -35,6 +35,17 @@ from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 log = logging.getLogger("fdi_bridge.rover")
 
 
+def rover_mavlink_spec(cfg: BridgeConfig, url: str | None) -> MavlinkSpec | None:
+    """The MAVLink output of a vehicle on the rover's receiver (the rover, the live INS/GNSS):
+    ``url`` (none when empty) with ``[rover.output]``'s ids and baud rate and the rover's
+    reopen backoff."""
+    if not url:
+        return None
+    o, rc = cfg.rover.output, cfg.rover
+    return MavlinkSpec(url, o.mavlink_baudrate, o.mavlink_system, o.mavlink_component,
+                       rc.reconnect_max_s)
+
+
 class RoverVehicle:
     """See the module docstring. ``nmea_url``/``mavlink_url`` override the config's."""
 
@@ -63,11 +74,7 @@ class RoverVehicle:
         return [PortSpec("gps", rc.port, rc.reconnect_max_s, opener=open_port_nonblocking)]
 
     def mavlink(self) -> MavlinkSpec | None:
-        if not self.mavlink_url:
-            return None
-        o, rc = self.cfg.rover.output, self.cfg.rover
-        return MavlinkSpec(self.mavlink_url, o.mavlink_baudrate, o.mavlink_system,
-                           o.mavlink_component, rc.reconnect_max_s)
+        return rover_mavlink_spec(self.cfg, self.mavlink_url)
 
     def start(self, ctx: Context) -> None:
         rc = self.cfg.rover
