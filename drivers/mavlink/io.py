@@ -315,9 +315,29 @@ class _Encoders:
         return self._emit(msg)
 
     def send_raw_imu(self, time_usec: int, acc: tuple[int, int, int],
-                     gyro: tuple[int, int, int], imu_id: int = 0) -> bytes:
-        """RAW_IMU in ArduPilot's scaling (mG, mrad/s; see drivers/mavlink/imu.py), no compass."""
-        msg = self._mav.raw_imu_encode(int(time_usec), *acc, *gyro, 0, 0, 0, int(imu_id), 0)
+                     gyro: tuple[int, int, int], imu_id: int = 0,
+                     mag: tuple[int, int, int] = (0, 0, 0)) -> bytes:
+        """RAW_IMU in ArduPilot's scaling (mG, mrad/s; see drivers/mavlink/imu.py), the compass
+        in mGauss (all 0: none; drivers/mavlink/compass.py)."""
+        msg = self._mav.raw_imu_encode(int(time_usec), *acc, *gyro, *mag, int(imu_id), 0)
+        return self._emit(msg)
+
+    def send_scaled_imu(self, instance: int, time_boot_ms: int, acc: tuple[int, int, int],
+                        gyro: tuple[int, int, int], mag: tuple[int, int, int]) -> bytes:
+        """SCALED_IMU (``instance`` 0), SCALED_IMU2 (1) or SCALED_IMU3 (2): mG, mrad/s, mGauss."""
+        enc = (self._mav.scaled_imu_encode, self._mav.scaled_imu2_encode,
+               self._mav.scaled_imu3_encode)[instance]
+        msg = enc(int(time_boot_ms) & 0xFFFFFFFF, *acc, *gyro, *mag, 0)
+        return self._emit(msg)
+
+    def send_rc_channels_override(self, target_system: int, target_component: int,
+                                  channels: tuple[int, ...]) -> bytes:
+        """RC_CHANNELS_OVERRIDE with ``channels`` (18 values, µs; per the MAVLink spec
+        UINT16_MAX ignores channels 1-8 and 0 releases them; 0 or UINT16_MAX ignores 9-18)."""
+        if len(channels) != 18:
+            raise ValueError("RC_CHANNELS_OVERRIDE takes 18 channel values")
+        msg = self._mav.rc_channels_override_encode(target_system, target_component,
+                                                    *(int(c) for c in channels))
         return self._emit(msg)
 
     def send_highres_imu(self, time_usec: int, acc: tuple[float, float, float],
@@ -364,11 +384,13 @@ class _Encoders:
         return self._emit(msg)
 
     def send_attitude(
-        self, time_boot_ms: int, roll_rad: float, pitch_rad: float, yaw_rad: float
+        self, time_boot_ms: int, roll_rad: float, pitch_rad: float, yaw_rad: float,
+        rates_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> bytes:
-        """ATTITUDE (angles in rad; rates sent as zero), as an autopilot reports its heading."""
+        """ATTITUDE (angles in rad; body rates p, q, r in rad/s, zero unless given), as an
+        autopilot reports its heading."""
         msg = self._mav.attitude_encode(
-            int(time_boot_ms) & 0xFFFFFFFF, roll_rad, pitch_rad, yaw_rad, 0.0, 0.0, 0.0
+            int(time_boot_ms) & 0xFFFFFFFF, roll_rad, pitch_rad, yaw_rad, *rates_rad_s
         )
         return self._emit(msg)
 

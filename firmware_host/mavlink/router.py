@@ -560,6 +560,16 @@ class Router:
         self._post(raw, self.autopilot)
         return raw
 
+    def send_rc_channels_override(self, channels: tuple[int, ...],
+                                  target_system: int | None = None) -> bytes:
+        """RC_CHANNELS_OVERRIDE (18 values) to the autopilot from the pilot's (GCS) system id:
+        ArduPilot takes it only from ``SYSID_MYGCS``, as MANUAL_CONTROL."""
+        target = self.cfg.system_id if target_system is None else target_system
+        with self._lock:
+            raw = self._pilot.send_rc_channels_override(target, 1, channels)
+        self._post(raw, self.autopilot)
+        return raw
+
     def request_mode(
         self, mode: str, vehicle: str = "rover", target_system: int | None = None
     ) -> bytes:

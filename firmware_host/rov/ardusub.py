@@ -53,6 +53,7 @@ clockwise), ``y = 10 lateral``, ``z = 500 + 5 vertical`` (0..1000, 500 neutral),
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import threading
@@ -61,17 +62,20 @@ from collections.abc import Callable
 from typing import Any, Literal
 
 from drivers.mavlink import io as mio
+from drivers.mavlink.compass import heading_rate_dps, mag_from_message, tilt_compensated_heading_deg
 from drivers.mavlink.framer import MavFrame
 from drivers.mavlink.modes import MODES
 from drivers.outland.link import ThrusterCommand
-from fdi.errors import ConfigError
+from drivers.ratelog import RateLimitedLog
+from fdi.errors import ConfigError, DecodeError
 from firmware_host.mavlink.router import Router
 from firmware_host.rov.config import RovConfig
 from firmware_host.rov.control import RovController, epoch_record
+from firmware_host.runtime.config_rov import ArduSubConfig
 from firmware_host.runtime.failsafe import RovFailsafeMonitor
 from firmware_host.runtime.mavout import MavlinkOutput, RouterOutput
 from firmware_host.runtime.records import EpochLog
-from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
+from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec, Tap
 
 log = logging.getLogger(__name__)
 
@@ -166,73 +170,56 @@ class RovOperatorSink:
         self._action = action
 
 
-class AutopilotHeading:
-    """The newest ATTITUDE yaw from the autopilot (deg, 0..360), taken once per period."""
+class Inbox:
+    """The autopilot's and the pilot's frames as they arrive (router thread), taken once per
+    period by the loop, which decodes them in arrival order (so a recording of what each step
+    took replays exactly: :mod:`firmware_host.rov.replay`)."""
 
-    def __init__(self, router: Router, autopilot: tuple[int, int] = (1, 1)) -> None:
-        self.autopilot = autopilot
+    def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._latest: float | None = None
-        self.received = 0
-        router.listen("ATTITUDE", self._on_attitude)
+        self._frames: list[bytes] = []
 
-    def _on_attitude(self, frame: MavFrame) -> None:
+    def push(self, raw: bytes) -> None:
+        with self._lock:
+            self._frames.append(raw)
+
+    def take(self) -> list[bytes]:
+        with self._lock:
+            frames, self._frames = self._frames, []
+        return frames
+
+
+class AutopilotListener:
+    """One message of the autopilot (``(system, component)`` = ``autopilot``) into the inbox,
+    counted in ``received``."""
+
+    def __init__(self, router: Router, message: str, inbox: Inbox,
+                 autopilot: tuple[int, int] = (1, 1)) -> None:
+        self.autopilot = autopilot
+        self.inbox = inbox
+        self.received = 0
+        router.listen(message, self._on_frame)
+
+    def _on_frame(self, frame: MavFrame) -> None:
         if (frame.sysid, frame.compid) != self.autopilot:
             return
-        msg = mio.decode_packet(frame.raw)
-        if msg is None:
-            return
-        with self._lock:
-            self._latest = math.degrees(float(msg.yaw)) % 360.0
-            self.received += 1
-
-    def take(self) -> float | None:
-        """The heading received since the last call, None when none came (a dropout)."""
-        with self._lock:
-            value, self._latest = self._latest, None
-        return value
-
-
-class AutopilotState:
-    """The newest HEARTBEAT of the autopilot (armed flag, custom mode), taken once per period."""
-
-    def __init__(self, router: Router, autopilot: tuple[int, int] = (1, 1)) -> None:
-        self.autopilot = autopilot
-        self._lock = threading.Lock()
-        self._latest: tuple[bool, int] | None = None
-        self.received = 0
-        router.listen("HEARTBEAT", self._on_heartbeat)
-
-    def _on_heartbeat(self, frame: MavFrame) -> None:
-        if (frame.sysid, frame.compid) != self.autopilot:
-            return
-        msg = mio.decode_packet(frame.raw)
-        if msg is None:
-            return
-        armed = bool(int(msg.base_mode) & mio.MAV_MODE_FLAG_SAFETY_ARMED)
-        with self._lock:
-            self._latest = (armed, int(msg.custom_mode))
-            self.received += 1
-
-    def take(self) -> tuple[bool, int] | None:
-        with self._lock:
-            value, self._latest = self._latest, None
-        return value
+        self.received += 1
+        self.inbox.push(frame.raw)
 
 
 class PilotInput:
     """The pilot's MANUAL_CONTROL from the ground stations, intercepted in the router.
 
     A frame passes unchanged when the bridge is not steering or the pilot's ``|r|`` is above the
-    dead band; otherwise it is kept (the bridge sends its axes with its own yaw).
+    dead band; otherwise it is kept (the bridge sends its axes with its own yaw). Frames for
+    this vehicle go to the inbox.
     """
 
-    def __init__(self, router: Router, vehicle: int, dead_band: int) -> None:
+    def __init__(self, router: Router, vehicle: int, dead_band: int, inbox: Inbox) -> None:
         self.vehicle = vehicle
         self.dead_band = dead_band
+        self.inbox = inbox
         self.steering = False  # set by the loop each period
-        self._lock = threading.Lock()
-        self._latest: tuple[int, int, int, int, int] | None = None
         self.received = 0
         router.intercept("MANUAL_CONTROL", self._on_manual_control)
 
@@ -240,39 +227,89 @@ class PilotInput:
         msg = mio.decode_packet(frame.raw)
         if msg is None or int(msg.target) != self.vehicle:
             return True  # not for this vehicle (ArduSub ignores it too): forwarded as it is
-        axes = (int(msg.x), int(msg.y), int(msg.z), int(msg.r), int(msg.buttons))
-        with self._lock:
-            self._latest = axes
-            self.received += 1
-        return not self.steering or abs(axes[3]) > self.dead_band
+        self.received += 1
+        self.inbox.push(frame.raw)
+        return not self.steering or abs(int(msg.r)) > self.dead_band
 
-    def take(self) -> tuple[int, int, int, int, int] | None:
-        with self._lock:
-            value, self._latest = self._latest, None
-        return value
+
+UINT16_MAX = 0xFFFF
+RC_RELEASE = 0
+
+
+def _pwm(value: float, lo: int = 1100, hi: int = 1900) -> int:
+    return min(max(round(value), lo), hi)
+
+
+def rc_override_channels(acfg: ArduSubConfig, axes: tuple[int, int, int, int] | None
+                         ) -> tuple[int, ...]:
+    """RC_CHANNELS_OVERRIDE's 18 values for MANUAL_CONTROL axes ``(x, y, z, r)``, or the
+    release of the bridge's channels when ``axes`` is None.
+
+    ArduSub's joystick mapping at gain 1 (``transform_manual_control_to_rc_override``:
+    ``1500 + 0.4 r`` for yaw, forward and lateral, ``1100 + 0.8 z`` for throttle; 1100..1900),
+    on the ``RCMAP_*`` channels of ``[rov.ardusub]``; the other channels 1-8 are UINT16_MAX
+    (ignored), 9-18 are 0 (ignored), per the MAVLink spec. A release sets the bridge's four
+    channels to 0 (back to the RC radio)."""
+    ch = [UINT16_MAX] * 8 + [0] * 10
+    slots = (acfg.rc_forward_channel, acfg.rc_lateral_channel, acfg.rc_throttle_channel,
+             acfg.rc_yaw_channel)
+    if axes is None:
+        for c in slots:
+            ch[c - 1] = RC_RELEASE
+        return tuple(ch)
+    x, y, z, r = axes
+    for c, v in zip(slots, (_pwm(1500 + 0.4 * x), _pwm(1500 + 0.4 * y),
+                            _pwm(1100 + 0.8 * z), _pwm(1500 + 0.4 * r)), strict=True):
+        ch[c - 1] = v
+    return tuple(ch)
+
+
+_RELEASE_ON = frozenset({"mode", "disarmed", "no_heartbeat", "detect_only"})
 
 
 class RovAutopilotLoop:
-    """The ROV heading hold driven through an autopilot (see the module docstring)."""
+    """The ROV heading hold driven through an autopilot (see the module docstring).
+
+    ``router`` None: no router (a replay): the loop reads ``inbox`` (loaded by the caller)
+    and sends nothing; ``output`` gets the operator's telemetry (a null output in a replay).
+    ``tx`` receives one line per command the loop sends (JSON: ``{"mc": [x, y, z, r,
+    buttons]}`` or ``{"rc": [18 values]}``): the recorder's ``ardusub tx`` channel.
+    """
 
     def __init__(
         self,
         cfg: RovConfig,
-        router: Router,
+        router: Router | None,
         *,
         ft: bool = True,
         vehicle_system_id: int = 1,
         on_epoch: Callable[[dict[str, Any]], None] | None = None,
+        inbox: Inbox | None = None,
+        output: MavlinkOutput | None = None,
     ) -> None:
         self.cfg = cfg
         self.acfg = cfg.ardusub
         self.router = router
         self.vehicle = vehicle_system_id
         self.ctl = RovController(cfg, ft=ft)
-        self.heading = AutopilotHeading(router, (vehicle_system_id, 1))
-        self.autopilot = AutopilotState(router, (vehicle_system_id, 1))
-        self.pilot = PilotInput(router, vehicle_system_id, self.acfg.yaw_dead_band)
-        self.output = RouterOutput(router)
+        self.inbox = inbox if inbox is not None else Inbox()
+        a = self.acfg
+        self.heading: AutopilotListener | None = None
+        self.autopilot: AutopilotListener | None = None
+        self.compass: AutopilotListener | None = None
+        self.pilot: PilotInput | None = None
+        self._uses_compass = a.heading == "raw_compass" or a.gyro == "imu"
+        if router is not None:
+            ap = (vehicle_system_id, 1)
+            self.heading = AutopilotListener(router, "ATTITUDE", self.inbox, ap)
+            self.autopilot = AutopilotListener(router, "HEARTBEAT", self.inbox, ap)
+            if self._uses_compass:
+                self.compass = AutopilotListener(router, a.compass_message, self.inbox, ap)
+            self.pilot = PilotInput(router, vehicle_system_id, a.yaw_dead_band, self.inbox)
+        if output is None:
+            assert router is not None, "a replay gives its own output"
+            output = RouterOutput(router)
+        self.output = output
         self.operator = RovOperatorSink(self.output)
         self.on_epoch = on_epoch
         self.t = 0.0
@@ -283,10 +320,92 @@ class RovAutopilotLoop:
         self._pilot_age = 0.0
         self._pilot_has = False  # the pilot is steering (yaw above the dead band)
         self._centred_s = 0.0
+        self._attitude: tuple[float, float] | None = None  # the newest (roll, pitch), rad
         self.state = "init"
         self.states: Counter[str] = Counter()
         self.takeovers = 0
         self.sent = 0
+        self.rc_releases = 0
+        self.tx: list[bytes] = []  # this step's commands (see the class docstring)
+        self.taken: Counter[str] = Counter()  # frames processed, by message
+        self.rejected: Counter[str] = Counter()  # frames or values not used, by reason
+        self._ratelog = RateLimitedLog(log)
+
+    # -- inputs -------------------------------------------------------------------------
+
+    def _reject(self, why: str) -> None:
+        self.rejected[why] += 1
+        self._ratelog.warning(f"ardusub input not used: {why}",
+                              f"{self.rejected[why]} so far")
+
+    def _absorb(self, frames: list[bytes]) -> tuple[
+            float | None, float | None, float | None,
+            tuple[bool, int] | None, tuple[int, int, int, int, int] | None]:
+        """This period's frames, in arrival order: ``(heading, attitude yaw, yaw rate,
+        heartbeat, pilot axes)``, each the newest (the rate: the mean of the period's)."""
+        a = self.acfg
+        yaw_att: float | None = None
+        compass: float | None = None
+        hb: tuple[bool, int] | None = None
+        pilot: tuple[int, int, int, int, int] | None = None
+        rates: list[float] = []
+        for raw in frames:
+            msg = mio.decode_packet(raw)
+            if msg is None:
+                self._reject("undecodable")
+                continue
+            kind = msg.get_type()
+            self.taken[kind] += 1
+            try:
+                if kind == "ATTITUDE":
+                    roll, pitch, yaw = float(msg.roll), float(msg.pitch), float(msg.yaw)
+                    if not all(math.isfinite(v) for v in (roll, pitch, yaw)):
+                        self._reject("attitude_not_finite")
+                        continue
+                    self._attitude = (roll, pitch)
+                    yaw_att = math.degrees(yaw) % 360.0
+                    if a.gyro == "attitude":
+                        rate = heading_rate_dps((float(msg.rollspeed), float(msg.pitchspeed),
+                                                 float(msg.yawspeed)), roll, pitch)
+                        if rate is None:
+                            self._reject("rate_not_finite")
+                        else:
+                            rates.append(rate)
+                elif kind == "HEARTBEAT":
+                    hb = (bool(int(msg.base_mode) & mio.MAV_MODE_FLAG_SAFETY_ARMED),
+                          int(msg.custom_mode))
+                elif kind == "MANUAL_CONTROL":
+                    pilot = (int(msg.x), int(msg.y), int(msg.z), int(msg.r), int(msg.buttons))
+                if kind == a.compass_message and self._uses_compass:
+                    sample = mag_from_message(msg)
+                    if sample is None:
+                        self._reject("compass_empty")
+                        continue
+                    if self._attitude is None:
+                        self._reject("compass_before_attitude")  # no roll/pitch to level it
+                        continue
+                    roll, pitch = self._attitude
+                    if a.heading == "raw_compass":
+                        h = tilt_compensated_heading_deg(sample.field_mgauss, roll, pitch,
+                                                         a.declination_deg)
+                        if h is None:
+                            self._reject("compass_field_too_weak")
+                        else:
+                            compass = (h + a.compass_offset_deg) % 360.0
+                    if a.gyro == "imu":
+                        rate = (None if sample.gyro_rad_s is None
+                                else heading_rate_dps(sample.gyro_rad_s, roll, pitch))
+                        if rate is None:
+                            self._reject("gyro_missing")
+                        else:
+                            rates.append(rate)
+            except DecodeError:
+                self._reject(f"{kind.lower()}_fields")
+        heading = compass if a.heading == "raw_compass" else yaw_att
+        rate = sum(rates) / len(rates) if rates else None
+        return heading, yaw_att, rate, hb, pilot
+
+    # -- the gate -----------------------------------------------------------------------
 
     def _gate(self) -> str:
         """Why the bridge may not steer now, or :data:`STEERING`."""
@@ -329,27 +448,48 @@ class RovAutopilotLoop:
             text = text.format(mode=_SUB_MODE_NAMES.get(mode, str(mode)))
         log.info("ardusub: %s", text)
         self.output.send_statustext(severity, text)
+        if (self.state == STEERING and state in _RELEASE_ON
+                and self.acfg.output == "rc_override"):
+            self._send_rc(rc_override_channels(self.acfg, None))  # the channels back to RC
+            self.rc_releases += 1
         self.state = state
 
-    def step(self) -> dict[str, Any]:
-        """One period: heading, heartbeat and pilot in; controller; MANUAL_CONTROL out when
-        the bridge steers (module docstring); operator telemetry."""
+    # -- outputs ------------------------------------------------------------------------
+
+    def _send_rc(self, channels: tuple[int, ...]) -> None:
+        self.tx.append(json.dumps({"rc": list(channels)}, separators=(",", ":")).encode())
+        if self.router is not None:
+            self.router.send_rc_channels_override(channels, target_system=self.vehicle)
+
+    def _send_command(self, x: int, y: int, z: int, r: int, buttons: int) -> None:
+        if self.acfg.output == "rc_override":
+            self._send_rc(rc_override_channels(self.acfg, (x, y, z, r)))
+        else:
+            self.tx.append(json.dumps({"mc": [x, y, z, r, buttons]},
+                                      separators=(",", ":")).encode())
+            self.output.send_manual_control(self.vehicle, x, y, z, r, buttons)
+        self.sent += 1
+
+    def step(self, frames: list[bytes] | None = None) -> dict[str, Any]:
+        """One period: heading, heartbeat and pilot in (``frames``, default the inbox's);
+        controller; MANUAL_CONTROL or RC_CHANNELS_OVERRIDE out when the bridge steers (module
+        docstring); operator telemetry."""
         dt = self.cfg.period_s
-        meas = self.heading.take()
-        hb = self.autopilot.take()
+        self.tx = []
+        meas, yaw_att, rate, hb, pilot = self._absorb(
+            self.inbox.take() if frames is None else frames)
         if hb is not None:
             self.armed, self.mode = hb
             self._hb_age = 0.0
         elif self._hb_age is not None:
             self._hb_age += dt
-        pilot = self.pilot.take()
         if pilot is not None:
             self._pilot_axes, self._pilot_age = pilot, 0.0
         else:
             self._pilot_age += dt
         was_pilot = self._pilot_has
         pilot_yaw = self._pilot_axes is not None and self._pilot_yaw(dt)
-        cmd, dec = self.ctl.step(meas, dt)
+        cmd, dec = self.ctl.step(meas, dt, yaw_rate_dps=rate)
         if was_pilot and not pilot_yaw and dec.heading_used is not None:  # handed back
             self.ctl.setpoint_deg = dec.heading_used % 360.0
             self.ctl.pid.reset()
@@ -359,7 +499,8 @@ class RovAutopilotLoop:
         state = "pilot" if gate == STEERING and pilot_yaw else gate
         self._set_state(state)
         steering = state == STEERING
-        self.pilot.steering = steering
+        if self.pilot is not None:
+            self.pilot.steering = steering
         x, y, z, r = manual_control_axes(cmd)
         buttons = 0
         if self._pilot_axes is not None and self._pilot_age <= self.acfg.pilot_timeout_s + 1e-9:
@@ -367,8 +508,7 @@ class RovAutopilotLoop:
             if not steering:
                 r = pr
         if steering:
-            self.output.send_manual_control(self.vehicle, x, y, z, r, buttons)
-            self.sent += 1
+            self._send_command(x, y, z, r, buttons)
         else:
             # Not ours: the yaw the vehicle gets is the pilot's (0 without one), and that is
             # the detector's next input; the PID does not wind up meanwhile.
@@ -380,6 +520,10 @@ class RovAutopilotLoop:
         rec = epoch_record(self.t, None, meas, self.ctl.setpoint_deg, cmd, dec, self.ctl.action)
         rec["ardusub"] = state
         rec["r_sent"] = r if steering else None
+        if self.acfg.heading == "raw_compass":
+            rec["heading_attitude"] = None if yaw_att is None else round(yaw_att, 4)
+        if self.acfg.gyro != "none":
+            rec["yaw_rate"] = None if rate is None else round(rate, 4)
         self.t += dt
         self.operator(rec)
         if self.on_epoch is not None:
@@ -387,10 +531,51 @@ class RovAutopilotLoop:
         return rec
 
 
+class NullOutput:
+    """A :class:`~firmware_host.runtime.mavout.MavlinkOutput` that sends nothing (a replay)."""
+
+    def send_heartbeat(self) -> None:
+        """Nothing."""
+
+    def send_statustext(self, severity: int, text: str) -> None:
+        """Nothing."""
+
+    def request_mode(self, target_system: int, mode: str, vehicle: str = "rover") -> None:
+        """Nothing."""
+
+    def send_gps_input(self, fix: mio.GpsInputFix) -> None:
+        """Nothing."""
+
+    def send_named_value(self, name: str, value: float) -> None:
+        """Nothing."""
+
+    def send_manual_control(self, target_system: int, x: int, y: int, z: int, r: int,
+                            buttons: int = 0) -> None:
+        """Nothing."""
+
+    def counters(self) -> dict[str, int]:
+        return {}
+
+    def close(self) -> None:
+        """Nothing."""
+
+
+TICK = "ardusub tick"
+"""Recorder channel: one ``{"k": step, "t": seconds}`` record at the start of each step."""
+RX = "ardusub rx"
+"""Recorder channel: each frame the step took from the inbox (one record per frame)."""
+TX = "ardusub tx"
+"""Recorder channel: each command the step sent (``RovAutopilotLoop.tx`` lines)."""
+
+
 class ArduSubRovVehicle:
     """The ROV through an ArduSub autopilot as a vehicle of the runtime (module docstring).
 
-    Needs the runner's router (a ``[mavlink]`` table): ATTITUDE in, MANUAL_CONTROL out.
+    Needs the runner's router (a ``[mavlink]`` table): ATTITUDE (and the raw compass) in,
+    MANUAL_CONTROL or RC_CHANNELS_OVERRIDE out. With a flight recorder, each step writes a
+    mark on :data:`TICK`, then the frames it took on :data:`RX` and its commands on
+    :data:`TX`: ``fdi-bridge replay`` re-runs the steps on exactly those frames
+    (:func:`firmware_host.rov.replay.replay_ardusub`).
     """
 
     name = "rov-ardusub"
@@ -408,6 +593,11 @@ class ArduSubRovVehicle:
         self.monitor = RovFailsafeMonitor(cfg.period_s)
         self.epochs = EpochLog(None)
         self.actions: Counter[str] = Counter()
+        self.t0 = 0.0
+        self.steps = 0
+        self._tick: Tap | None = None
+        self._rx: Tap | None = None
+        self._tx: Tap | None = None
 
     def ports(self) -> list[PortSpec]:
         return []  # the router's autopilot link is the vehicle's
@@ -423,14 +613,42 @@ class ArduSubRovVehicle:
                                      vehicle_system_id=self.vehicle_system_id,
                                      on_epoch=self.on_epoch)  # before the router starts
         self.epochs = ctx.epochs
+        url = ctx.router.cfg.autopilot.url
+        self._tick = ctx.tap(TICK, "", 0, "tx")
+        self._rx = ctx.tap(RX, url, 0, "rx")
+        self._tx = ctx.tap(TX, url, 0, "tx")
+        self.t0 = ctx.clock()
+
+    def start_replay(self, epochs: EpochLog) -> None:
+        """No router: the steps get their frames from :meth:`step_frames` (a replay)."""
+        self.loop = RovAutopilotLoop(self.cfg, None, ft=self.ft,
+                                     vehicle_system_id=self.vehicle_system_id,
+                                     on_epoch=self.on_epoch, output=NullOutput())
+        self.epochs = epochs
 
     def step(self, t: float) -> int:
         assert self.loop is not None
-        rec = self.loop.step()
+        if self._tick is not None:
+            self._tick(json.dumps({"k": self.steps, "t": t - self.t0}).encode("ascii"))
+        frames = self.loop.inbox.take()
+        if self._rx is not None:
+            for raw in frames:
+                self._rx(raw)
+        self.step_frames(frames)
+        if self._tx is not None:
+            for line in self.loop.tx:
+                self._tx(line)
+        return 1
+
+    def step_frames(self, frames: list[bytes]) -> dict[str, Any]:
+        """One step on ``frames`` (live: the inbox's; a replay: the recorded ones)."""
+        assert self.loop is not None
+        self.steps += 1
+        rec = self.loop.step(frames)
         self.monitor.observe(rec)
         self.actions[rec["action"]] += 1
         self.epochs.write(rec)
-        return 1
+        return rec
 
     def check(self, now: float) -> None:
         """Nothing beyond the step: the dropout rule runs in the controller every period."""
@@ -445,10 +663,20 @@ class ArduSubRovVehicle:
         out: dict[str, Any] = {"actions": dict(sorted(self.actions.items()))}
         if self.loop is not None:
             lp = self.loop
-            out["attitude_received"] = lp.heading.received
-            out["heartbeat_received"] = lp.autopilot.received
-            out["pilot_received"] = lp.pilot.received
-            out["manual_control_sent"] = lp.sent
+            if lp.heading is not None and lp.autopilot is not None and lp.pilot is not None:
+                out["attitude_received"] = lp.heading.received
+                out["heartbeat_received"] = lp.autopilot.received
+                out["pilot_received"] = lp.pilot.received
+            if lp.compass is not None:
+                out["compass_received"] = lp.compass.received
+            out["frames_taken"] = dict(sorted(lp.taken.items()))
+            out["inputs_rejected"] = dict(sorted(lp.rejected.items()))
+            out["heading"] = lp.acfg.heading
+            out["output"] = lp.acfg.output
+            out["manual_control_sent" if lp.acfg.output == "manual_control"
+                else "rc_override_sent"] = lp.sent
+            if lp.acfg.output == "rc_override":
+                out["rc_releases"] = lp.rc_releases
             out["pilot_takeovers"] = lp.takeovers
             out["ardusub_states"] = dict(sorted(lp.states.items()))
         out["failsafe"] = {"episodes": self.monitor.episodes,

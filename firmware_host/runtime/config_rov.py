@@ -39,6 +39,10 @@ HeadingSource = Literal["outland", "mavlink"]
 # handlers read ``channel_yaw``): the bridge may steer in these; in AUTO, GUIDED, CIRCLE and
 # SURFACE the autopilot owns the heading, and the bridge refuses to command.
 ARDUSUB_YAW_MODES = ("MANUAL", "STABILIZE", "ACRO", "ALT_HOLD", "POSHOLD")
+ArduSubHeading = Literal["attitude", "raw_compass"]
+CompassMessage = Literal["RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3"]
+ArduSubGyro = Literal["none", "imu", "attitude"]
+ArduSubOutput = Literal["manual_control", "rc_override"]
 
 
 @dataclass(frozen=True)
@@ -61,12 +65,42 @@ class ArduSubConfig:
                                "doc": "pilot MANUAL_CONTROL silent this long: stop sending"})
     heartbeat_timeout_s: float = field(
         default=3.0, metadata={"gt": 0.0, "doc": "autopilot HEARTBEAT older: not commanding"})
+    heading: ArduSubHeading = field(
+        default="attitude", metadata={"doc": "attitude: ATTITUDE.yaw (the EKF's); raw_compass: "
+                                             "xmag/ymag of compass_message, tilt-compensated"})
+    compass_message: CompassMessage = field(
+        default="RAW_IMU", metadata={"doc": "the message whose xmag/ymag/zmag is the compass"})
+    declination_deg: float = field(
+        default=0.0, metadata={"ge": -180.0, "le": 180.0,
+                               "doc": "raw_compass: added (east positive; ArduPilot's "
+                                      "COMPASS_DEC in degrees)"})
+    compass_offset_deg: float = field(
+        default=0.0, metadata={"ge": -180.0, "le": 180.0,
+                               "doc": "raw_compass: added after the declination (mounting)"})
+    gyro: ArduSubGyro = field(
+        default="none", metadata={"doc": "the gyro witness's yaw rate: none, imu (the "
+                                         "compass_message's gyro), attitude (yawspeed)"})
+    output: ArduSubOutput = field(
+        default="manual_control", metadata={"doc": "manual_control or rc_override"})
+    rc_yaw_channel: int = field(
+        default=4, metadata={"ge": 1, "le": 8, "doc": "rc_override: RCMAP_YAW"})
+    rc_throttle_channel: int = field(
+        default=3, metadata={"ge": 1, "le": 8, "doc": "rc_override: RCMAP_THROTTLE"})
+    rc_forward_channel: int = field(
+        default=5, metadata={"ge": 1, "le": 8, "doc": "rc_override: RCMAP_FORWARD"})
+    rc_lateral_channel: int = field(
+        default=6, metadata={"ge": 1, "le": 8, "doc": "rc_override: RCMAP_LATERAL"})
 
     def __post_init__(self) -> None:
         bad = [m for m in self.modes if m not in ARDUSUB_YAW_MODES]
         if bad:
             raise ValueError(f"modes: {', '.join(bad)} do not take MANUAL_CONTROL yaw "
                              f"(one of {', '.join(ARDUSUB_YAW_MODES)})")
+        chans = (self.rc_yaw_channel, self.rc_throttle_channel, self.rc_forward_channel,
+                 self.rc_lateral_channel)
+        if len(set(chans)) != len(chans):
+            raise ValueError("rc_yaw_channel, rc_throttle_channel, rc_forward_channel and "
+                             f"rc_lateral_channel must differ, found {chans}")
 
 
 @dataclass(frozen=True)
