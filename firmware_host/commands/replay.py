@@ -40,6 +40,7 @@ from firmware_host.runtime.config import BridgeConfig, load_config
 # An ROV recording (firmware_host.rov.vehicle's TICK and LINK channels) goes to the ROV's
 # replay, loaded only then (as the CLI loads a command): the rover's replay stays light.
 ROV_TICK, ROV_LINK_RX, ROV_REPLAY = "rov tick", "rov link rx", "firmware_host.rov.replay"
+ARDUSUB_TICK = "ardusub tick"  # firmware_host.rov.ardusub's TICK: the ArduSub ROV's replay
 _TIME_RE = re.compile(rb"^\$..(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
 
 
@@ -329,7 +330,7 @@ def _print_rov(args: argparse.Namespace, summary: dict[str, Any]) -> int:
 def run(args: argparse.Namespace) -> int:
     if is_capture(args.capture):
         names = {c.name for c in CaptureReader(args.capture).channels}
-        if {ROV_TICK, ROV_LINK_RX} <= names:
+        if {ROV_TICK, ROV_LINK_RX} <= names or ARDUSUB_TICK in names:
             return _print_rov(args, importlib.import_module(ROV_REPLAY).run(args))
         if ROV_LINK_RX in names:
             raise FdiBridgeError(f"{args.capture}: an ROV recording without step ticks (made "

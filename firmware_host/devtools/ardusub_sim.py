@@ -18,6 +18,22 @@ a real pymavlink endpoint (``udpout:127.0.0.1:PORT``, :mod:`drivers.mavlink.io`)
 
 :meth:`ArduSubSim.step` advances ``dt`` of simulated time: tests drive it in lockstep with the
 bridge (no wall clock), :meth:`ArduSubSim.serve` runs it in real time in a thread.
+
+The raw compass (``compass = "RAW_IMU"``, ``"SCALED_IMU"``, ``"SCALED_IMU2"`` or
+``"SCALED_IMU3"``, at ``imu_hz``): the body-frame field of the compass heading (faults
+included) in an Earth field of ``field_mgauss`` (horizontal, down) whose north is
+``declination_deg`` east of true north, at a rolling and pitching attitude (``tilt_deg``
+amplitudes, reported in ATTITUDE), and the body rates from the plant's yaw gyro, in the same
+message (int16: mGauss, mrad/s, as ArduPilot's ``send_raw_imu``). ``fault_on =
+"magnetometer"`` puts the injected faults on the magnetometer only: ATTITUDE's yaw is then an
+EKF that takes the compass's error in slowly (a first-order lag of ``ekf_tau_s``), so its
+heading hides a drift for a while; ``"attitude"`` (the default) reports the faulty compass
+heading as ATTITUDE's yaw, as before.
+
+RC_CHANNELS_OVERRIDE from ``gcs_system_id`` for this vehicle sets the yaw on
+``rc_yaw_channel`` (``(pwm - 1500) / 4`` % over 1100..1900; UINT16_MAX ignores the field, 0
+releases it: no yaw) and counts as pilot input for the failsafe (ArduSub's
+``GCS_MAVLINK_Sub::handle_message``); MANUAL_CONTROL sets it to ``r / 10`` %.
 """
 
 from __future__ import annotations
@@ -29,6 +45,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from drivers.mavlink import io as mio
+from drivers.mavlink.compass import body_field_mgauss
 from drivers.mavlink.modes import MODES
 from firmware_host.devtools.rov_sim import FaultSpec, RovPlant, make_plant
 from firmware_host.runtime.config_rov import ARDUSUB_YAW_MODES, SimConfig
@@ -43,6 +60,10 @@ class ArduSubCounters:
     accepted: int = 0
     refused: int = 0  # MANUAL_CONTROL from another system id, or for another vehicle
     failsafes: int = 0
+    imu_sent: int = 0
+    rc_accepted: int = 0
+    rc_refused: int = 0
+    rc_releases: int = 0
     r_log: list[tuple[float, int]] = field(default_factory=list)  # (t, r) accepted
 
 
@@ -52,7 +73,15 @@ class ArduSubSim:
     def __init__(self, url: str, sim: SimConfig, faults: Sequence[FaultSpec] = (), *,
                  system_id: int = 1, gcs_system_id: int = 255, armed: bool = True,
                  mode: str = "ALT_HOLD", attitude_hz: float = 10.0,
-                 pilot_timeout_s: float = 3.0) -> None:
+                 pilot_timeout_s: float = 3.0, compass: str | None = None,
+                 imu_hz: float = 10.0, fault_on: str = "attitude", ekf_tau_s: float = 30.0,
+                 tilt_deg: tuple[float, float] = (3.0, 2.0),
+                 field_mgauss: tuple[float, float] = (200.0, 400.0),
+                 declination_deg: float = 0.0, rc_yaw_channel: int = 4) -> None:
+        if fault_on not in ("attitude", "magnetometer"):
+            raise ValueError(f"fault_on: attitude or magnetometer, found {fault_on!r}")
+        if compass not in (None, "RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3"):
+            raise ValueError(f"compass: not a compass message: {compass!r}")
         self.plant: RovPlant = make_plant(sim, faults)
         self.link = mio.MavEndpoint(url, source_system=system_id, source_component=1)
         self.system_id = system_id
@@ -71,6 +100,24 @@ class ArduSubSim:
         self._since_input = 0.0
         self._in_failsafe = False
         self._lock = threading.Lock()
+        self.compass = compass
+        self.imu_period_s = 1.0 / imu_hz
+        self._next_imu = 0.0
+        self.fault_on = fault_on
+        self.ekf_tau_s = ekf_tau_s
+        self._ekf_err = 0.0  # the EKF's share of the compass error, deg
+        self.tilt_deg = tilt_deg if compass is not None else (0.0, 0.0)
+        self.field_mgauss = field_mgauss
+        self.declination_deg = declination_deg
+        self.rc_yaw_channel = rc_yaw_channel
+        self.last_rc: tuple[int, ...] | None = None
+
+    def attitude_rp(self, t: float) -> tuple[float, float, float, float]:
+        """(roll, pitch, roll rate, pitch rate) at ``t`` (rad, rad/s): slow waves."""
+        ar, ap = (math.radians(a) for a in self.tilt_deg)
+        wr, wp = 2 * math.pi / 6.0, 2 * math.pi / 8.0
+        return (ar * math.sin(wr * t), ap * math.sin(wp * t + 1.0),
+                ar * wr * math.cos(wr * t), ap * wp * math.cos(wp * t + 1.0))
 
     def set_mode(self, mode: str, armed: bool | None = None) -> None:
         with self._lock:
@@ -91,6 +138,23 @@ class ArduSubSim:
                     self.last_axes = (int(msg.x), int(msg.y), int(msg.z), int(msg.r))
                 else:
                     self.counters.refused += 1
+            elif msg.get_type() == "RC_CHANNELS_OVERRIDE" and not self.unplugged:
+                if (msg.get_srcSystem() == self.gcs_system_id
+                        and msg.target_system == self.system_id):
+                    self.counters.rc_accepted += 1
+                    self._since_input = 0.0  # pilot input for FS_PILOT_INPUT, as ArduSub
+                    self._in_failsafe = False
+                    chans = tuple(int(getattr(msg, f"chan{i}_raw")) for i in range(1, 19))
+                    self.last_rc = chans
+                    pwm = chans[self.rc_yaw_channel - 1]
+                    if pwm == 0:
+                        self._r = 0
+                        self.counters.rc_releases += 1
+                    elif pwm != 0xFFFF:
+                        self._r = round((min(max(pwm, 1100), 1900) - 1500) * 2.5)
+                    self.counters.r_log.append((round(self.t, 3), self._r))
+                else:
+                    self.counters.rc_refused += 1
             msg = self.link.recv(0.0)
 
     def pump(self) -> None:
@@ -121,12 +185,52 @@ class ArduSubSim:
                     base = mio.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0
                     self.link.send_vehicle_heartbeat(mio.MAV_TYPE_SUBMARINE, base, self.mode)
                     self.counters.heartbeat_sent += 1
+            gyro = self.plant.gyro_dps() if self.compass is not None else None
+            truth = self.plant.heading_true
+            if tel is not None:
+                err = (tel.heading_deg - truth + 180.0) % 360.0 - 180.0
+                self._ekf_err += (err - self._ekf_err) * min(1.0, dt / self.ekf_tau_s)
+            roll, pitch, droll, dpitch = self.attitude_rp(self.t)
+            if self.fault_on == "magnetometer":
+                att_yaw: float | None = truth + self._ekf_err  # the EKF: gyro + slow compass
+            else:
+                att_yaw = None if tel is None else tel.heading_deg
             if self.t + 1e-9 >= self._next_att:
                 self._next_att += self.attitude_period_s
-                if tel is not None and not self.unplugged:
-                    yaw = (tel.heading_deg + 180.0) % 360.0 - 180.0  # ATTITUDE yaw: -pi..pi
-                    self.link.send_attitude(int(self.t * 1000), 0.0, 0.0, math.radians(yaw))
+                if att_yaw is not None and not self.unplugged:
+                    yaw = (att_yaw + 180.0) % 360.0 - 180.0  # ATTITUDE yaw: -pi..pi
+                    rates = self._body_rates(gyro, roll, pitch, droll, dpitch)
+                    self.link.send_attitude(int(self.t * 1000), roll, pitch, math.radians(yaw),
+                                            rates)
                     self.counters.attitude_sent += 1
+            if self.compass is not None and self.t + 1e-9 >= self._next_imu:
+                self._next_imu += self.imu_period_s
+                if tel is not None and not self.unplugged:
+                    h, d = self.field_mgauss
+                    mag = body_field_mgauss(tel.heading_deg, roll, pitch, h, d,
+                                            self.declination_deg)
+                    p, q, r = self._body_rates(gyro, roll, pitch, droll, dpitch)
+                    m = (round(mag[0]), round(mag[1]), round(mag[2]))
+                    g = (round(p * 1000), round(q * 1000), round(r * 1000))
+                    acc = (0, 0, -1000)
+                    if self.compass == "RAW_IMU":
+                        self.link.send_raw_imu(int(self.t * 1e6), acc, g, mag=m)
+                    else:
+                        inst = {"SCALED_IMU": 0, "SCALED_IMU2": 1, "SCALED_IMU3": 2}
+                        self.link.send_scaled_imu(inst[self.compass], int(self.t * 1000), acc,
+                                                  g, m)
+                    self.counters.imu_sent += 1
+
+    @staticmethod
+    def _body_rates(gyro_dps: float | None, roll: float, pitch: float, droll: float,
+                    dpitch: float) -> tuple[float, float, float]:
+        """Body rates (p, q, r) in rad/s of the Euler rates (the heading's from the gyro)."""
+        if gyro_dps is None:
+            return (0.0, 0.0, 0.0)
+        dpsi = math.radians(gyro_dps)
+        sr, cr = math.sin(roll), math.cos(roll)
+        sp, cp = math.sin(pitch), math.cos(pitch)
+        return (droll - dpsi * sp, dpitch * cr + dpsi * sr * cp, -dpitch * sr + dpsi * cr * cp)
 
     def serve(self, stop: threading.Event, dt: float = 0.02) -> None:
         """Real time: :meth:`step` every ``dt`` until ``stop``."""

@@ -12,6 +12,11 @@ read, and the ``rov link tx`` bytes there what it wrote.
 writes; it writes ``epochs.jsonl`` (the same bytes as the live run's) and ``summary.json``,
 and compares the written commands with the recorded ``tx`` bytes step by step.
 
+An ArduSub ROV recording (:func:`replay_ardusub`: channels ``ardusub tick``, ``ardusub rx``,
+``ardusub tx`` of :mod:`firmware_host.rov.ardusub`) is replayed the same way, step by step,
+with the frames each live step took from the router (the vehicle's own time base is its step
+count, so no clock is needed).
+
 What a replay cannot reproduce exactly: the heading plausibility check of the link (the
 protocol file's ``max_rate``) reads the clock when a message is decoded; live that is the
 step time plus the read's latency (milliseconds), in the replay the step time itself, so a
@@ -30,6 +35,10 @@ from typing import Any, cast
 from drivers.capture import CaptureReader
 from drivers.resilient import ResilientPort
 from fdi.errors import CaptureFormatError, FdiBridgeError
+from firmware_host.rov.ardusub import RX as ARDUSUB_RX
+from firmware_host.rov.ardusub import TICK as ARDUSUB_TICK
+from firmware_host.rov.ardusub import TX as ARDUSUB_TX
+from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.config import RovConfig
 from firmware_host.rov.vehicle import LINK, TICK, OutlandRovVehicle, link_settings
 from firmware_host.runtime.config import load_bridge_file, rov_config, vehicle_of
@@ -62,14 +71,16 @@ class RecordedStep:
     tx: bytearray = field(default_factory=bytearray)
 
 
-def recorded_steps(reader: CaptureReader, facts: dict[str, int]) -> Iterator[RecordedStep]:
+def recorded_steps(reader: CaptureReader, facts: dict[str, int],
+                   channels: tuple[str, str, str] = (TICK, RX, TX)) -> Iterator[RecordedStep]:
     """The steps of the recording, in order (streamed: memory does not grow with its length).
 
+    ``channels``: the names of the tick, rx and tx channels (the Outland ROV's by default).
     ``facts`` receives ``rx_before_first_step`` / ``tx_before_first_step`` (bytes no step
     read or wrote) and ``bad_ticks`` (a tick that does not decode: its bytes go to the step
     before)."""
     ids = {c.name: i for i, c in enumerate(reader.channels)}
-    tick, rx, tx = ids[TICK], ids[RX], ids.get(TX, -1)
+    tick, rx, tx = ids[channels[0]], ids.get(channels[1], -1), ids.get(channels[2], -1)
     step: RecordedStep | None = None
     for rec in reader:
         if rec.channel == tick:
@@ -208,6 +219,70 @@ def replay_rov(cfg: RovConfig, base_dir: Path, capture: Path, out_dir: Path,
     return summary
 
 
+def is_ardusub_capture(reader: CaptureReader) -> bool:
+    """A recording of the ArduSub ROV (:mod:`firmware_host.rov.ardusub`): its tick channel."""
+    return any(c.name == ARDUSUB_TICK for c in reader.channels)
+
+
+def replay_ardusub(cfg: RovConfig, capture: Path, out_dir: Path, *,
+                   config_name: str = "") -> dict[str, Any]:
+    """Replay the ArduSub ROV recording ``capture``: each recorded step's frames (the
+    ``ardusub rx`` records after its tick, as the live step took them from the router) through
+    the same :class:`~firmware_host.rov.ardusub.ArduSubRovVehicle`, with no router; write
+    ``out_dir/epochs.jsonl`` (the live run's bytes) and ``summary.json``, and compare each
+    step's commands with the recorded ``ardusub tx`` lines."""
+    reader = CaptureReader(capture)
+    if not is_ardusub_capture(reader):
+        raise CaptureFormatError(f"{capture}: not an ArduSub ROV recording (no "
+                                 f"{ARDUSUB_TICK!r} channel)")
+    if cfg.heading_source != "mavlink":
+        raise FdiBridgeError(f"{capture} is an ArduSub ROV recording: its config has "
+                             '[rov] heading_source = "mavlink"')
+    vehicle = ArduSubRovVehicle(cfg)
+    epochs = EpochLog(out_dir)
+    facts: dict[str, int] = {}
+    steps = tx_same = tx_differ = frames = 0
+    first_differ: int | None = None
+    try:
+        vehicle.start_replay(epochs)
+        assert vehicle.loop is not None
+        for st in recorded_steps(reader, facts, (ARDUSUB_TICK, ARDUSUB_RX, ARDUSUB_TX)):
+            vehicle.step_frames(st.rx)
+            steps += 1
+            frames += len(st.rx)
+            if b"".join(vehicle.loop.tx) == bytes(st.tx):
+                tx_same += 1
+            else:
+                tx_differ += 1
+                if first_differ is None:
+                    first_differ = st.k
+        vehicle.finish()
+    finally:
+        epochs.close()
+    notes = list(reader.notes)
+    if reader.truncated:
+        notes.append("last record truncated (skipped)")
+    if reader.corrupt:
+        notes.append(f"{reader.skipped_bytes} damaged bytes in {reader.damaged_regions} "
+                     "place(s) skipped")
+    summary = dict(vehicle.summary())
+    summary["vehicle"] = "rov-ardusub"
+    summary["config"] = config_name
+    summary["epochs"] = epochs.lines
+    summary["input"] = {"file": str(capture), "kind": "rov-ardusub capture", "notes": notes}
+    summary["replay"] = {
+        "steps": steps,
+        "frames": frames,
+        "tx_steps_same": tx_same,
+        "tx_steps_differ": tx_differ,
+        "tx_first_differ_step": first_differ,
+        "tx_match": tx_differ == 0,
+        **facts,
+    }
+    epochs.write_summary(summary)
+    return summary
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """``fdi-bridge replay`` of an ROV recording (from :mod:`firmware_host.commands.replay`,
     which prints): its steps re-run with the ``[rov]`` file of ``--config`` (the one it was
@@ -220,4 +295,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise FdiBridgeError(f"{args.capture} is an ROV recording, but {args.config} has no "
                              "[rov] table")
     rcfg, base = rov_config(bf)
+    if is_ardusub_capture(CaptureReader(args.capture)):
+        return replay_ardusub(rcfg, args.capture, args.out, config_name=str(args.config))
     return replay_rov(rcfg, base, args.capture, args.out, config_name=str(args.config))
