@@ -53,3 +53,31 @@ def test_bad_values_are_refused_at_load(tmp_path: Path, text: str, key: str) -> 
     with pytest.raises((ConfigError, ConfigErrors)) as exc:
         load_bridge_file(p)
     assert key in str(exc.value)
+
+
+def test_example_sets_the_raw_compass_and_its_keys() -> None:
+    bf = load_bridge_file(EXAMPLE)
+    assert bf.rov is not None
+    a = bf.rov.ardusub
+    assert (a.heading, a.compass_message, a.gyro, a.output) == (
+        "raw_compass", "RAW_IMU", "imu", "manual_control")
+    assert (a.rc_yaw_channel, a.rc_throttle_channel, a.rc_forward_channel,
+            a.rc_lateral_channel) == (4, 3, 5, 6)  # ArduSub's default RCMAP
+    assert bf.recorder.dir == ""  # off unless the user sets it
+
+
+@pytest.mark.parametrize("text, key", [
+    ('[rov.ardusub]\nheading = "vfr_hud"\n', "rov.ardusub.heading"),
+    ('[rov.ardusub]\ncompass_message = "HIGHRES_IMU"\n', "rov.ardusub.compass_message"),
+    ('[rov.ardusub]\ngyro = "ahrs2"\n', "rov.ardusub.gyro"),
+    ('[rov.ardusub]\noutput = "servo"\n', "rov.ardusub.output"),
+    ('[rov.ardusub]\nrc_yaw_channel = 9\n', "rov.ardusub.rc_yaw_channel"),
+    ('[rov.ardusub]\nrc_yaw_channel = 3\n', "must differ"),
+    ('[rov.ardusub]\ndeclination_deg = 200.0\n', "rov.ardusub.declination_deg"),
+])
+def test_bad_new_keys_are_refused_at_load(tmp_path: Path, text: str, key: str) -> None:
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    with pytest.raises((ConfigError, ConfigErrors)) as exc:
+        load_bridge_file(p)
+    assert key in str(exc.value)
