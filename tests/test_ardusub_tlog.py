@@ -38,7 +38,7 @@ def _ticks(path: Path) -> list[list[Any]]:
     """The log's ATTITUDE, HEARTBEAT (autopilot) and MANUAL_CONTROL grouped into 0.2 s ticks
     from the first ATTITUDE (as firmware_host.rov.tlog.load_dive samples it)."""
     msgs = [(r.t_us / 1e6, r) for r in mio.iter_tlog(path) if r.msg is not None and (
-        (r.msg.get_type() in ("ATTITUDE", "HEARTBEAT")
+        (r.msg.get_type() in ("ATTITUDE", "HEARTBEAT", "RAW_IMU")
          and (r.msg.get_srcSystem(), r.msg.get_srcComponent()) == (1, 1))
         or r.msg.get_type() == "MANUAL_CONTROL")]
     msgs.sort(key=lambda m: m[0])
@@ -53,11 +53,12 @@ def _ticks(path: Path) -> list[list[Any]]:
     return ticks
 
 
-def replay_vehicle(path: Path, drift_deg: float = 0.0,
-                   drift_at_s: float | None = None) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+def replay_vehicle(path: Path, drift_deg: float = 0.0, drift_at_s: float | None = None,
+                   **ardusub: Any) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """``ardusub``: more ``[rov.ardusub]`` keys (the raw compass: RAW_IMU as logged)."""
     cfg, _ = load_rov_config(project_root() / "config" / "rov.toml")
     cfg = replace(cfg, heading_source="mavlink",
-                  ardusub=replace(cfg.ardusub, steer=False))
+                  ardusub=replace(cfg.ardusub, steer=False, **ardusub))
     records: list[dict[str, Any]] = []
     v = ArduSubRovVehicle(cfg, on_epoch=records.append)
     mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
@@ -70,7 +71,7 @@ def replay_vehicle(path: Path, drift_deg: float = 0.0,
     ap = mio.MavEndpoint(f"udpout:127.0.0.1:{ports[0]}", source_system=1, source_component=1)
     gcs = mio.MavEndpoint(f"udpout:127.0.0.1:{ports[1]}", source_system=255,
                           source_component=190)
-    sent = {"att": 0, "hb": 0, "mc": 0}
+    sent = {"att": 0, "hb": 0, "mc": 0, "imu": 0}
     try:
         for k, tick in enumerate(_ticks(path)):
             t = k * TICK_S  # the tick's time from the first ATTITUDE (the record's "t")
@@ -85,12 +86,18 @@ def replay_vehicle(path: Path, drift_deg: float = 0.0,
                 elif kind == "HEARTBEAT":
                     ap.send_raw(rec.raw)
                     sent["hb"] += 1
+                elif kind == "RAW_IMU":
+                    if loop.compass is not None:
+                        ap.send_raw(rec.raw)
+                        sent["imu"] += 1
                 else:
                     gcs.send_raw(rec.raw)
                     sent["mc"] += 1
             _wait(lambda: loop.heading.received >= sent["att"]
                   and loop.autopilot.received >= sent["hb"]
-                  and loop.pilot.received >= sent["mc"], f"tick {k}'s packets")
+                  and loop.pilot.received >= sent["mc"]
+                  and (loop.compass is None or loop.compass.received >= sent["imu"]),
+                  f"tick {k}'s packets")
             runner.step()
     finally:
         ap.close()
@@ -124,3 +131,45 @@ def test_drift_in_the_dive_is_confirmed_through_the_vehicle(tlog: Path) -> None:
     t_conf = next(r["t"] for r in records if r["event"] == "confirmed")
     assert 150.0 <= t_conf <= 152.0
     assert not any(r["fault"] for r in records if r["t"] < 150.0)
+
+
+DEC_DEG = 15.73  # the dive's COMPASS_DEC (0.2746 rad)
+
+
+def test_dive_on_the_raw_compass_at_2_hz(tlog: Path) -> None:
+    """The dive's RAW_IMU came at 2 Hz (SR0_RAW_SENS = 2): said once, and without the gyro
+    nothing is confirmed (3 periods of 5 have no compass: the dropout rule holds)."""
+    records, summary = replay_vehicle(tlog, heading="raw_compass", declination_deg=DEC_DEG)
+    assert summary["compass_slow_hz"] == pytest.approx(2.0, abs=0.1)
+    assert not any(r["event"] == "confirmed" for r in records)
+    with_heading = sum(r["heading_meas"] is not None for r in records)
+    assert 0.35 * len(records) < with_heading < 0.45 * len(records)
+
+
+def test_dive_raw_compass_with_the_gyro_flags_a_magnetic_excursion(tlog: Path) -> None:
+    """With RAW_IMU's gyro as the witness, one confirmation, at 218.8 s: from 214 s the raw
+    compass leaves the gyro by 10-25 deg (it settles ~14 deg below) while the gyro turns less
+    than 3 deg, and ATTITUDE's EKF yaw follows the compass only slowly (~0.5 deg/s). No
+    ground truth says which was right; the autopilot's own EKF moving towards the compass
+    suggests a real disturbance of the magnetometer, not a false alarm of the witness."""
+    records, _ = replay_vehicle(tlog, heading="raw_compass", declination_deg=DEC_DEG,
+                                gyro="imu")
+    confirmed = [r["t"] for r in records if r["event"] == "confirmed"]
+    assert len(confirmed) == 1 and 214.0 <= confirmed[0] <= 222.0, confirmed
+    t_conf = confirmed[0]
+
+    def median(values: list[float]) -> float:
+        v = sorted(values)
+        return v[len(v) // 2]
+
+    def raw(t0: float, t1: float) -> float:
+        return median([r["heading_meas"] for r in records
+                       if t0 <= r["t"] < t1 and r["heading_meas"] is not None])
+
+    moved = raw(219.0, 226.0) - raw(205.0, 211.0)
+    rates = [r["yaw_rate"] for r in records if 211.0 <= r["t"] < 226.0 and r["yaw_rate"]]
+    gyro_moved = sum(rates) / len(rates) * 15.0
+    assert moved < -10.0 and abs(gyro_moved) < 3.0, (moved, gyro_moved)
+    at = next(r for r in records if r["t"] == t_conf)
+    assert at["heading_attitude"] - at["heading_meas"] > 10.0  # the EKF still far from it
+    assert not any(r["fault"] for r in records if r["t"] < 211.0)

@@ -264,6 +264,10 @@ def rc_override_channels(acfg: ArduSubConfig, axes: tuple[int, int, int, int] | 
     return tuple(ch)
 
 
+COMPASS_RATE_PERIODS = 50
+COMPASS_RATE_MIN = 0.9
+"""The compass (or its gyro) must arrive in 90 % of the 50 periods from the first one."""
+
 _RELEASE_ON = frozenset({"mode", "disarmed", "no_heartbeat", "detect_only"})
 
 
@@ -330,6 +334,9 @@ class RovAutopilotLoop:
         self.taken: Counter[str] = Counter()  # frames processed, by message
         self.rejected: Counter[str] = Counter()  # frames or values not used, by reason
         self._ratelog = RateLimitedLog(log)
+        self._compass_periods = 0
+        self._compass_hits = 0
+        self.compass_slow_hz: float | None = None  # said once: the compass is too slow
 
     # -- inputs -------------------------------------------------------------------------
 
@@ -403,7 +410,26 @@ class RovAutopilotLoop:
                 self._reject(f"{kind.lower()}_fields")
         heading = compass if a.heading == "raw_compass" else yaw_att
         rate = sum(rates) / len(rates) if rates else None
+        if self._uses_compass:
+            self._check_compass_rate(compass is not None or rate is not None)
         return heading, yaw_att, rate, hb, pilot
+
+    def _check_compass_rate(self, got: bool) -> None:
+        """Said once: the compass message comes slower than the hold's period (fewer than
+        :data:`COMPASS_RATE_MIN` of :data:`COMPASS_RATE_PERIODS` periods had one)."""
+        if not got and self._compass_hits == 0:
+            return  # counted from the first compass message on
+        self._compass_periods += 1
+        self._compass_hits += got
+        if self._compass_periods == COMPASS_RATE_PERIODS:
+            share = self._compass_hits / COMPASS_RATE_PERIODS
+            if share < COMPASS_RATE_MIN:
+                hz = share / self.cfg.period_s
+                text = (f"FDI compass: {self.acfg.compass_message} at {hz:.1f} Hz, below "
+                        f"the hold's {1 / self.cfg.period_s:.0f} Hz (SRn_RAW_SENS)")
+                log.warning("%s", text)
+                self.output.send_statustext(mio.MAV_SEVERITY_WARNING, text)
+                self.compass_slow_hz = round(hz, 2)
 
     # -- the gate -----------------------------------------------------------------------
 
@@ -669,6 +695,8 @@ class ArduSubRovVehicle:
                 out["pilot_received"] = lp.pilot.received
             if lp.compass is not None:
                 out["compass_received"] = lp.compass.received
+            if lp.compass_slow_hz is not None:
+                out["compass_slow_hz"] = lp.compass_slow_hz
             out["frames_taken"] = dict(sorted(lp.taken.items()))
             out["inputs_rejected"] = dict(sorted(lp.rejected.items()))
             out["heading"] = lp.acfg.heading
