@@ -30,6 +30,9 @@ EKF that takes the compass's error in slowly (a first-order lag of ``ekf_tau_s``
 heading hides a drift for a while; ``"attitude"`` (the default) reports the faulty compass
 heading as ATTITUDE's yaw, as before.
 
+ATTITUDE's ``rollspeed, pitchspeed, yawspeed`` are the same body rates (ArduPilot sends the
+gyro there).
+
 RC_CHANNELS_OVERRIDE from ``gcs_system_id`` for this vehicle sets the yaw on
 ``rc_yaw_channel`` (``(pwm - 1500) / 4`` % over 1100..1900; UINT16_MAX ignores the field, 0
 releases it: no yaw) and counts as pilot input for the failsafe (ArduSub's
@@ -185,7 +188,7 @@ class ArduSubSim:
                     base = mio.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0
                     self.link.send_vehicle_heartbeat(mio.MAV_TYPE_SUBMARINE, base, self.mode)
                     self.counters.heartbeat_sent += 1
-            gyro = self.plant.gyro_dps() if self.compass is not None else None
+            gyro = self.plant.gyro_dps()  # its own random stream: the compass is unchanged
             truth = self.plant.heading_true
             if tel is not None:
                 err = (tel.heading_deg - truth + 180.0) % 360.0 - 180.0
