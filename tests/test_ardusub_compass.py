@@ -196,3 +196,18 @@ def test_clean_300_s_on_the_raw_compass_with_the_gyro_confirms_nothing(plant: st
     assert not any(r["fault"] for r in recs)
     assert _confirmed_at(recs) is None
     assert max(abs(err(h)) for h in b.true[50 * 5:]) < BOUND_DEG
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_nonlinear_plant_drift_held_with_the_autopilot_gyro(seed: int) -> None:
+    """The plant the FIR is not exact for (thrust dead band and latency, outliers, deviation
+    with thrust, waves): the raw compass alone leaves up to 2.40 deg after confirmation
+    (seeds 1-5, seed 1: above the bound, as on ATTITUDE); with RAW_IMU's gyro as the witness
+    the worst is 0.92 deg (seed 3), confirmed 0.6-0.8 s after the onset (measured)."""
+    cfg = _cfg(heading="raw_compass", gyro="imu")
+    cfg = replace(cfg, sim=replace(cfg.sim, plant="nonlinear"))
+    recs, true, _ = _run(cfg, seed)
+    t_conf = _confirmed_at(recs)
+    assert t_conf is not None and 70.0 < t_conf <= 71.0, t_conf
+    after = [abs(err(h)) for k, h in enumerate(true) if (k + 1) * 0.2 >= t_conf - 1e-9]
+    assert max(after) < BOUND_DEG, max(after)

@@ -2,10 +2,19 @@
 
 Where the vehicle is driven through an autopilot (ArduSub) instead of the Outland link, the
 heading-hold loop (:class:`~firmware_host.rov.control.RovController`: compass FDI, substitution,
-PID) reads the vehicle's heading from the autopilot's ATTITUDE (``yaw``, via
-:meth:`Router.listen <firmware_host.mavlink.router.Router.listen>`) and sends its thrust as
-MANUAL_CONTROL with the ground station's system id (``pilot_system_id``) and the vehicle as
-target: ArduSub takes pilot input only from its ground station (``SYSID_MYGCS``).
+PID) reads the vehicle's heading from the autopilot (via
+:meth:`Router.listen <firmware_host.mavlink.router.Router.listen>`): ATTITUDE's ``yaw`` (the
+EKF's), or with ``heading = "raw_compass"`` the compass of RAW_IMU / SCALED_IMU* levelled with
+ATTITUDE's roll and pitch (:mod:`drivers.mavlink.compass`, ArduPilot's convention), with the
+autopilot's gyro as the FDI's witness where ``gyro`` says so. It sends its thrust as
+MANUAL_CONTROL (or, ``output = "rc_override"``, RC_CHANNELS_OVERRIDE on the RCMAP channels:
+:func:`rc_override_channels`) with the ground station's system id (``pilot_system_id``) and the
+vehicle as target: ArduSub takes pilot input only from its ground station (``SYSID_MYGCS``).
+
+The router's thread only queues the frames (:class:`Inbox`); each period's step decodes the
+ones that arrived, in order, so a recording of what each step took (the ``ardusub rx``
+channel) replays to the same records (:mod:`firmware_host.rov.replay`). Frames or values that
+cannot be used are counted by reason (``inputs_rejected``) and logged, rate-limited.
 
 :class:`ArduSubRovVehicle` is this loop as a vehicle of the runtime
 (:class:`~firmware_host.runtime.runner.Runner`, period-paced, no port of its own: the router's
