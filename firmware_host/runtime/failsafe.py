@@ -22,6 +22,7 @@ from collections.abc import Callable
 from typing import Any
 
 from drivers.mavlink.io import GpsInputFix
+from drivers.ratelog import RateLimitedLog
 from firmware_host.rover.outputs import gps_week_ms, unix_time
 from firmware_host.rover.pipeline import EpochOutcome
 from firmware_host.runtime.config import RoverConfig
@@ -152,6 +153,8 @@ class RovFailsafeMonitor:
         self.episodes = 0
         self.neutral_episodes = 0
         self._prev = "init"
+        # A compass slower than the hold gives an episode at every gap: one line per 10 s.
+        self._ratelog = RateLimitedLog(log, interval_s=10.0)
 
     def observe(self, rec: dict[str, Any]) -> str | None:
         """Return ``"lost"``, ``"neutral"`` or ``"back"`` at a transition (an episode counts
@@ -168,8 +171,9 @@ class RovFailsafeMonitor:
                 event = "neutral"
         else:
             if self.lost_steps >= 2:
-                log.warning("ROV: telemetry back after %.1f s; heading hold resumed",
-                            self.lost_steps * self.period_s)
+                self._ratelog.warning(
+                    "ROV telemetry back",
+                    f"after {self.lost_steps * self.period_s:.1f} s; heading hold resumed")
                 event = "back"
             self.lost_steps = 0
         self._prev = action
