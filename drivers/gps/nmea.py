@@ -5,7 +5,7 @@ Two layers, kept apart (pynmeagps style):
 * :class:`NmeaFramer` turns an arbitrary byte stream into candidate sentences. It resyncs on
   ``$``, caps a line's length *before* collecting more of it, and reports every rejected piece
   with a reason (``garbage``, ``too_long``, ``truncated``, ``bad_chars``).
-* :func:`parse_sentence` is a pure function from one line to a frozen dataclass (:class:`Gga`,
+* :func:`parse_sentence` is a pure function from one line to an immutable message (:class:`Gga`,
   :class:`Rmc`, :class:`Vtg`, :class:`Gsa`, :class:`Gst`, :class:`Zda`, :class:`Gll`, and the
   true headings :class:`Hdt` and :class:`Ths`). It requires a valid checksum, uses pynmea2
   (``check=True``) only to split and identify the sentence (HDT and THS are split here:
@@ -26,6 +26,7 @@ import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import pynmea2
 
@@ -183,10 +184,12 @@ class NmeaFramer:
 
 
 # --------------------------------------------------------------------------- messages
+# Immutable and typed as NamedTuples rather than frozen dataclasses: a frozen dataclass sets each
+# field through object.__setattr__, several times slower to build, and a replay builds three or
+# more of these per epoch.
 
 
-@dataclass(frozen=True, slots=True)
-class Gga:
+class Gga(NamedTuple):
     talker: str
     time_s: float | None
     lat_deg: float | None
@@ -200,8 +203,7 @@ class Gga:
     dgps_station: str | None
 
 
-@dataclass(frozen=True, slots=True)
-class Rmc:
+class Rmc(NamedTuple):
     talker: str
     time_s: float | None
     valid: bool
@@ -213,16 +215,14 @@ class Rmc:
     mode: str | None
 
 
-@dataclass(frozen=True, slots=True)
-class Vtg:
+class Vtg(NamedTuple):
     talker: str
     course_deg: float | None
     speed_mps: float | None
     mode: str | None
 
 
-@dataclass(frozen=True, slots=True)
-class Gsa:
+class Gsa(NamedTuple):
     talker: str
     fix_mode: int | None  # 1 none, 2 2D, 3 3D
     pdop: float | None
@@ -230,8 +230,7 @@ class Gsa:
     vdop: float | None
 
 
-@dataclass(frozen=True, slots=True)
-class Gst:
+class Gst(NamedTuple):
     talker: str
     time_s: float | None
     rms_m: float | None
@@ -240,15 +239,13 @@ class Gst:
     sd_alt_m: float | None
 
 
-@dataclass(frozen=True, slots=True)
-class Zda:
+class Zda(NamedTuple):
     talker: str
     time_s: float | None
     date: tuple[int, int, int] | None
 
 
-@dataclass(frozen=True, slots=True)
-class Gll:
+class Gll(NamedTuple):
     talker: str
     time_s: float | None
     valid: bool
@@ -256,16 +253,14 @@ class Gll:
     lon_deg: float | None
 
 
-@dataclass(frozen=True, slots=True)
-class Hdt:
+class Hdt(NamedTuple):
     """True heading (a dual-antenna or gyro receiver); ``heading_deg`` None when not known."""
 
     talker: str
     heading_deg: float | None
 
 
-@dataclass(frozen=True, slots=True)
-class Ths:
+class Ths(NamedTuple):
     """True heading with its mode (A autonomous, E estimated, M manual, S simulator, V not
     valid). ``heading_deg`` is kept as sent; only mode A is a heading to use (:attr:`valid`)."""
 
