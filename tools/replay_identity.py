@@ -1,6 +1,6 @@
 """Is ``epochs.jsonl`` byte-identical to a reference commit's? (issue 19: speed without change)
 
-    python tools/replay_identity.py [--ref REV] [--corpus DIR] [--keep DIR]
+    python tools/replay_identity.py [--ref REV] [--tree DIR] [--corpus DIR] [--keep DIR]
 
 Exports ``REV`` (default ``HEAD``) with ``git archive`` into a temporary directory (the
 repository's branches and worktrees are not touched), generates rover runs with the
@@ -52,6 +52,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ref", default="HEAD", help="reference revision (default: HEAD)")
     ap.add_argument("--corpus", type=Path, default=ROOT.parent / "shared" / "corpus")
     ap.add_argument("--keep", type=Path, default=None, help="keep the outputs here")
+    ap.add_argument("--tree", type=Path, default=ROOT,
+                    help="the tree to check (default: this one; e.g. a copy built with mypyc)")
     args = ap.parse_args(argv)
     work = args.keep or Path(tempfile.mkdtemp(prefix="replay-identity-"))
     ref = work / "ref-tree"
@@ -82,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue  # the presets on the plain logs are enough
             tag = f"{inp.parent.name}-{inp.name}-{cfg or 'default'}"
             outs = {}
-            for name, tree in (("ref", ref), ("new", ROOT)):
+            for name, tree in (("ref", ref), ("new", args.tree)):
                 out = work / name / tag
                 cmd = ["replay", str(inp), "--out", str(out)]
                 if cfg is not None:
