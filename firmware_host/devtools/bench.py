@@ -369,7 +369,12 @@ RATIO_GOAL = 1.5
 
 def export_tree(rev: str, dest: Path) -> str:
     """``git archive REV`` of this checkout into ``dest``; returns the commit's short hash.
-    RuntimeError when this is not a git checkout or REV is unknown."""
+    RuntimeError when this is not a git checkout or REV is unknown. A REV that is a directory
+    (a source tree, e.g. an export of the commit for an installed or compiled build, which has
+    no git) is linked at ``dest`` instead and named by its path."""
+    if Path(rev).is_dir():
+        dest.symlink_to(Path(rev).resolve(), target_is_directory=True)
+        return rev
     try:
         short = subprocess.run(["git", "-C", str(TREE), "rev-parse", "--short", rev],
                                capture_output=True, text=True, check=True).stdout.strip()
@@ -652,7 +657,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "startup: the nmea-rtk replay's process time, seconds)")
     parser.add_argument("--against", default="HEAD~1", metavar="REV",
                         help="the commit to compare replay throughput and process time with, "
-                             "in the same run (git checkout only); 'none' to skip")
+                             "in the same run (git checkout only), or a source tree's "
+                             "directory; 'none' to skip")
     parser.add_argument("--corpus", type=Path, default=CORPUS,
                         help="the shared corpus (for gpsd/nmea-rtk.log)")
 
