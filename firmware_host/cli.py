@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
-import importlib.metadata
 import logging
 import os
 import sys
@@ -163,10 +162,25 @@ def _run_module(spec: str) -> str:
 
 
 def version() -> str:
+    import importlib.metadata  # ~40 ms: only when the version is asked for (--version)
+
     try:
         return importlib.metadata.version("fdi-bridge")
     except importlib.metadata.PackageNotFoundError:  # a source tree on PYTHONPATH
         return firmware_host.__version__
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: the installed version, looked up only when asked for."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str = argparse.SUPPRESS,
+                 default: str = argparse.SUPPRESS, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=default, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> NoReturn:
+        sys.stdout.write(f"fdi-bridge {version()}\n")  # on stdout, as argparse's own
+        parser.exit()
 
 
 def _logging_options(parser: argparse.ArgumentParser, *, sub: bool) -> None:
@@ -241,7 +255,8 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
         description="Fault detection and isolation between navigation sensors and a controller.",
         allow_abbrev=False,  # _command_of skips the global options by their full names
     )
-    parser.add_argument("--version", action="version", version=f"fdi-bridge {version()}")
+    parser.add_argument("--version", action=_VersionAction,
+                        help="show program's version number and exit")
     _logging_options(parser, sub=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_text) in COMMANDS.items():

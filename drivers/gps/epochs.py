@@ -24,15 +24,18 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from drivers.gps.nmea import Gga, Gll, Gsa, Gst, Hdt, NmeaMessage, Rmc, Ths, Vtg, Zda
 
 TIME_EPS_S = 1e-3
 
 
-@dataclass(frozen=True, slots=True)
-class GpsEpoch:
-    """Everything the receiver said about one fix. ``valid``: it claims a position fix."""
+class GpsEpoch(NamedTuple):
+    """Everything the receiver said about one fix. ``valid``: it claims a position fix.
+
+    Immutable; a NamedTuple rather than a frozen dataclass because it is built once an epoch
+    (a frozen dataclass's ``__init__`` is several times slower)."""
 
     utc_s: float | None
     date: tuple[int, int, int] | None

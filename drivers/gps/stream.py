@@ -65,10 +65,10 @@ class NmeaStream:
             self.sentences += 1
             events += push(msg)
         for event in events:
-            if isinstance(event, tuple):
-                self._log_reject(*event)
-            else:
+            if isinstance(event, GpsEpoch):
                 yield event
+            else:
+                self._log_reject(*event)
 
     def flush(self) -> Iterator[GpsEpoch]:
         for item in self.framer.flush():

@@ -19,7 +19,14 @@ by the
   router over a direct UDP path.
 
 * replay's peak memory (max RSS of a child ``fdi-bridge replay``) on a 24 h and a 1 min log at
-  1 Hz, plain NMEA and capture (:func:`bench_replay_memory`; alone: ``--only replay-memory``).
+  1 Hz, plain NMEA and capture (:func:`bench_replay_memory`; alone: ``--only replay-memory``);
+* replay throughput with JSON Lines against another commit (``--against REV``, default the
+  previous commit), in the same run, as a ratio (:func:`bench_against`; alone:
+  ``--only against``): the commit is exported with ``git archive`` and each tree replays the
+  same generated log in its own child interpreter, alternately, best of each;
+* the whole ``fdi-bridge replay`` process (start-up included) on the corpus's
+  ``gpsd/nmea-rtk.log`` through a pty: user + system time from ``wait4``, worst of 5, for this
+  tree and the ``--against`` one (:func:`bench_startup`; alone: ``--only startup``).
 
 With the defaults it runs in about four minutes (the two 60 s loops and the 24 h replays
 dominate).
@@ -37,6 +44,7 @@ import platform
 import shutil
 import subprocess
 import sys
+import tarfile
 import tempfile
 import threading
 import time
@@ -50,6 +58,7 @@ import numpy as np
 from drivers.mavlink.io import MavEndpoint
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port, read_some
+from fdi.errors import UsageError
 from firmware_host.commands import tables
 from firmware_host.commands.checks import (
     check_output_file,
@@ -335,6 +344,126 @@ def bench_replay_memory(long_s: float = 86400.0, short_s: float = 60.0, rate_hz:
     return out
 
 
+_THROUGHPUT_CHILD = """
+import io, json, logging, sys, time
+from firmware_host.commands.replay import ReplayInput, load_input, replay_direct
+from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime.config import BridgeConfig
+logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)
+inp = ReplayInput(list(load_input(sys.argv[1]).chunks))
+cfg = BridgeConfig()
+best = 0.0
+for _ in range(int(sys.argv[2])):
+    pipe = RoverPipeline(cfg.rover, jsonl=io.StringIO())
+    t0 = time.process_time()
+    replay_direct(inp, pipe)
+    best = max(best, pipe.epochs / (time.process_time() - t0))
+print(json.dumps({"eps": best, "epochs": pipe.epochs}))
+"""
+TREE = Path(__file__).resolve().parents[2]  # the tree this module runs from
+CORPUS = TREE.parent / "shared" / "corpus"
+RTK_LOG = Path("gpsd") / "nmea-rtk.log"
+STARTUP_GOAL_S = 0.2
+RATIO_GOAL = 1.5
+
+
+def export_tree(rev: str, dest: Path) -> str:
+    """``git archive REV`` of this checkout into ``dest``; returns the commit's short hash.
+    RuntimeError when this is not a git checkout or REV is unknown. A REV that is a directory
+    (a source tree, e.g. an export of the commit for an installed or compiled build, which has
+    no git) is linked at ``dest`` instead and named by its path."""
+    if Path(rev).is_dir():
+        dest.symlink_to(Path(rev).resolve(), target_is_directory=True)
+        return rev
+    try:
+        short = subprocess.run(["git", "-C", str(TREE), "rev-parse", "--short", rev],
+                               capture_output=True, text=True, check=True).stdout.strip()
+        data = subprocess.run(["git", "-C", str(TREE), "archive", rev], capture_output=True,
+                              check=True).stdout
+    except (OSError, subprocess.CalledProcessError) as err:
+        raise RuntimeError(f"cannot export {rev!r} from {TREE} (a git checkout is needed)"
+                           ) from err
+    with tarfile.open(fileobj=io.BytesIO(data)) as tar:
+        tar.extractall(dest, filter="data")
+    return short
+
+
+def _child_env(tree: Path) -> dict[str, str]:
+    return dict(os.environ, PYTHONPATH=str(tree))
+
+
+def _throughput_in(tree: Path, log: Path, reps: int) -> float:
+    proc = subprocess.run([sys.executable, "-c", _THROUGHPUT_CHILD, str(log), str(reps)],
+                          cwd=tree, env=_child_env(tree), capture_output=True, text=True,
+                          timeout=600, check=False)
+    if proc.returncode != 0:
+        tail = (proc.stderr.strip().splitlines() or ["?"])[-1]
+        raise RuntimeError(f"throughput child in {tree} failed: {tail}")
+    return float(json.loads(proc.stdout.strip().splitlines()[-1])["eps"])
+
+
+def bench_against(rev: str = "HEAD~1", duration_s: float = 600.0, rounds: int = 5,
+                  reps: int = 2) -> dict[str, Any]:
+    """Replay throughput with JSON Lines (no pty) of this tree and of ``rev``, in one run.
+
+    One generated 10 Hz log (``sim rover --seed 1``); each tree replays it in its own child
+    interpreter ``reps`` times (best kept), the two trees alternating for ``rounds`` rounds so
+    that a change in the machine's load falls on both. Epochs per second of the child's
+    processor time (``time.process_time``): on a shared machine, wall time also counts the
+    time another process had the core. ``ratio``: best of this tree over best of ``rev``."""
+    tmp = Path(tempfile.mkdtemp(prefix="fdi-bench-against-"))
+    try:
+        short = export_tree(rev, tmp / "ref")
+        write_run(RoverScenario(rate_hz=10.0, duration_s=duration_s, seed=1), tmp / "run")
+        log = tmp / "run" / "rover.nmea"
+        ref: list[float] = []
+        new: list[float] = []
+        for _ in range(rounds):
+            ref.append(_throughput_in(tmp / "ref", log, reps))
+            new.append(_throughput_in(TREE, log, reps))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return {"rev": rev, "commit": short, "epochs": int(duration_s * 10), "rounds": rounds,
+            "ref_eps": [round(x) for x in ref], "new_eps": [round(x) for x in new],
+            "ratio": round(max(new) / max(ref), 3)}
+
+
+def _replay_cpu_s(tree: Path, log: Path, out: Path) -> float:
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.cli", "replay", str(log),
+                             "--out", str(out)], cwd=tree, env=_child_env(tree),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"replay of {log} in {tree} exited {os.waitstatus_to_exitcode(status)}")
+    return usage.ru_utime + usage.ru_stime
+
+
+def bench_startup(corpus: Path = CORPUS, rev: str | None = "HEAD~1", runs: int = 5
+                  ) -> dict[str, Any]:
+    """User + system time of the whole ``fdi-bridge replay`` of ``gpsd/nmea-rtk.log`` (through
+    a pty, JSON Lines written), ``runs`` times for this tree (and for ``rev``, alternately)."""
+    log = corpus / RTK_LOG
+    if not log.is_file():
+        return {"error": f"{log} not found (the shared corpus)"}
+    tmp = Path(tempfile.mkdtemp(prefix="fdi-bench-startup-"))
+    out: dict[str, Any] = {"log": str(log), "runs": runs, "goal_s": STARTUP_GOAL_S}
+    try:
+        trees = {"new": TREE}
+        if rev is not None:
+            out["commit"] = export_tree(rev, tmp / "ref")
+            trees["ref"] = tmp / "ref"
+        times: dict[str, list[float]] = {k: [] for k in trees}
+        for _ in range(runs):
+            for name, tree in trees.items():
+                times[name].append(_replay_cpu_s(tree, log, tmp / f"out-{name}"))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    for name, ts in times.items():
+        out[f"{name}_cpu_s"] = [round(t, 3) for t in ts]
+        out[f"{name}_worst_s"] = round(max(ts), 3)
+    return out
+
+
 def _machine() -> dict[str, Any]:
     model = ""
     try:
@@ -349,13 +478,15 @@ def _machine() -> dict[str, Any]:
 
 
 BENCH_STEPS = ("rover pipeline", "ROV step", "INS/GNSS step", "end to end", "loop 5 Hz",
-               "loop 10 Hz", "MAVLink forwarding", "replay memory")
+               "loop 10 Hz", "MAVLink forwarding", "replay memory", "against a commit",
+               "replay process time")
 
 
 def run_bench(duration_s: float = 60.0, replay_s: float = 600.0, e2e_epochs: int = 200,
               fwd_seconds: float = 5.0, fwd_rate: int = 200, *,
               step: Callable[[str], None] | None = None,
-              into: dict[str, Any] | None = None) -> dict[str, Any]:
+              into: dict[str, Any] | None = None, against: str | None = "HEAD~1",
+              corpus: Path = CORPUS) -> dict[str, Any]:
     """Every figure; ``step(name)`` after each of :data:`BENCH_STEPS` (a progress bar);
     ``into`` is filled as the figures come (what a ^C keeps)."""
     done = step or (lambda name: None)
@@ -378,8 +509,20 @@ def run_bench(duration_s: float = 60.0, replay_s: float = 600.0, e2e_epochs: int
     done(BENCH_STEPS[6])
     res["replay_memory"] = bench_replay_memory()
     done(BENCH_STEPS[7])
+    res["against"] = _or_error(lambda: bench_against(against, replay_s)) if against else None
+    done(BENCH_STEPS[8])
+    res["startup"] = _or_error(lambda: bench_startup(corpus, against))
+    done(BENCH_STEPS[9])
     res["seconds"] = round(time.perf_counter() - t0, 1)
     return res
+
+
+def _or_error(fn: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    """A figure that needs a git checkout or the corpus: its error instead when it cannot."""
+    try:
+        return fn()
+    except RuntimeError as err:
+        return {"error": str(err)}
 
 
 def _nan(x: Any) -> float | None:
@@ -445,6 +588,26 @@ def figures(res: dict[str, Any]) -> list[dict[str, Any]]:
         if isinstance(v, dict):
             add(f"replay peak RSS, {kind}: {v['long_mib']:.1f} MiB on a 24 h log", "x the 1 min",
                 value=v["ratio"], goal="<= 1.10", ok=v["ratio"] <= 1.10)
+    rows += against_rows(res)
+    return rows
+
+
+def against_rows(res: dict[str, Any]) -> list[dict[str, Any]]:
+    """The figures of :func:`bench_against` and :func:`bench_startup` (see :func:`figures`)."""
+    rows: list[dict[str, Any]] = []
+    ag = res.get("against") or {}
+    if "ratio" in ag:
+        rows.append({"figure": f"throughput, no pty, JSON Lines: {max(ag['new_eps'])} against "
+                               f"{max(ag['ref_eps'])} epochs/CPU-s of {ag['commit']}",
+                     "unit": "x", "p50": None, "p99": None, "max": None, "value": ag["ratio"],
+                     "goal": f">= {RATIO_GOAL:g}", "ok": ag["ratio"] >= RATIO_GOAL})
+    st = res.get("startup") or {}
+    if "new_worst_s" in st:
+        ref = f" ({st['commit']}: {st['ref_worst_s']:.3f} s)" if "ref_worst_s" in st else ""
+        rows.append({"figure": f"nmea-rtk.log pty replay, whole process, worst of "
+                               f"{st['runs']}{ref}", "unit": "s user+sys", "p50": None,
+                     "p99": None, "max": None, "value": st["new_worst_s"],
+                     "goal": f"< {STARTUP_GOAL_S:g}", "ok": st["new_worst_s"] < STARTUP_GOAL_S})
     return rows
 
 
@@ -459,10 +622,11 @@ def table(res: dict[str, Any]) -> str:
               _verdict(f["ok"])] for f in rows if f["value"] is None]
     rates = [[f["figure"], f["value"], f["unit"], f["goal"] or "-", _verdict(f["ok"])]
              for f in rows if f["value"] is not None]
-    out = [tables.table(["figure", "p50", "p99", "max", "unit", "goal", "result"], timed)]
+    out = [tables.table(["figure", "p50", "p99", "max", "unit", "goal", "result"], timed)
+           ] if timed else []
     if rates:
         out += ["", tables.table(["figure", "value", "unit", "goal", "result"], rates)]
-    return "\n".join(out)
+    return "\n".join(out).strip("\n")
 
 
 def replay_memory_rows(mem: dict[str, Any]) -> list[str]:
@@ -487,25 +651,50 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "temporary directory)")
     parser.add_argument("--strict", action="store_true",
                         help="exit 1 when a figure misses its goal (default: exit 0 either way)")
-    parser.add_argument("--only", choices=("replay-memory",), default=None,
-                        help="measure just this figure (replay-memory: about a minute)")
+    parser.add_argument("--only", choices=("replay-memory", "against", "startup"), default=None,
+                        help="measure just this figure (replay-memory: about a minute; "
+                             "against: throughput ratio to --against, about a minute; "
+                             "startup: the nmea-rtk replay's process time, seconds)")
+    parser.add_argument("--against", default="HEAD~1", metavar="REV",
+                        help="the commit to compare replay throughput and process time with, "
+                             "in the same run (git checkout only), or a source tree's "
+                             "directory; 'none' to skip")
+    parser.add_argument("--corpus", type=Path, default=CORPUS,
+                        help="the shared corpus (for gpsd/nmea-rtk.log)")
 
 
 def run(args: argparse.Namespace) -> int:
     logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)  # gate-health notes etc.
+    against = None if args.against.lower() == "none" else args.against
     if args.only == "replay-memory":
         mem = bench_replay_memory()
         print("\n".join(replay_memory_rows(mem)[1:]))
         if args.json is not None:
             args.json.write_text(json.dumps({"replay_memory": mem}, indent=2) + "\n")
         return 0
+    if args.only in ("against", "startup"):
+        if args.only == "against" and against is None:
+            raise UsageError("--only against needs --against REV")
+        one: dict[str, Any] = (
+            {"against": _or_error(lambda: bench_against(against or "", args.replay_duration))}
+            if args.only == "against" else
+            {"startup": _or_error(lambda: bench_startup(args.corpus, against))})
+        one["figures"] = against_rows(one)
+        for v in one.values():
+            if isinstance(v, dict) and "error" in v:
+                print(f"fdi-bridge bench: {v['error']}", file=sys.stderr)
+        print(table(one) if one["figures"] else "(nothing measured)")
+        if args.json is not None:
+            args.json.write_text(json.dumps(one, indent=2) + "\n")
+        misses = [f for f in one["figures"] if f["ok"] is False]
+        return 1 if args.strict and misses else 0
     out = args.json or Path(tempfile.gettempdir()) / "fdi-bridge-bench.json"
     check_output_file(out, "--json")  # before 160 s of work, not after
     res: dict[str, Any] = {}
     try:
         with Progress(len(BENCH_STEPS), "bench") as bar:
             run_bench(args.duration, args.replay_duration, args.e2e_epochs, step=bar.step,
-                      into=res)
+                      into=res, against=against, corpus=args.corpus)
     except KeyboardInterrupt:
         res["partial"] = True
         res["figures"] = figures(res)

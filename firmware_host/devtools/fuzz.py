@@ -235,7 +235,7 @@ def check_nmea(data: bytes, cuts: list[int], max_line: int = 120) -> Counter[str
         except Ignored as ign:
             reasons["ignored_" + ign.reason] += 1
             continue
-        for v in msg.__slots__:
+        for v in msg._fields:
             x = getattr(msg, v)
             if isinstance(x, float):
                 _require(math.isfinite(x), f"{v} not finite")

@@ -16,14 +16,12 @@ the same ``epochs.jsonl``.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any, Protocol, TextIO
+from typing import Any, NamedTuple, Protocol, TextIO
 
 import numpy as np
 
@@ -35,6 +33,7 @@ from fdi.geodesy import LocalFrame
 from fdi.rover import Decision, FixInput, RoverIsolator
 from firmware_host.runtime.config import RoverConfig
 from firmware_host.runtime.loop import EpochTimer
+from firmware_host.runtime.records import encode_line
 
 log = logging.getLogger("fdi_bridge.rover")
 
@@ -47,9 +46,9 @@ class EpochSink(Protocol):
     def close(self) -> None: ...
 
 
-@dataclass(frozen=True, slots=True)
-class EpochOutcome:
-    """One epoch's input, decision and output position, handed to the sinks."""
+class EpochOutcome(NamedTuple):
+    """One epoch's input, decision and output position, handed to the sinks (immutable; a
+    NamedTuple: built once an epoch, faster than a frozen dataclass)."""
 
     epoch: GpsEpoch
     decision: Decision
@@ -101,6 +100,11 @@ class RoverPipeline:
         self._period_s: float | None = None
         self._last_t: float | None = None
         self.last_outcome: EpochOutcome | None = None
+        # The record's values that rarely change, with what they were made from (_record).
+        self._date_key: tuple[int, int, int] | None = None
+        self._date_text: str | None = None
+        self._gates_key: tuple[float | None, ...] = ()
+        self._gates_out: tuple[float | None, ...] = (None, None, None, None)
 
     # ------------------------------------------------------------------ feeding
 
@@ -192,7 +196,7 @@ class RoverPipeline:
         if self.epochs % 100 == 0:
             self._check_gate_health()
         if jsonl is not None:
-            jsonl.write(json.dumps(record, separators=(",", ":")) + "\n")
+            jsonl.write(encode_line(record))
         for sink in self.sinks:
             try:
                 sink.emit(outcome)
@@ -234,11 +238,31 @@ class RoverPipeline:
         lon: float | None,
         alt: float | None,
     ) -> dict[str, Any]:
+        # Written out rather than through _r: this runs once an epoch (the same values).
         pred = d.pred_enu
         kf = d.kf_enu
+        e_ = n_ = u_ = pe = pn = pu = ke = kn = ku = None
+        if enu:
+            e_, n_, u = enu
+            e_, n_ = round(e_, 4), round(n_, 4)
+            u_ = None if math.isnan(u) else round(u, 4)
+        if pred:
+            pe, pn, pu = round(pred[0], 4), round(pred[1], 4), round(pred[2], 4)
+        if kf:
+            ke, kn, ku = round(kf[0], 4), round(kf[1], 4), round(kf[2], 4)
+        date = e.date
+        if date != self._date_key:  # the same date (and gates) epoch after epoch: kept
+            self._date_key = date
+            self._date_text = None if date is None else "{:04d}-{:02d}-{:02d}".format(*date)
+        gates = (d.grey_gate_h, d.grey_gate_u, d.doppler_gate, d.chi2_threshold)
+        if gates != self._gates_key or 0.0 in gates:  # (0.0 in: -0.0 and 0.0 compare equal)
+            self._gates_key = gates
+            self._gates_out = (_r(gates[0]), _r(gates[1]), _r(gates[2]), _r(gates[3]))
+        gh, gu, dg, ct = self._gates_out
+        speed, drift, zones = e.speed_mps, d.drift, d.zones
         return {
             "utc": e.utc_s,
-            "date": None if e.date is None else "{:04d}-{:02d}-{:02d}".format(*e.date),
+            "date": self._date_text,
             "raw_lat": e.lat_deg,
             "raw_lon": e.lon_deg,
             "raw_alt": e.alt_msl_m,
@@ -253,28 +277,28 @@ class RoverPipeline:
             "quality": e.quality,
             "sats": e.num_sats,
             "hdop": e.hdop,
-            "speed": _r(e.speed_mps),
+            "speed": None if speed is None else round(speed, 4),
             "course": e.course_deg,
-            "e": _r(enu[0]) if enu else None,
-            "n": _r(enu[1]) if enu else None,
-            "u": _r(enu[2]) if enu and not math.isnan(enu[2]) else None,
-            "pred_e": _r(pred[0]) if pred else None,
-            "pred_n": _r(pred[1]) if pred else None,
-            "pred_u": _r(pred[2]) if pred else None,
+            "e": e_,
+            "n": n_,
+            "u": u_,
+            "pred_e": pe,
+            "pred_n": pn,
+            "pred_u": pu,
             "grey_res_h": _r(d.grey_res_h),
             "grey_res_u": _r(d.grey_res_u),
-            "grey_gate_h": _r(d.grey_gate_h),
-            "grey_gate_u": _r(d.grey_gate_u),
+            "grey_gate_h": gh,
+            "grey_gate_u": gu,
             "doppler_res": _r(d.doppler_res),
-            "doppler_gate": _r(d.doppler_gate),
-            "drift": _r(d.drift, 2),
+            "doppler_gate": dg,
+            "drift": None if drift is None else round(drift, 2),
             "chi2": _r(d.chi2),
-            "chi2_threshold": _r(d.chi2_threshold),
+            "chi2_threshold": ct,
             "consecutive": d.consecutive,
-            "zones": None if d.zones is None else list(d.zones),
-            "kf_e": _r(kf[0]) if kf else None,
-            "kf_n": _r(kf[1]) if kf else None,
-            "kf_u": _r(kf[2]) if kf else None,
+            "zones": None if zones is None else list(zones),
+            "kf_e": ke,
+            "kf_n": kn,
+            "kf_u": ku,
         }
 
     # ------------------------------------------------------------------ summary

@@ -12,13 +12,72 @@ import json
 from pathlib import Path
 from typing import Any, TextIO
 
+try:  # the ``fast`` extra: a compiled encoder (no wheel on every platform, so optional)
+    import orjson as _orjson
+except ImportError:  # pragma: no cover - exercised by the tests with the encoder disabled
+    _orjson = None  # type: ignore[assignment]
+
 EPOCHS = "epochs.jsonl"
 SUMMARY = "summary.json"
 
 
-def encode_line(record: dict[str, Any]) -> str:
-    """One line of ``epochs.jsonl`` (compact separators, as the replay contract has them)."""
+def encode_line_stdlib(record: dict[str, Any]) -> str:
+    """One line of ``epochs.jsonl`` with the standard library (compact separators, as the
+    replay contract has them): the reference encoding."""
     return json.dumps(record, separators=(",", ":")) + "\n"
+
+
+def _same_in_orjson(value: Any) -> bool:
+    """Does orjson write ``value`` byte for byte as :func:`json.dumps` does? True for the
+    plain JSON types only (exact types: no subclasses, no numpy scalars), floats that are 0 or
+    finite with ``1e-4 <= |x| < 1e16`` (outside that, ``repr`` uses an exponent that orjson
+    spells differently, and NaN/Infinity become ``null``), strings of printable ASCII (else
+    ``json.dumps`` escapes what orjson writes raw), and dicts with such string keys. Integers
+    beyond 64 bits make orjson raise, which falls back too. Checked on generated runs, the
+    corpus and random values by tests/test_json_encoding.py."""
+    t = type(value)
+    if t is float:
+        return 1e-4 <= abs(value) < 1e16 or value == 0.0
+    if t is str:
+        return value.isascii() and value.isprintable()
+    if value is None or t is int or t is bool:
+        return True
+    if t is dict:
+        return all(type(k) is str and k.isascii() and k.isprintable() and _same_in_orjson(v)
+                   for k, v in value.items())
+    if t is list or t is tuple:
+        return all(_same_in_orjson(v) for v in value)
+    return False
+
+
+def _flat_same_in_orjson(record: dict[str, Any]) -> bool:
+    """:func:`_same_in_orjson` of a record, its scalar values checked inline (the hot path:
+    once an epoch); a non-string key makes ``join`` raise TypeError (the caller falls back)."""
+    for v in record.values():
+        t = type(v)
+        if t is float:  # the same test as _same_in_orjson's, without the call to abs
+            if not (1e-4 <= v < 1e16 or -1e16 < v <= -1e-4 or v == 0.0):
+                return False
+        elif t is str:
+            if not (v.isascii() and v.isprintable()):
+                return False
+        elif not (v is None or t is bool or t is int or _same_in_orjson(v)):
+            return False
+    keys = "".join(record)
+    return keys.isascii() and keys.isprintable()
+
+
+def encode_line(record: dict[str, Any]) -> str:
+    """One line of ``epochs.jsonl``, byte-identical to :func:`encode_line_stdlib`: orjson
+    (about ten times faster) when it is installed and writes this record the same way, else
+    the standard library."""
+    if _orjson is not None:
+        try:
+            if _flat_same_in_orjson(record):
+                return _orjson.dumps(record, option=_orjson.OPT_APPEND_NEWLINE).decode()
+        except TypeError:  # a non-string key, an integer beyond 64 bits
+            pass
+    return encode_line_stdlib(record)
 
 
 class EpochLog:

@@ -1,0 +1,49 @@
+"""``fdi-bridge bench``'s issue-19 figures: throughput against a commit, the pty replay's
+process time. Speed is never asserted here: only that the figures are made and judged."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from firmware_host.devtools import bench
+
+
+def test_against_rows_judge_the_ratio_and_the_process_time() -> None:
+    res = {"against": {"commit": "abc1234", "ref_eps": [9000, 10000], "new_eps": [14000, 16000],
+                       "ratio": 1.6},
+           "startup": {"runs": 5, "new_worst_s": 0.25, "commit": "abc1234",
+                       "ref_worst_s": 0.33}}
+    rows = {r["figure"]: r for r in bench.against_rows(res)}
+    (ratio,) = [r for name, r in rows.items() if name.startswith("throughput")]
+    (startup,) = [r for name, r in rows.items() if name.startswith("nmea-rtk")]
+    assert ratio["value"] == 1.6 and ratio["ok"] is True and "16000 against 10000" in \
+        next(n for n in rows if n.startswith("throughput"))
+    assert startup["value"] == 0.25 and startup["ok"] is False and "0.330 s" in \
+        next(n for n in rows if n.startswith("nmea-rtk"))
+    res["against"]["ratio"] = 1.2
+    assert not bench.against_rows(res)[0]["ok"]
+    assert bench.against_rows({"against": {"error": "no git"}, "startup": {"error": "x"}}) == []
+
+
+def test_startup_figure_replays_the_corpus_log(corpus: Path) -> None:
+    st = bench.bench_startup(corpus, rev=None, runs=1)
+    assert st["new_worst_s"] > 0 and len(st["new_cpu_s"]) == 1 and "ref_worst_s" not in st
+
+
+def test_startup_figure_without_the_corpus(tmp_path: Path) -> None:
+    assert "error" in bench.bench_startup(tmp_path, rev=None, runs=1)
+
+
+def test_export_tree_of_a_commit_and_of_a_directory(tmp_path: Path) -> None:
+    if subprocess.run(["git", "-C", str(bench.TREE), "rev-parse", "HEAD"], capture_output=True,
+                      check=False).returncode != 0:
+        pytest.skip("not a git checkout")
+    short = bench.export_tree("HEAD", tmp_path / "a")
+    assert short and (tmp_path / "a" / "firmware_host" / "devtools" / "bench.py").is_file()
+    assert bench.export_tree(str(tmp_path / "a"), tmp_path / "b") == str(tmp_path / "a")
+    assert (tmp_path / "b" / "pyproject.toml").is_file()
+    with pytest.raises(RuntimeError, match="cannot export"):
+        bench.export_tree("no-such-revision-xyz", tmp_path / "c")

@@ -1,0 +1,117 @@
+"""The fast JSON Lines encoder (orjson, the ``fast`` extra) writes exactly what the standard
+library writes: on random values, on the records of generated runs and on the corpus logs.
+
+``epochs.jsonl`` is the replay contract: it must not change by a byte with the encoder.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from firmware_host.commands.replay import load_input, replay_direct
+from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime import records
+from firmware_host.runtime.config import BridgeConfig, load_config
+from firmware_host.runtime.records import encode_line, encode_line_stdlib
+
+orjson = pytest.importorskip("orjson", reason="the fast extra (orjson) is not installed")
+
+RUNS = [  # (seed, error model, rate Hz, duration s, GST, ZDA, fault kinds)
+    (11, "gm", 10.0, 60.0, False, False, ("jump", "burst")),
+    (12, "dgps", 5.0, 60.0, True, False, ("ramp", "frozen", "outage")),
+    (13, "multipath", 10.0, 60.0, False, True, ("multipath", "jump")),
+    (14, "coarse", 1.0, 200.0, True, True, ("jump", "burst", "ramp")),
+]
+
+scalars = (st.none() | st.booleans() | st.integers() | st.integers(-2**70, 2**70)
+           | st.floats(allow_nan=True, allow_infinity=True) | st.floats(-1e-3, 1e-3)
+           | st.floats(1e14, 1e18) | st.text(max_size=8))
+values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=4)
+                      | st.dictionaries(st.text(max_size=6), inner, max_size=4), max_leaves=12)
+
+
+@settings(max_examples=1500, deadline=None)
+@given(st.dictionaries(st.text(max_size=10), values, max_size=8))
+def test_fast_encoder_writes_what_json_writes(record: dict[str, Any]) -> None:
+    assert encode_line(record) == encode_line_stdlib(record)
+
+
+@settings(max_examples=3000, deadline=None)
+@given(st.floats(allow_nan=True, allow_infinity=True))
+def test_the_float_range_said_safe_is_spelled_alike(x: float) -> None:
+    """The claim :func:`records._same_in_orjson` rests on, tested on orjson itself."""
+    if records._same_in_orjson(x):
+        assert orjson.dumps(x) == json.dumps(x).encode()
+    else:
+        assert x != 0.0 and not (1e-4 <= abs(x) < 1e16)
+
+
+def test_values_orjson_spells_differently_take_the_standard_library() -> None:
+    for rec in ({"x": 5e-05}, {"x": 1e-07}, {"x": math.nan}, {"x": -math.inf}, {"x": 2**70},
+                {"s": "é"}, {"s": "\x7f"}, {"s": "a\nb"}, {"é": 1}, {"a": [1, {"b": 1e-9}]}):
+        line = encode_line(rec)
+        assert line == encode_line_stdlib(rec), rec
+    assert encode_line({1: 2}) == '{"1":2}\n'  # a non-string key: json's conversion
+
+
+def _records(inp: Path, cfg: BridgeConfig) -> tuple[list[dict[str, Any]], str]:
+    out = io.StringIO()
+    pipe = RoverPipeline(cfg.rover, jsonl=out)
+    got: list[dict[str, Any]] = []
+    process = pipe.process
+
+    def keep(epoch: Any) -> Any:
+        outcome = process(epoch)
+        got.append(outcome.record)
+        return outcome
+
+    pipe.process = keep  # type: ignore[method-assign]
+    replay_direct(load_input(inp), pipe)
+    return got, out.getvalue()
+
+
+def _check(recs: list[dict[str, Any]], text: str) -> int:
+    """Every record's line as the standard library writes it; returns how many orjson wrote."""
+    assert text == "".join(encode_line_stdlib(r) for r in recs)
+    return sum(records._flat_same_in_orjson(r) for r in recs)
+
+
+@pytest.mark.parametrize("run", RUNS, ids=lambda r: f"seed{r[0]}-{r[1]}")
+def test_generated_runs_are_byte_identical(run: tuple[Any, ...], tmp_path: Path) -> None:
+    seed, model, rate, dur, gst, zda, kinds = run
+    write_run(RoverScenario(rate_hz=rate, duration_s=dur, seed=seed, error_model=model,
+                            gst=gst, zda=zda, kinds=kinds), tmp_path)
+    for cfg in (BridgeConfig(), load_config("rover-combined-paper")):
+        recs, text = _records(tmp_path / "rover.nmea", cfg)
+        assert len(recs) >= dur * rate * 0.9
+        fast = _check(recs, text)
+        assert fast >= 0.9 * len(recs)  # the fast encoder did the work, not the fallback
+
+
+def test_corpus_logs_are_byte_identical(corpus: Path) -> None:
+    logs = sorted((corpus / "gpsd").glob("*.log")) + sorted((corpus / "ardusub").glob("nmea*"))
+    assert len(logs) >= 17
+    total = fast = 0
+    for log in logs:
+        recs, text = _records(log, BridgeConfig())
+        fast += _check(recs, text)
+        total += len(recs)
+    assert total > 1000 and fast >= 0.9 * total
+
+
+def test_without_orjson_the_file_is_the_same(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                              ) -> None:
+    write_run(RoverScenario(rate_hz=10.0, duration_s=30.0, seed=21), tmp_path)
+    _, fast_text = _records(tmp_path / "rover.nmea", BridgeConfig())
+    monkeypatch.setattr(records, "_orjson", None)
+    _, slow_text = _records(tmp_path / "rover.nmea", BridgeConfig())
+    assert fast_text == slow_text and fast_text
