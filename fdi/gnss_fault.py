@@ -64,43 +64,14 @@ from __future__ import annotations
 import enum
 import math
 from collections import deque
-from dataclasses import dataclass, field
-from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
 
-from fdi.chi2 import chi2_ppf
+from fdi.insgnss_params import DIMS as DIMS  # re-exported
+from fdi.insgnss_params import FaultStateParams as FaultStateParams  # re-exported
 
 FloatArray = npt.NDArray[np.float64]
-DIMS = 3  # E, N, U position
-
-
-@dataclass(frozen=True)
-class FaultStateParams:
-    """The ``[filter.fault_state]`` table of ``config/insgnss.toml``."""
-
-    alpha_onset: float = field(
-        default=0.01, metadata={"gt": 0.0, "lt": 1.0,
-                                "doc": "onset significance: T_on = χ²₃(1 − α_on)"})
-    window: int = field(
-        default=4, metadata={"ge": 1, "le": 64, "doc": "innovation history of the jump test"})
-    return_log_lr: float = field(
-        default=2.3026,  # ln 10
-        metadata={"gt": 0.0, "doc": "CUSUM threshold on ln L(H0)/L(H1) to return"})
-    bias_sigma0_m: float = field(
-        default=1000.0, metadata={"gt": 0.0, "doc": "prior 1σ of the bias at an onset, m"})
-    bias_rw_m_sqrt_s: float = field(
-        default=0.01, metadata={"ge": 0.0, "doc": "random walk of the bias while faulted"})
-    max_prior_ratio: float = field(
-        default=0.25, metadata={"gt": 0.0,
-                                "doc": "open a fault only while P⁻_ii ≤ ratio · R_ii (coasting "
-                                       "on the INS beats the fix)"})
-
-    @cached_property
-    def t_onset(self) -> float:
-        """T_on = χ²₃(1 − α_on) (11.345 at α_on = 0.01)."""
-        return chi2_ppf(1.0 - self.alpha_onset, DIMS)
 
 
 class Verdict(enum.Enum):

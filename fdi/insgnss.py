@@ -63,15 +63,41 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from functools import cached_property
-from typing import Any, Literal
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from fdi.errors import EstimatorError
-from fdi.gnss_fault import FaultStateParams, GnssFaultMonitor, Verdict
+from fdi.gnss_fault import GnssFaultMonitor, Verdict
+from fdi.insgnss_params import (  # re-exported: the parameters live without numpy
+    DEG as DEG,
+)
+from fdi.insgnss_params import (
+    EARTH_RADIUS_M as EARTH_RADIUS_M,
+)
+from fdi.insgnss_params import (
+    OMEGA_IE as OMEGA_IE,
+)
+from fdi.insgnss_params import (
+    STANDARD_G as STANDARD_G,
+)
+from fdi.insgnss_params import (
+    EarthModel as EarthModel,
+)
+from fdi.insgnss_params import (
+    ImuErrorModel as ImuErrorModel,
+)
+from fdi.insgnss_params import (
+    InsGnssParams as InsGnssParams,
+)
+from fdi.insgnss_params import (
+    InsGnssStrategy as InsGnssStrategy,
+)
+from fdi.insgnss_params import (
+    normal_gravity as normal_gravity,
+)
 from fdi.three_zone import (
     STRATEGIES,
     Action,
@@ -80,31 +106,19 @@ from fdi.three_zone import (
     ReceiverState,
     Strategy,
     ThreeZoneGate,
-    ThreeZoneParams,
     classify,
 )
 
 # The GNSS treatments: the gate's (fdi.three_zone.Strategy) and "fault_state", a persistent
 # fault as a state of the filter (fdi.gnss_fault) with plain down-weighting while healthy.
-InsGnssStrategy = Literal["none", "downweight", "replace", "three_zone", "fault_state"]
 INS_STRATEGIES: tuple[InsGnssStrategy, ...] = (*STRATEGIES, "fault_state")
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 FloatArray = npt.NDArray[np.float64]
 VecLike = Sequence[float] | npt.NDArray[Any]  # a 3-vector as a sequence or an array
 
-OMEGA_IE = 7.2921151467e-5  # Earth rotation rate, rad/s (WGS 84)
-EARTH_RADIUS_M = 6_371_008.8  # mean radius of the spherical Earth model, m
-STANDARD_G = 9.80665  # m/s² per g
-DEG = math.pi / 180.0
 N_STATES = 15
 _RATE_WINDOW = 10  # IMU samples whose median interval decides the rate check
-
-
-def normal_gravity(latitude_deg: float) -> float:
-    """Somigliana normal gravity on the WGS 84 ellipsoid, m/s²."""
-    s2 = math.sin(latitude_deg * DEG) ** 2
-    return 9.7803253359 * (1 + 0.00193185265241 * s2) / math.sqrt(1 - 0.00669437999013 * s2)
 
 
 # ---------------------------------------------------------------- quaternion helpers (floats)
@@ -209,37 +223,6 @@ def _skew(a: VecLike) -> FloatArray:
 # ---------------------------------------------------------------- Earth model and mechanisation
 
 
-@dataclass(frozen=True)
-class EarthModel:
-    """Spherical Earth seen from a tangent plane at ``latitude_deg`` (see the module docstring)."""
-
-    latitude_deg: float = 34.25
-    rotation: bool = True
-
-    @cached_property
-    def g0(self) -> float:
-        return normal_gravity(self.latitude_deg)
-
-    @cached_property
-    def _g0_r2(self) -> float:
-        return self.g0 * EARTH_RADIUS_M**2
-
-    @cached_property
-    def omega_ie_n(self) -> Vec3:
-        """Earth rate in ENU, rad/s."""
-        if not self.rotation:
-            return (0.0, 0.0, 0.0)
-        lat = self.latitude_deg * DEG
-        return (0.0, OMEGA_IE * math.cos(lat), OMEGA_IE * math.sin(lat))
-
-    def gravity(self, p: Vec3) -> Vec3:
-        """Gravity vector at ENU position p (m), m/s²."""
-        rx, ry, rz = p[0], p[1], p[2] + EARTH_RADIUS_M
-        r2 = rx * rx + ry * ry + rz * rz
-        k = -self._g0_r2 / (r2 * math.sqrt(r2))
-        return (k * rx, k * ry, k * rz)
-
-
 @dataclass
 class NavState:
     """Nominal navigation state: C_b^n as a quaternion, ENU velocity (m/s) and position (m)."""
@@ -311,67 +294,6 @@ def invert_mechanization(
 
 
 # ---------------------------------------------------------------- configuration
-
-
-@dataclass(frozen=True)
-class ImuErrorModel:
-    """IMU errors: 1σ turn-on bias and white-noise densities (per axis).
-
-    Defaults: a MEMS autopilot IMU after its turn-on calibration (ICM-42688 / BMI088 class).
-    """
-
-    gyro_bias_deg_h: float = field(default=30.0, metadata={"ge": 0.0, "doc": "1σ gyro bias"})
-    gyro_arw_deg_sqrt_h: float = field(
-        default=0.2, metadata={"ge": 0.0, "doc": "angle random walk"}
-    )
-    accel_bias_ug: float = field(default=2000.0, metadata={"ge": 0.0, "doc": "1σ accel bias"})
-    accel_vrw_ug_sqrt_hz: float = field(
-        default=70.0, metadata={"ge": 0.0, "doc": "accelerometer white noise density"}
-    )
-
-    @property
-    def gyro_bias_rad_s(self) -> float:
-        return self.gyro_bias_deg_h * DEG / 3600.0
-
-    @property
-    def gyro_arw_rad_sqrt_s(self) -> float:
-        return self.gyro_arw_deg_sqrt_h * DEG / 60.0
-
-    @property
-    def accel_bias_m_s2(self) -> float:
-        return self.accel_bias_ug * 1e-6 * STANDARD_G
-
-    @property
-    def accel_vrw_m_s_sqrt_s(self) -> float:
-        return self.accel_vrw_ug_sqrt_hz * 1e-6 * STANDARD_G
-
-
-@dataclass(frozen=True)
-class InsGnssParams:
-    """Filter parameters (the ``[filter]`` table of ``config/insgnss*.toml``)."""
-
-    strategy: InsGnssStrategy = field(
-        default="fault_state", metadata={"doc": "robust treatment (the paper's: three_zone)"})
-    three_zone: ThreeZoneParams = field(default_factory=ThreeZoneParams)
-    fault_state: FaultStateParams = field(default_factory=FaultStateParams)
-    imu: ImuErrorModel = field(default_factory=ImuErrorModel)
-    gnss_sigma_h_m: float = field(default=3.0, metadata={"gt": 0.0, "doc": "R: E/N 1σ"})
-    gnss_sigma_v_m: float = field(default=5.0, metadata={"gt": 0.0, "doc": "R: up 1σ"})
-    gnss_sigma_vel_m_s: float = field(default=0.1, metadata={"gt": 0.0, "doc": "R: velocity"})
-    use_velocity: bool = field(default=True, metadata={"doc": "use GNSS velocity when given"})
-    latitude_deg: float = field(default=34.25, metadata={"ge": -89.0, "le": 89.0})
-    earth_rotation: bool = True
-    min_imu_rate_hz: float = field(default=20.0, metadata={"ge": 10.0})
-    max_imu_gap_s: float = field(default=0.25, metadata={"gt": 0.0})
-    cov_rate_hz: float = field(default=10.0, metadata={"gt": 0.0, "doc": "P propagation rate"})
-    init_sigma_pos_m: float = field(default=3.0, metadata={"gt": 0.0})
-    init_sigma_vel_m_s: float = field(default=0.1, metadata={"gt": 0.0})
-    init_sigma_tilt_deg: float = field(default=0.5, metadata={"gt": 0.0})
-    init_sigma_yaw_deg: float = field(default=2.0, metadata={"gt": 0.0})
-
-    @property
-    def earth(self) -> EarthModel:
-        return EarthModel(self.latitude_deg, self.earth_rotation)
 
 
 # ---------------------------------------------------------------- rate checks

@@ -21,8 +21,6 @@ import math
 from collections import deque
 from typing import ClassVar
 
-import numpy as np
-
 
 class RobustVariance:
     """EWMA of clipped squares; ``update(x)`` unless :attr:`frozen`."""
@@ -52,7 +50,11 @@ class RobustVariance:
 
 
 def _trim_bias(window: int, trim: int) -> float:
-    """E[trimmed mean of squares] / var for Gaussian samples (seeded Monte Carlo)."""
+    """E[trimmed mean of squares] / var for Gaussian samples (seeded Monte Carlo). numpy is
+    imported here, once per (window, trim), so that loading an ``[rov]`` file does not import
+    it (issue 19: a rover replay's start-up)."""
+    import numpy as np
+
     rng = np.random.default_rng(0)
     x = np.sort(rng.normal(size=(20000, window)) ** 2, axis=1)[:, : window - trim]
     return float(x.mean())

@@ -295,7 +295,7 @@ def test_sub_alarm_sends_alt_hold_and_keeps_the_gps_input(tmp_path: Path) -> Non
 def test_mode_tables_match_pymavlink() -> None:
     from drivers.mavlink.modes import MODES
 
-    for vehicle, table in mio.PYMAVLINK_MODE_TABLES.items():
+    for vehicle, table in mio.pymavlink_mode_tables().items():
         ours = MODES[vehicle]
         for number, name in table.items():
             if name in ours:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import struct
+import subprocess
+import sys
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
@@ -12,6 +14,7 @@ import pytest
 
 from drivers.mavlink import io as mio
 from fdi.errors import PortError
+from firmware_host.runtime.config_mavlink import DEFAULT_ALLOW_UNSIGNED
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL_TLOG = ROOT.parent / "shared" / "corpus" / "ardusub" / "small.tlog"
@@ -231,3 +234,25 @@ def test_iter_tlog_resyncs_after_garbage(tmp_path: Path) -> None:
     assert [r.raw for r in records] == [a, b"\x00\x01garbage", b, b[:5]]
     assert [r.msg is None for r in records] == [False, True, False, True]
     assert [r.t_us - t0 for r in records] == [0, 1, 2, 3]
+
+
+def test_enum_constants_are_pymavlinks() -> None:
+    """drivers.mavlink.io spells the standard's numbers so that importing it does not import
+    pymavlink; each must be the dialect's own value."""
+    from pymavlink.dialects.v20 import ardupilotmega as dialect
+
+    names = [n for n in dir(mio) if n.startswith(("MAV_", "GPS_INPUT_IGNORE_FLAG_"))]
+    assert len(names) >= 27
+    for name in names:
+        assert getattr(mio, name) == getattr(dialect, name), name
+
+
+def test_importing_the_io_module_does_not_import_pymavlink() -> None:
+    code = ("import sys, drivers.mavlink.io as m; assert 'pymavlink' not in sys.modules; "
+            "m.message_id('HEARTBEAT'); assert 'pymavlink.mavutil' in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+def test_default_unsigned_pass_list_names_dialect_messages() -> None:
+    ids = [mio.message_id(name) for name in DEFAULT_ALLOW_UNSIGNED]  # KeyError if not
+    assert ids == [0, 109]

@@ -30,7 +30,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 from drivers.mavlink.modes import mode_number
 from fdi.errors import PortError
@@ -38,81 +38,108 @@ from fdi.errors import PortError
 DIALECT = "ardupilotmega"
 _log = logging.getLogger("fdi_bridge.mavlink")
 
-# pymavlink reads these when mavutil is imported and whenever set_dialect() runs: fix them here,
-# once, for the whole process (rule 7). MAVLINK20 selects the v20 dialect modules, which send
-# MAVLink 2 and still decode MAVLink 1.
+# pymavlink is imported on first use, not with this module: a rover replay or run without
+# MAVLink never pays its ~0.13 s of start-up (issue 19). pymavlink reads these variables when
+# mavutil is imported and whenever set_dialect() runs: they are fixed here, once, for the whole
+# process (rule 7). MAVLINK20 selects the v20 dialect modules, which send MAVLink 2 and still
+# decode MAVLink 1.
 os.environ["MAVLINK20"] = "1"
 os.environ["MAVLINK_DIALECT"] = DIALECT
 
-from pymavlink import mavutil  # noqa: E402  (after the environment is fixed)
-from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
+_pymavlink: tuple[Any, Any] | None = None
 
-if mavutil.current_dialect != DIALECT:  # someone imported mavutil before us with another dialect
-    mavutil.set_dialect(DIALECT)
 
-MAVLink = mavlink2.MAVLink
-MAVError = mavlink2.MAVError
+def _load() -> tuple[Any, Any]:
+    """``(mavutil, the ardupilotmega v20 dialect module)``, imported once (third-party only)."""
+    global _pymavlink
+    if _pymavlink is None:
+        from pymavlink import mavutil
+        from pymavlink.dialects.v20 import ardupilotmega
 
-# Enum values the rest of the project may use without importing pymavlink.
-MAV_TYPE_GCS = mavlink2.MAV_TYPE_GCS
-MAV_TYPE_ONBOARD_CONTROLLER = mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
-MAV_AUTOPILOT_INVALID = mavlink2.MAV_AUTOPILOT_INVALID
-MAV_STATE_ACTIVE = mavlink2.MAV_STATE_ACTIVE
-MAV_TYPE_SUBMARINE = mavlink2.MAV_TYPE_SUBMARINE
-MAV_AUTOPILOT_ARDUPILOTMEGA = mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA
-MAV_MODE_FLAG_SAFETY_ARMED = mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
-MAV_CMD_DO_SET_MODE = mavlink2.MAV_CMD_DO_SET_MODE
-MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-MAV_PARAM_TYPE_REAL32 = mavlink2.MAV_PARAM_TYPE_REAL32
-MAV_PARAM_TYPE_INT32 = mavlink2.MAV_PARAM_TYPE_INT32
-MAV_RESULT_IN_PROGRESS = mavlink2.MAV_RESULT_IN_PROGRESS
-MAV_RESULT_ACCEPTED = mavlink2.MAV_RESULT_ACCEPTED
-MAV_RESULT_DENIED = mavlink2.MAV_RESULT_DENIED
-MAV_RESULT_UNSUPPORTED = mavlink2.MAV_RESULT_UNSUPPORTED
-MAV_SEVERITY_EMERGENCY = mavlink2.MAV_SEVERITY_EMERGENCY
-MAV_SEVERITY_ALERT = mavlink2.MAV_SEVERITY_ALERT
-MAV_SEVERITY_CRITICAL = mavlink2.MAV_SEVERITY_CRITICAL
-MAV_SEVERITY_ERROR = mavlink2.MAV_SEVERITY_ERROR
-MAV_SEVERITY_WARNING = mavlink2.MAV_SEVERITY_WARNING
-MAV_SEVERITY_NOTICE = mavlink2.MAV_SEVERITY_NOTICE
-MAV_SEVERITY_INFO = mavlink2.MAV_SEVERITY_INFO
-MAV_SEVERITY_DEBUG = mavlink2.MAV_SEVERITY_DEBUG
+        if mavutil.current_dialect != DIALECT:  # imported before us with another dialect
+            mavutil.set_dialect(DIALECT)
+        _pymavlink = (mavutil, ardupilotmega)
+    return _pymavlink
 
-GPS_INPUT_IGNORE_FLAG_ALT = mavlink2.GPS_INPUT_IGNORE_FLAG_ALT
-GPS_INPUT_IGNORE_FLAG_VDOP = mavlink2.GPS_INPUT_IGNORE_FLAG_VDOP
-GPS_INPUT_IGNORE_FLAG_VEL_HORIZ = mavlink2.GPS_INPUT_IGNORE_FLAG_VEL_HORIZ
-GPS_INPUT_IGNORE_FLAG_VEL_VERT = mavlink2.GPS_INPUT_IGNORE_FLAG_VEL_VERT
+
+def _mavutil() -> Any:
+    return _load()[0]
+
+
+def _dialect() -> Any:
+    return _load()[1]
+
+
+def MAVLink(file: Any, srcSystem: int = 0, srcComponent: int = 0) -> Any:
+    """A pymavlink ``MAVLink`` codec object of the dialect (pymavlink's own signature)."""
+    return _dialect().MAVLink(file, srcSystem=srcSystem, srcComponent=srcComponent)
+
+
+def mav_error() -> type[Exception]:
+    """pymavlink's ``MAVError`` class (for ``except`` clauses)."""
+    return _dialect().MAVError
+
+
+# Enum values the rest of the project may use without importing pymavlink: the MAVLink
+# standard's numbers (tests/test_mavlink_io.py keeps them equal to pymavlink's).
+MAV_TYPE_GCS: Final = 6
+MAV_TYPE_ONBOARD_CONTROLLER: Final = 18
+MAV_AUTOPILOT_INVALID: Final = 8
+MAV_STATE_ACTIVE: Final = 4
+MAV_TYPE_SUBMARINE: Final = 12
+MAV_AUTOPILOT_ARDUPILOTMEGA: Final = 3
+MAV_MODE_FLAG_SAFETY_ARMED: Final = 128
+MAV_CMD_DO_SET_MODE: Final = 176
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED: Final = 1
+MAV_PARAM_TYPE_REAL32: Final = 9
+MAV_PARAM_TYPE_INT32: Final = 6
+MAV_RESULT_IN_PROGRESS: Final = 5
+MAV_RESULT_ACCEPTED: Final = 0
+MAV_RESULT_DENIED: Final = 2
+MAV_RESULT_UNSUPPORTED: Final = 3
+MAV_SEVERITY_EMERGENCY: Final = 0
+MAV_SEVERITY_ALERT: Final = 1
+MAV_SEVERITY_CRITICAL: Final = 2
+MAV_SEVERITY_ERROR: Final = 3
+MAV_SEVERITY_WARNING: Final = 4
+MAV_SEVERITY_NOTICE: Final = 5
+MAV_SEVERITY_INFO: Final = 6
+MAV_SEVERITY_DEBUG: Final = 7
+
+GPS_INPUT_IGNORE_FLAG_ALT: Final = 1
+GPS_INPUT_IGNORE_FLAG_VDOP: Final = 4
+GPS_INPUT_IGNORE_FLAG_VEL_HORIZ: Final = 8
+GPS_INPUT_IGNORE_FLAG_VEL_VERT: Final = 16
 
 STATUSTEXT_LEN = 50
 """Bytes of text one STATUSTEXT carries; longer text is sent as chunks (MAVLink 2 ``id``)."""
 NAMED_VALUE_NAME_LEN = 10
 PARAM_ID_LEN = 16
 
-# Custom-mode tables per vehicle, from pymavlink (ArduPilot's mode numbers): number -> name.
-# drivers.mavlink.modes holds the same tables without pymavlink (a test keeps them equal).
-PYMAVLINK_MODE_TABLES: dict[str, dict[int, str]] = {
-    "rover": mavutil.mode_mapping_rover,
-    "boat": mavutil.mode_mapping_rover,
-    "sub": mavutil.mode_mapping_sub,
-    "copter": mavutil.mode_mapping_acm,
-    "plane": mavutil.mode_mapping_apm,
-}
+def pymavlink_mode_tables() -> dict[str, dict[int, str]]:
+    """Custom-mode tables per vehicle, from pymavlink (ArduPilot's mode numbers): number ->
+    name. drivers.mavlink.modes holds the same tables without pymavlink (a test keeps them
+    equal)."""
+    mu = _mavutil()
+    return {"rover": mu.mode_mapping_rover, "boat": mu.mode_mapping_rover,
+            "sub": mu.mode_mapping_sub, "copter": mu.mode_mapping_acm,
+            "plane": mu.mode_mapping_apm}
 
 
 def crc_extra(msgid: int) -> int | None:
     """The CRC_EXTRA seed byte of message ``msgid`` in the dialect, or None when unknown."""
-    cls = mavlink2.mavlink_map.get(msgid)
+    cls = _dialect().mavlink_map.get(msgid)
     return None if cls is None else int(cls.crc_extra)
 
 
 def crc_extra_table() -> dict[int, int]:
     """``{msgid: CRC_EXTRA}`` for every message of the dialect (a fresh dict)."""
-    return {msgid: int(cls.crc_extra) for msgid, cls in mavlink2.mavlink_map.items()}
+    return {msgid: int(cls.crc_extra) for msgid, cls in _dialect().mavlink_map.items()}
 
 
 def payload_length_table() -> dict[int, int]:
     """``{msgid: payload length with every extension field}`` for the dialect."""
-    return {msgid: int(cls.unpacker.size) for msgid, cls in mavlink2.mavlink_map.items()}
+    return {msgid: int(cls.unpacker.size) for msgid, cls in _dialect().mavlink_map.items()}
 
 
 def target_offsets() -> dict[int, tuple[int | None, int | None]]:
@@ -123,7 +150,7 @@ def target_offsets() -> dict[int, tuple[int | None, int | None]]:
     payload; a MAVLink 2 packet whose payload was cut before the offset has target 0 there.
     """
     out: dict[int, tuple[int | None, int | None]] = {}
-    for msgid, cls in mavlink2.mavlink_map.items():
+    for msgid, cls in _dialect().mavlink_map.items():
         names = list(cls.ordered_fieldnames)
         offset = 0
         offsets: dict[str, int] = {}
@@ -142,13 +169,13 @@ def target_offsets() -> dict[int, tuple[int | None, int | None]]:
 
 def message_name(msgid: int) -> str | None:
     """The dialect's name of message ``msgid`` (``"HEARTBEAT"``), or None when unknown."""
-    cls = mavlink2.mavlink_map.get(msgid)
+    cls = _dialect().mavlink_map.get(msgid)
     return None if cls is None else str(cls.msgname)
 
 
 def message_id(name: str) -> int:
     """The id of the message called ``name`` (``"PARAM_SET"`` -> 23); KeyError if unknown."""
-    return int(getattr(mavlink2, f"MAVLINK_MSG_ID_{name}"))
+    return int(getattr(_dialect(), f"MAVLINK_MSG_ID_{name}"))
 
 
 def custom_mode_number(mode: str, vehicle: str = "rover") -> int:
@@ -548,7 +575,7 @@ class MavEndpoint(_Encoders):
         self.url = url
         self.bad_packets = 0
         try:
-            self._conn = mavutil.mavlink_connection(
+            self._conn = _mavutil().mavlink_connection(
                 url,
                 baud=baud,
                 source_system=source_system,
@@ -556,7 +583,7 @@ class MavEndpoint(_Encoders):
                 dialect=DIALECT,
                 autoreconnect=False,
             )
-        except (OSError, ValueError, MAVError) as err:
+        except (OSError, ValueError, mav_error()) as err:
             raise PortError(f"could not open MAVLink endpoint {url!r}: {err}") from err
         except Exception as err:  # serial.SerialException and other driver errors
             raise PortError(f"could not open MAVLink endpoint {url!r}: {err}") from err
@@ -698,8 +725,7 @@ class MavEndpoint(_Encoders):
 
 # A parser used only by decode_packet: pymavlink's decode() keeps signing/sequence counters but
 # no state that changes how the next packet decodes (no secret key is ever set on it).
-_decoder = MAVLink(None)
-_decoder.robust_parsing = True
+_decoder: Any = None
 
 
 def decode_packet(data: bytes) -> Any | None:
@@ -708,9 +734,13 @@ def decode_packet(data: bytes) -> Any | None:
     A message id the dialect does not know decodes to pymavlink's ``MAVLink_unknown``
     (``get_type()`` ``"UNKNOWN_<id>"``), not None. Signatures are not checked here.
     """
+    global _decoder
+    if _decoder is None:
+        _decoder = MAVLink(None)
+        _decoder.robust_parsing = True
     try:
         return _decoder.decode(bytearray(data))
-    except (MAVError, struct.error, IndexError, ValueError):
+    except (mav_error(), struct.error, IndexError, ValueError):
         return None
 
 

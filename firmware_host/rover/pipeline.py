@@ -23,8 +23,6 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any, NamedTuple, Protocol, TextIO
 
-import numpy as np
-
 from drivers.gps.epochs import GpsEpoch
 from drivers.gps.stream import NmeaStream
 from drivers.ratelog import RateLimitedLog
@@ -32,7 +30,7 @@ from fdi.gate_health import GateHealth
 from fdi.geodesy import LocalFrame
 from fdi.rover import Decision, FixInput, RoverIsolator
 from firmware_host.runtime.config import RoverConfig
-from firmware_host.runtime.loop import EpochTimer
+from firmware_host.runtime.loop import EpochTimer, percentile
 from firmware_host.runtime.records import encode_line
 
 log = logging.getLogger("fdi_bridge.rover")
@@ -305,7 +303,7 @@ class RoverPipeline:
 
     def summary(self) -> dict[str, Any]:
         stats = self.timer.stats
-        proc = np.asarray(stats.proc_s) * 1e3 if stats.proc_s else np.zeros(1)
+        proc = [v * 1e3 for v in stats.proc_s]
         return {
             "epochs": self.epochs,
             "faults": self.faults,
@@ -317,8 +315,8 @@ class RoverPipeline:
             "outputs": {type(sink).__name__: _sink_stats(sink) for sink in self.sinks},
             "epoch_period_s": None if self._period_s is None else round(self._period_s, 4),
             "processing_ms": {
-                "p50": round(float(np.percentile(proc, 50)), 4),
-                "p99": round(float(np.percentile(proc, 99)), 4),
+                "p50": round(percentile(proc, 50), 4),
+                "p99": round(percentile(proc, 99), 4),
                 "max": round(stats.proc_s.peak * 1e3, 4),
             },
             "overruns": stats.overruns,

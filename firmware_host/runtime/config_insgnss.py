@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from fdi.insgnss import ImuErrorModel, InsGnssParams
+from fdi.insgnss_params import ImuErrorModel, InsGnssParams
 
 
 @dataclass(frozen=True)

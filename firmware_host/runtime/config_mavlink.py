@@ -10,6 +10,10 @@ from dataclasses import dataclass, field
 
 from drivers.mavlink import io as mio
 
+# The default unsigned pass-list: names of the dialect (checked by a test, not at each import,
+# so that loading a file without [mavlink] does not import pymavlink).
+DEFAULT_ALLOW_UNSIGNED = ("HEARTBEAT", "RADIO_STATUS")
+
 
 @dataclass(frozen=True)
 class EndpointConfig:
@@ -22,7 +26,7 @@ class EndpointConfig:
     )
     name: str = ""
     # Unsigned messages a signing link still passes (they command nothing).
-    allow_unsigned: tuple[str, ...] = ("HEARTBEAT", "RADIO_STATUS")
+    allow_unsigned: tuple[str, ...] = DEFAULT_ALLOW_UNSIGNED
     peer_timeout_s: float = field(
         default=0.0, metadata={"ge": 0.0, "doc": "udpin: forget a peer silent this long; 0 never"}
     )
@@ -39,7 +43,10 @@ class EndpointConfig:
 
     def __post_init__(self) -> None:
         for key in ("allow_unsigned", "block_in", "allow_out", "block_out"):
-            for name in getattr(self, key):
+            names = getattr(self, key)
+            if names == DEFAULT_ALLOW_UNSIGNED:
+                continue
+            for name in names:
                 try:
                     mio.message_id(name)
                 except (KeyError, AttributeError):

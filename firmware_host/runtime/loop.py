@@ -12,13 +12,12 @@ than the receiver's period.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, SupportsIndex, overload
-
-import numpy as np
 
 Clock = Callable[[], float]
 Sleep = Callable[[float], None]
@@ -42,6 +41,25 @@ class FakeClock:
 
 
 KEEP_SAMPLES = 65536
+
+
+def percentile(values: Iterable[float], q: float) -> float:
+    """The ``q``-th percentile (0-100) of ``values``, as ``numpy.percentile``'s default
+    ("linear": the virtual index ``(n - 1) q / 100`` between the two nearest order statistics,
+    with numpy's two-sided interpolation); 0.0 for no values. Pure Python, so the loop and the
+    rover's summary do not import numpy (issue 19: start-up)."""
+    a = sorted(values)
+    n = len(a)
+    if n == 0:
+        return 0.0
+    qf = q / 100.0
+    h = n * qf + (1.0 + qf * -1.0) - 1.0  # numpy's virtual index, alpha = beta = 1
+    lo = math.floor(h)
+    t = h - lo
+    lo = min(max(lo, 0), n - 1)
+    x, y = float(a[lo]), float(a[min(lo + 1, n - 1)])
+    diff = y - x
+    return y - diff * (1.0 - t) if t >= 0.5 else x + diff * t
 
 
 class RecentSamples(deque[float]):
@@ -87,9 +105,9 @@ class TimingStats:
         out: dict[str, float | int] = {"steps": self.steps, "overruns": self.overruns}
         for name, values in (("proc", self.proc_s), ("jitter", self.jitter_s)):
             if values:
-                arr = np.asarray(values) * 1e3
-                out[f"{name}_p50_ms"] = float(np.percentile(arr, 50))
-                out[f"{name}_p99_ms"] = float(np.percentile(arr, 99))
+                arr = [v * 1e3 for v in values]
+                out[f"{name}_p50_ms"] = percentile(arr, 50)
+                out[f"{name}_p99_ms"] = percentile(arr, 99)
                 out[f"{name}_max_ms"] = values.peak * 1e3
         return out
 
