@@ -28,8 +28,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
-import pynmea2
-
 from fdi.errors import DecodeError
 
 KNOT_MPS = 1852.0 / 3600.0
@@ -450,7 +448,10 @@ def _split_usual(line: bytes, text: str, comma: int, star: int) -> list[str] | N
 def _split_pynmea2(line: bytes, text: str, star: int) -> list[str]:
     """pynmea2 splits the sentence and, with check=True, verifies the checksum (once: it is
     not computed again on this path), so unusual sentences are classified as they always
-    were. Its field conversions are not used."""
+    were. Its field conversions are not used. pynmea2 is imported on the first unusual
+    sentence, not with this module (issue 19: start-up; the usual ones never need it)."""
+    import pynmea2
+
     try:
         msg = pynmea2.parse(text, check=True)
     except pynmea2.ChecksumError as err:
