@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from firmware_host.commands import tables
 from firmware_host.commands.checks import output_dir_arg
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import parse_fault
@@ -42,14 +43,14 @@ def run(args: argparse.Namespace) -> int:
     runs = {ft: run_experiment(cfg, faults, 130.0, ft=ft, seed=args.seed, gyro=args.gyro)
             for ft in (False, True)}
     print(f"ROV compass drift {args.drift:g} deg at t = 70 s, setpoint {cfg.setpoint_deg:g} deg")
-    print(f"{'':10s} {'suspect t':>10s} {'confirm t':>10s} {'max |err| after':>16s} "
-          f"{'mean err 104-130 s':>19s}")
+    rows = []
     for ft, ep in runs.items():
         s = summarize(ep, faults)
         tail = [_err(e) for e in ep if e["t"] >= 104.0]
-        print(f"{'FT' if ft else 'no FT':10s} {s['first_suspect_t']!s:>10s} "
-              f"{s['first_fault_t']!s:>10s} {s.get('max_abs_err_after_fault_deg', 0.0):16.2f} "
-              f"{sum(tail) / len(tail):19.2f}")
+        rows.append(["on" if ft else "off", s["first_suspect_t"], s["first_fault_t"],
+                     s.get("max_abs_err_after_fault_deg", 0.0), sum(tail) / len(tail)])
+    print(tables.table(["fault tolerance", "suspect at (s)", "confirmed at (s)",
+                        "max |err| after (deg)", "mean err 104-130 s (deg)"], rows))
     try:
         import matplotlib
 

@@ -2,20 +2,20 @@
 
 Generates a 10-minute rover run with injected GPS faults (:mod:`firmware_host.devtools.rover_sim`),
 replays it through a real pty into the pipeline with the default preset and with the paper's
-preset, scores both against the truth, and prints a table. With the ``plot`` extra installed it
-also writes a PNG like the paper's figures (track raw vs corrected; χ² statistic against its
-threshold; grey residual against its gate).
+preset, scores both against the truth, and prints an aligned table. With the ``plot`` extra
+installed it also writes a PNG like the paper's figures (track raw vs corrected; χ² statistic
+against its threshold; grey residual against its gate).
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
 from pathlib import Path
 from typing import Any
 
 from fdi.errors import UsageError
+from firmware_host.commands import tables
 from firmware_host.commands.checks import output_dir_arg, positive_float
 from firmware_host.commands.replay import run_replay
 from firmware_host.devtools.plots import HAVE_MATPLOTLIB, plot_rover
@@ -38,10 +38,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated presets to compare")
 
 
-def _fmt(x: float, nd: int = 3) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{nd}f}"
-
-
 def run(args: argparse.Namespace) -> int:
     if args.duration < MIN_DURATION_S:  # the scoring needs fixes before and after the faults
         raise UsageError(f"--duration {args.duration:g}: expected at least "
@@ -60,14 +56,12 @@ def run(args: argparse.Namespace) -> int:
           f"replayed through a pty; output in {out}")
     faulty = rows[0][1].faulty if rows else 0
     print(f"faulty epochs injected: {faulty} (jumps of 3-20 sigma, sigma = 0.35 m, and bursts)\n")
-    print("| preset | detected | missed | false alarms | alarms | raw RMS clean (m) "
-          "| out RMS faulty (m) | out RMS all (m) | p99 ms/epoch |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for preset, s, summ in rows:
-        print(f"| {preset} | {s.detected}/{s.faulty} | {s.faulty - s.detected} | "
-              f"{s.false_alarms}/{s.clean} | {s.alarms} | {_fmt(s.raw_rms_clean_m)} | "
-              f"{_fmt(s.out_rms_faulty_m)} | {_fmt(s.out_rms_all_m)} | "
-              f"{summ['processing_ms']['p99']} |")
+    print(tables.table(
+        ["preset", "detected", "missed", "false alarms", "alarms", "raw RMS clean (m)",
+         "out RMS faulty (m)", "out RMS all (m)", "p99 (ms/epoch)"],
+        [[preset, f"{s.detected}/{s.faulty}", s.faulty - s.detected,
+          f"{s.false_alarms}/{s.clean}", s.alarms, s.raw_rms_clean_m, s.out_rms_faulty_m,
+          s.out_rms_all_m, summ["processing_ms"]["p99"]] for preset, s, summ in rows]))
     if not HAVE_MATPLOTLIB:
         print("\n(install the plot extra, pip install -e '.[plot]', for a PNG)")
         return 0

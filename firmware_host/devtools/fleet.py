@@ -44,6 +44,7 @@ from fdi.errors import ConfigError, FdiBridgeError
 from firmware_host.commands.checks import output_dir_arg, positive_int
 from firmware_host.commands.progress import Progress as Bar
 from firmware_host.commands.replay import load_input
+from firmware_host.commands.tables import Block, Table, report_console, report_markdown
 from firmware_host.devtools.eval import run_ours
 from firmware_host.devtools.score import score_rover
 from firmware_host.rov.config import RovConfig, load_rov_config
@@ -412,14 +413,14 @@ def _cell(x: Any) -> str:
     return str(x)
 
 
-def point_table(rows: Sequence[dict[str, Any]], root: str = "") -> str:
-    head = ("| log | kind | epochs | faults | alarms | replaced | detected % | false alarms % "
-            "| raw RMS (m) | out RMS (m) | note |")
-    lines = [head, "|" + "---|" * 11]
+def point_tab(rows: Sequence[dict[str, Any]], root: str = "") -> Table:
+    """One row per log of one sweep point (a log that failed: its error as the note)."""
+    tab = Table(["log", "kind", "epochs", "faults", "alarms", "replaced", "detected %",
+                 "false alarms %", "raw RMS (m)", "out RMS (m)", "note"])
     for r in rows:
         name = os.path.relpath(r["log"], root) if root else r["log"]
         if r["error"] is not None:
-            lines.append(f"| {name} | {r['kind']} | | | | | | | | | **{r['error']}** |")
+            tab.add(name, r["kind"], *[""] * 8, f"**{r['error']}**")
             continue
         s = r.get("score")
         det = fa = raw = out = None
@@ -428,37 +429,57 @@ def point_table(rows: Sequence[dict[str, Any]], root: str = "") -> str:
             fa = 100 * s["false_alarms"] / s["clean"] if s["clean"] else None
             raw, out = s["raw_rms_all_m"], s["out_rms_all_m"]
         note = "; ".join(r["notes"]) or (f"gate {r['gate_health']}" if r["gate_health"] else "")
-        lines.append(
-            f"| {name} | {r['kind']} | {r['epochs']} | {r['faults']} | {r['alarms']} | "
-            f"{r['replaced']} | {_cell(det)} | {_cell(fa)} | {_cell(raw)} | {_cell(out)} | "
-            f"{note} |")
-    return "\n".join(lines)
+        tab.add(name, r["kind"], str(r["epochs"]), str(r["faults"]), str(r["alarms"]),
+                str(r["replaced"]), _cell(det), _cell(fa), _cell(raw), _cell(out), note)
+    return tab
+
+
+def point_table(rows: Sequence[dict[str, Any]], root: str = "") -> str:
+    """:func:`point_tab` as Markdown."""
+    return point_tab(rows, root).markdown()
+
+
+def comparison_tab(result: FleetResult) -> Table:
+    """One row per sweep point: the totals and pooled scores over the fleet."""
+    tab = Table(["point", "logs", "errors", "epochs", "faults", "alarms", "replaced",
+                 "detected %", "false alarms %", "events", "mean delay (s)", "raw RMS (m)",
+                 "out RMS (m)"])
+    for label in result.points:
+        p = pooled([r for r in result.rows if r["point"] == label])
+        tab.add(label, *(str(p[k]) for k in ("logs", "errors", "epochs", "faults", "alarms",
+                                              "replaced")),
+                _cell(p.get("detected_pct")), _cell(p.get("false_alarm_pct")),
+                f"{_cell(p.get('events_detected'))}/{_cell(p.get('events'))}",
+                _cell(p.get("mean_delay_s")), _cell(p.get("raw_rms_m")),
+                _cell(p.get("out_rms_m")))
+    return tab
 
 
 def comparison_table(result: FleetResult) -> str:
-    head = ("| point | logs | errors | epochs | faults | alarms | replaced | detected % "
-            "| false alarms % | events | mean delay (s) | raw RMS (m) | out RMS (m) |")
-    lines = [head, "|" + "---|" * 13]
+    """:func:`comparison_tab` as Markdown."""
+    return comparison_tab(result).markdown()
+
+
+def report(result: FleetResult, root: str = "") -> list[Block]:
+    """The fleet report: a title, the pooled comparison, one table per sweep point."""
+    parts: list[Block] = [
+        f"# Fleet evaluation: {len({r['log'] for r in result.rows})} logs, "
+        f"{len(result.points)} point(s), {result.executor}, {result.seconds:.1f} s",
+        "", "## Pooled comparison", "", comparison_tab(result)]
     for label in result.points:
-        p = pooled([r for r in result.rows if r["point"] == label])
-        lines.append(
-            f"| {label} | {p['logs']} | {p['errors']} | {p['epochs']} | {p['faults']} | "
-            f"{p['alarms']} | {p['replaced']} | {_cell(p.get('detected_pct'))} | "
-            f"{_cell(p.get('false_alarm_pct'))} | "
-            f"{_cell(p.get('events_detected'))}/{_cell(p.get('events'))} | "
-            f"{_cell(p.get('mean_delay_s'))} | {_cell(p.get('raw_rms_m'))} | "
-            f"{_cell(p.get('out_rms_m'))} |")
-    return "\n".join(lines)
+        parts += ["", f"## {label}", "",
+                  point_tab([r for r in result.rows if r["point"] == label], root)]
+    return parts
 
 
 def markdown(result: FleetResult, root: str = "") -> str:
-    parts = [f"# Fleet evaluation: {len({r['log'] for r in result.rows})} logs, "
-             f"{len(result.points)} point(s), {result.executor}, {result.seconds:.1f} s",
-             "", "## Pooled comparison", "", comparison_table(result)]
-    for label in result.points:
-        parts += ["", f"## {label}", "",
-                  point_table([r for r in result.rows if r["point"] == label], root)]
-    return "\n".join(parts) + "\n"
+    """:func:`report` as Markdown (``fleet.md``)."""
+    return report_markdown(report(result, root)) + "\n"
+
+
+def console(result: FleetResult, root: str = "") -> str:
+    """:func:`report` as aligned console tables."""
+    return report_console(report(result, root))
 
 
 def plot_tradeoff(result: FleetResult, path: Path) -> bool:
@@ -541,8 +562,8 @@ def run(args: argparse.Namespace) -> int:
     with Bar(len(logs), "fleet", unit="job") as bar:
         result = run_fleet(logs, configs, rov, workers=workers, scheduler=args.scheduler,
                            progress=_progress(bar))
-    print(markdown(result, os.path.commonpath([lg.path for lg in logs]) if len(logs) > 1
-                   else ""))
+    print(console(result, os.path.commonpath([lg.path for lg in logs]) if len(logs) > 1
+                  else ""))
     if args.compare_serial and result.executor != "serial":
         with Bar(len(logs), "fleet, serial", unit="job") as bar:
             serial = run_fleet(logs, configs, rov, workers=1, progress=_progress(bar))
