@@ -292,3 +292,50 @@ def test_no_console_markdown_left_in_the_commands() -> None:
             if re.search(r"""(print\(|\[|\+=|append\()\s*f?["']\|[ -]""", line):
                 offenders.append(f"{path.name}: {line.strip()}")
     assert offenders == []
+
+
+# ---------------------------------------------------------------- --json on these commands
+
+
+def test_fleet_json_is_the_file_document(run_dir: Path, tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    assert main(["fleet", str(run_dir / "sim"), "--workers", "1", "--json",
+                 "--out", str(tmp_path)]) == 0
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)  # stdout is the JSON alone ("wrote ..." on stderr)
+    assert "wrote" in cap.err
+    assert doc == json.loads((tmp_path / "fleet.json").read_text(encoding="utf-8"))
+    assert [r["kind"] for r in doc["rows"]] == ["capture"] and doc["rows"][0]["error"] is None
+
+
+def test_demo_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    capsys.readouterr()
+    assert main(["demo", "--duration", "20", "--presets", "rover", "--json",
+                 "--out", str(tmp_path / "rover")]) == 0
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)
+    score = doc["presets"]["rover"]["score"]
+    assert doc["epochs"] == 200 and score["clean"] + score["faulty"] == 200
+    assert main(["demo", "rov", "--json", "--out", str(tmp_path / "rov")]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["drift_deg"] == 30.0 and doc["ft"]["first_fault_t"] == pytest.approx(70.6)
+    assert abs(doc["ft"]["mean_err_104_130_s_deg"]) < 1.0 < abs(
+        doc["no_ft"]["mean_err_104_130_s_deg"])
+
+
+def test_insgnss_report_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out_md = tmp_path / "r.md"
+    assert main(["sim", "insgnss-report", "--seeds", "2", "--scenario", "paper-single",
+                 "--config", str(ROOT / "config" / "insgnss.toml"), "--json",
+                 "--out", str(out_md)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["partial"] is False
+    (run,) = doc["runs"]
+    assert (run["preset"], run["scenario"], run["seed"]) == ("insgnss", "paper-single", 2)
+    md = out_md.read_text(encoding="utf-8")  # the file is the Markdown report either way
+    rms = md_rows(md, INSGNSS_MD_HEAD)[1]
+    assert rms[3] == f"{run['methods']['none']['position_rms_3d_m']:.2f}"
+    with pytest.raises(SystemExit):
+        main(["sim", "insgnss-report", "--done-means", "--json", "--seeds", "x"])
+    assert main(["sim", "insgnss-report", "--done-means", "--json", "--seeds", "1"]) == 2

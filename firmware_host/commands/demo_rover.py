@@ -10,9 +10,11 @@ against its threshold; grey residual against its gate).
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from fdi.errors import UsageError
 from firmware_host.commands import tables
@@ -36,6 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="output directory (default: a temporary directory)")
     parser.add_argument("--presets", default="rover,rover-paper",
                         help="comma-separated presets to compare")
+    parser.add_argument("--json", action="store_true",
+                        help="print the scores as JSON (one object) instead of the table")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,6 +56,13 @@ def run(args: argparse.Namespace) -> int:
         summary = run_replay(cfg, out / "run" / "rover.nmea", out / preset)
         score = score_rover(read_jsonl(out / preset / "epochs.jsonl"), truth)
         rows.append((preset, score, summary))
+    if args.json:  # stdout is the JSON alone; what was written goes to stderr
+        print(json.dumps(tables.jsonable({
+            "epochs": gen["epochs"], "rate_hz": args.rate, "seed": args.seed, "out": str(out),
+            "presets": {preset: {"score": s.as_dict(),
+                                 "processing_ms_p99": summ["processing_ms"]["p99"]}
+                        for preset, s, summ in rows}})))
+        return _plots(rows, out, truth, sys.stderr)
     print(f"Rover demo: {gen['epochs']} epochs at {args.rate:g} Hz, seed {args.seed}, "
           f"replayed through a pty; output in {out}")
     faulty = rows[0][1].faulty if rows else 0
@@ -62,11 +73,17 @@ def run(args: argparse.Namespace) -> int:
         [[preset, f"{s.detected}/{s.faulty}", s.faulty - s.detected,
           f"{s.false_alarms}/{s.clean}", s.alarms, s.raw_rms_clean_m, s.out_rms_faulty_m,
           s.out_rms_all_m, summ["processing_ms"]["p99"]] for preset, s, summ in rows]))
+    return _plots(rows, out, truth, sys.stdout)
+
+
+def _plots(rows: list[tuple[str, Any, dict[str, Any]]], out: Path, truth: list[dict[str, Any]],
+           say: TextIO) -> int:
+    """One PNG per preset (with the plot extra), each named on ``say``."""
     if not HAVE_MATPLOTLIB:
-        print("\n(install the plot extra, pip install -e '.[plot]', for a PNG)")
+        print("\n(install the plot extra, pip install -e '.[plot]', for a PNG)", file=say)
         return 0
     for preset, _, _ in rows:
         png = plot_rover(read_jsonl(out / preset / "epochs.jsonl"), truth,
                          out / f"{preset}.png", title=f"fdi-bridge demo, preset {preset}")
-        print(f"wrote {png}")
+        print(f"wrote {png}", file=say)
     return 0

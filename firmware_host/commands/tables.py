@@ -100,6 +100,18 @@ def summary_rows(summary: Mapping[str, Any]) -> list[tuple[str, Any, str]]:
     return rows
 
 
+def jsonable(value: Any) -> Any:
+    """``value`` for ``json.dumps``: NaN and infinities (nothing measured) as ``null``,
+    tuples as lists, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    return value
+
+
 # --------------------------------------------------------------------------- reports
 
 #: Markdown emphasis and code marks, dropped on the console (``**best**`` -> ``best``).

@@ -31,6 +31,7 @@ import json
 import logging
 import math
 import os
+import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Sequence
@@ -536,6 +537,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also run serially, check the rows are identical, print the ratio")
     parser.add_argument("--out", type=output_dir_arg, default=None,
                         help="write fleet.md, fleet.json and fleet.png here")
+    parser.add_argument("--json", action="store_true",
+                        help="print the results (fleet.json's document) as JSON instead of "
+                             "the tables")
 
 
 def _progress(bar: Bar) -> Progress:
@@ -562,24 +566,29 @@ def run(args: argparse.Namespace) -> int:
     with Bar(len(logs), "fleet", unit="job") as bar:
         result = run_fleet(logs, configs, rov, workers=workers, scheduler=args.scheduler,
                            progress=_progress(bar))
-    print(console(result, os.path.commonpath([lg.path for lg in logs]) if len(logs) > 1
-                  else ""))
+    doc = {"executor": result.executor, "seconds": round(result.seconds, 3),
+           "points": {label: pooled([r for r in result.rows if r["point"] == label])
+                      for label in result.points},
+           "rows": result.rows}
+    say = sys.stderr if args.json else sys.stdout  # --json: stdout is the JSON alone
+    if args.json:
+        print(json.dumps(doc))
+    else:
+        print(console(result, os.path.commonpath([lg.path for lg in logs]) if len(logs) > 1
+                      else ""))
     if args.compare_serial and result.executor != "serial":
         with Bar(len(logs), "fleet, serial", unit="job") as bar:
             serial = run_fleet(logs, configs, rov, workers=1, progress=_progress(bar))
         same = serial.rows == result.rows
         print(f"serial {serial.seconds:.2f} s, {result.executor} {result.seconds:.2f} s: "
-              f"ratio {result.seconds / serial.seconds:.3f}; rows identical: {same}")
+              f"ratio {result.seconds / serial.seconds:.3f}; rows identical: {same}", file=say)
         if not same:
             return 1
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "fleet.md").write_text(markdown(result), encoding="utf-8")
-        doc = {"executor": result.executor, "seconds": round(result.seconds, 3),
-               "points": {label: pooled([r for r in result.rows if r["point"] == label])
-                          for label in result.points},
-               "rows": result.rows}
         (args.out / "fleet.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         plotted = plot_tradeoff(result, args.out / "fleet.png")
-        print(f"wrote {args.out / 'fleet.md'}, fleet.json" + (", fleet.png" if plotted else ""))
+        print(f"wrote {args.out / 'fleet.md'}, fleet.json" + (", fleet.png" if plotted else ""),
+              file=say)
     return 0

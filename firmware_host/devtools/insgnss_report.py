@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import sys
 from collections.abc import Callable, Sequence
@@ -30,10 +31,17 @@ from typing import Any
 
 import numpy as np
 
+from fdi.errors import UsageError
 from fdi.insgnss import INS_STRATEGIES, InsGnssStrategy
 from firmware_host.commands.checks import input_file_arg, output_file_arg
 from firmware_host.commands.progress import Progress
-from firmware_host.commands.tables import Block, Table, report_console, report_markdown
+from firmware_host.commands.tables import (
+    Block,
+    Table,
+    jsonable,
+    report_console,
+    report_markdown,
+)
 from firmware_host.devtools.insgnss_sim import (
     CONFIG_DIR,
     InsGnssSetup,
@@ -106,10 +114,13 @@ def range_verdict(pos: dict[str, dict[str, float]], axis: str) -> str:
 
 def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
            sweep: Sequence[float], scenarios: Sequence[Scenario] = PAPER_SCENARIOS,
-           progress: Callable[[str], None] | None = None) -> list[Block]:
+           progress: Callable[[str], None] | None = None,
+           runs: list[dict[str, Any]] | None = None) -> list[Block]:
     """The report (Markdown for a file, aligned tables for the console); ``progress(label)``
-    after each run (a progress bar). ^C: the tables of the runs done so far, the first line
-    starting with :data:`PARTIAL` (the command exits 130)."""
+    after each run (a progress bar); each run's summary appended to ``runs`` (``--json``).
+    ^C: the tables of the runs done so far, the first line starting with :data:`PARTIAL`
+    (the command exits 130)."""
+    kept = runs if runs is not None else []
     done = progress or (lambda label: None)
     rows: list[tuple[str, str, int, dict[str, Any]]] = []
     interrupted = False
@@ -120,6 +131,8 @@ def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
                     summary, _data, _runs = run_scenario(setup, scenario, seed)
                     done(f"{name} {scenario} seed {seed}")
                     rows.append((name, scenario, seed, summary["methods"]))
+                    kept.append({"preset": name, "scenario": scenario, "seed": seed,
+                                 "methods": summary["methods"]})
     except KeyboardInterrupt:
         interrupted = True
     rms = Table(["preset", "scenario", "seed", *INS_STRATEGIES, "three_zone max horiz. (m)",
@@ -163,6 +176,8 @@ def report(presets: Sequence[tuple[str, InsGnssSetup]], seeds: Sequence[int],
                     summary, _d, _r = run_scenario(with_sigma_v(setup, sv), "paper-deviation",
                                                    seed, ("none", "three_zone"))
                     done(f"sigma_v {sv:g} seed {seed}")
+                    kept.append({"preset": name, "scenario": "paper-deviation", "seed": seed,
+                                 "sigma_v_m": sv, "methods": summary["methods"]})
                     tz = summary["methods"]["three_zone"]["position_m"]
                     none = summary["methods"]["none"]["position_m"]
                     swept.add(f"{sv:g}", str(seed), range_verdict(tz, "up"),
@@ -366,6 +381,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "toml) beside the easier paper-deviation scenario")
     parser.add_argument("--strategy", choices=INS_STRATEGIES, default=None,
                         help="--done-means: run this strategy instead of each preset's own")
+    parser.add_argument("--json", action="store_true",
+                        help="print every run's summary as JSON instead of the tables (the "
+                             "default report; --out still writes the Markdown)")
     parser.add_argument("--done-means", action="store_true",
                         help="only the issue-15 checks per preset: paper-continuous against no "
                              "robust filtering, the others against down-weighting (use 1-50)")
@@ -379,6 +397,9 @@ def run(args: argparse.Namespace) -> int:
         presets = [(name, dataclasses.replace(
             st, filter=dataclasses.replace(st.filter, strategy=args.strategy)))
             for name, st in presets]
+    if args.json and (args.done_means or args.table2_calibrated):
+        raise UsageError("--json is for the default report (not --done-means or "
+                         "--table2-calibrated)")
     if args.done_means or args.table2_calibrated:
         parts: list[list[Block]] = []
         if args.table2_calibrated:
@@ -393,10 +414,15 @@ def run(args: argparse.Namespace) -> int:
     runs = len(presets) * len(scenarios) * len(args.seeds) + len(args.sweep_sigma_v) * len(
         args.seeds)
     with Progress(runs, "insgnss-report", unit="run") as bar:
-        blocks = report(presets, args.seeds, args.sweep_sigma_v, scenarios, progress=bar.step)
+        runs_done: list[dict[str, Any]] = []
+        blocks = report(presets, args.seeds, args.sweep_sigma_v, scenarios, progress=bar.step,
+                        runs=runs_done)
     if args.out is not None:
         args.out.write_text(report_markdown(blocks), encoding="utf-8")
-    sys.stdout.write(report_console(blocks))
+    if args.json:
+        print(json.dumps(jsonable({"partial": is_partial(blocks), "runs": runs_done})))
+    else:
+        sys.stdout.write(report_console(blocks))
     if is_partial(blocks):
         where = f" ({args.out}, marked partial)" if args.out is not None else ""
         print(f"fdi-bridge sim insgnss-report: interrupted: partial report written{where}",
