@@ -339,3 +339,19 @@ def test_insgnss_report_json(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     with pytest.raises(SystemExit):
         main(["sim", "insgnss-report", "--done-means", "--json", "--seeds", "x"])
     assert main(["sim", "insgnss-report", "--done-means", "--json", "--seeds", "1"]) == 2
+
+
+# ---------------------------------------------------------------- checked before the work
+
+
+def test_demo_presets_and_fleet_truth_dir_checked_before_any_work(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "demo"
+    assert main(["demo", "--presets", "rover,nosuch", "--out", str(out)]) == 2
+    assert "nosuch" in capsys.readouterr().err and not out.exists()  # nothing generated
+    assert main(["demo", "--presets", ",", "--out", str(out)]) == 2
+    assert "no preset named" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:
+        main(["fleet", str(tmp_path), "--truth-dir", str(tmp_path / "missing")])
+    assert info.value.code == 2
+    assert "--truth-dir" in capsys.readouterr().err

@@ -46,13 +46,17 @@ def run(args: argparse.Namespace) -> int:
     if args.duration < MIN_DURATION_S:  # the scoring needs fixes before and after the faults
         raise UsageError(f"--duration {args.duration:g}: expected at least "
                          f"{MIN_DURATION_S:g} s")
+    # every preset loads (or the one-line config error) before any work
+    configs = [load_config(p.strip()) for p in args.presets.split(",") if p.strip()]
+    if not configs:
+        raise UsageError(f"--presets {args.presets!r}: no preset named")
     out = args.out or Path(tempfile.mkdtemp(prefix="fdi-bridge-demo-"))
     sc = RoverScenario(rate_hz=args.rate, duration_s=args.duration, seed=args.seed)
     gen = write_run(sc, out / "run")
     truth = read_jsonl(out / "run" / "truth.jsonl")
     rows: list[tuple[str, Any, dict[str, Any]]] = []
-    for preset in [p.strip() for p in args.presets.split(",") if p.strip()]:
-        cfg = load_config(preset)
+    for preset, cfg in zip([p.strip() for p in args.presets.split(",") if p.strip()], configs,
+                           strict=True):
         summary = run_replay(cfg, out / "run" / "rover.nmea", out / preset)
         score = score_rover(read_jsonl(out / preset / "epochs.jsonl"), truth)
         rows.append((preset, score, summary))

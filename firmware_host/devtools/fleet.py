@@ -42,7 +42,7 @@ from typing import Any, Literal
 from drivers.capture import is_capture
 from drivers.configload import read_toml
 from fdi.errors import ConfigError, FdiBridgeError
-from firmware_host.commands.checks import output_dir_arg, positive_int
+from firmware_host.commands.checks import input_path_arg, output_dir_arg, positive_int
 from firmware_host.commands.progress import Progress as Bar
 from firmware_host.commands.replay import load_input
 from firmware_host.commands.tables import Block, Table, report_console, report_markdown
@@ -518,7 +518,7 @@ def plot_tradeoff(result: FleetResult, path: Path) -> bool:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("logs", nargs="+",
                         help="log files, directories (searched recursively) or globs")
-    parser.add_argument("--truth-dir", type=Path, default=None,
+    parser.add_argument("--truth-dir", type=input_path_arg, default=None,
                         help="truth files: DIR/<run>.truth.jsonl or DIR/<folder>/truth.jsonl "
                              "(default: a truth.jsonl beside each log)")
     parser.add_argument("--config", default="rover",
