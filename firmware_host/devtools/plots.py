@@ -21,6 +21,8 @@ import numpy as np
 from fdi.geodesy import LocalFrame
 from firmware_host.devtools.insgnss_sim import fault_spans
 
+ENU = tuple[float, float, float]
+
 
 class _PerEpoch:
     """Per epoch (``None`` where missing): raw fix, output and truth in local metres, whether
@@ -71,8 +73,6 @@ def _shade(ax: Any, spans: list[tuple[float, float]], label: str = "injected fau
 ZOOM_PAD_S = 1.0  # seconds of track before and after a fault period in its zoom
 ZOOM_MIN_HALF_M = 1.0  # the smallest half-width of a zoom window, m
 TRACK_WIDTH = 0.6  # of the figure's plotting width: the zooms take the rest of the track row
-
-ENU = tuple[float, float, float]
 
 
 def _zoom_periods(spans: list[tuple[float, float]], t: list[float], raw_err: list[float | None],
@@ -144,9 +144,9 @@ def plot_rover(
     epochs: list[dict[str, Any]], truth: list[dict[str, Any]] | None, path: Path, title: str = ""
 ) -> Path:
     """Track (raw fixes drawn over the output, so neither hides the other) with zooms beside it
-    into the :data:`ZOOMS` fault periods of largest raw error (at field scale the output and
-    the raw fixes are a fraction of a millimetre apart on the page; in a zoom each raw fix,
-    the output and, for a replaced fix, the line between them show the correction); with the
+    into three fault periods (:func:`_zoom_periods`: at field scale a fault of a metre is half
+    a millimetre on the page; in a zoom each raw fix, the output and, for a replaced fix, the
+    line between them show the correction); with the
     truth, the horizontal error of the raw fixes and of the output against time; the χ²
     statistic against its threshold and the grey residual against its gate (Figs. 1-5).
     Legends sit above or beside the axes; the truth's fault epochs are shaded (without a
