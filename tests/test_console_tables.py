@@ -13,12 +13,14 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from firmware_host.cli import main
 from firmware_host.commands.tables import Table, plain, report_console, report_markdown
 from firmware_host.devtools import eval as eval_mod
+from firmware_host.devtools import insgnss_report
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -355,3 +357,56 @@ def test_demo_presets_and_fleet_truth_dir_checked_before_any_work(
         main(["fleet", str(tmp_path), "--truth-dir", str(tmp_path / "missing")])
     assert info.value.code == 2
     assert "--truth-dir" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- ^C in the long report parts
+
+
+def test_done_means_interrupted_keeps_the_seeds_done(monkeypatch: pytest.MonkeyPatch,
+                                                     tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """^C in the second seed of --done-means: the first seed's row, marked partial, exit 130."""
+    calls = {"n": 0}
+    real = insgnss_report.run_coast
+
+    def second_interrupts(*a: Any, **kw: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise KeyboardInterrupt
+        return real(*a, **kw)
+
+    monkeypatch.setattr(insgnss_report, "run_coast", second_interrupts)
+    out = tmp_path / "dm.md"
+    assert main(["sim", "insgnss-report", "--done-means", "--seeds", "1,2",
+                 "--config", str(ROOT / "config" / "insgnss.toml"), "--out", str(out)]) == 130
+    cap = capsys.readouterr()
+    assert "interrupted: partial report written" in cap.err
+    text = out.read_text(encoding="utf-8")
+    assert text.startswith(f"{insgnss_report.PARTIAL} insgnss: 1 of 2 seeds")
+    rows = [ln for ln in text.splitlines() if re.match(r"\| \d \| ", ln)]
+    assert [r.split("|")[1].strip() for r in rows] == ["1"]
+    assert "against plain down-weighting" not in text  # not started
+    no_markdown(cap.out)
+    assert cap.out.startswith("Partial (interrupted): insgnss: 1 of 2 seeds")
+
+
+def test_table2_interrupted_keeps_the_first_section(monkeypatch: pytest.MonkeyPatch,
+                                                    tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    calls = {"n": 0}
+    real = insgnss_report.generate
+
+    def second_section_interrupts(*a: Any, **kw: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] == 2:  # one seed: the second call is the easier scenario's
+            raise KeyboardInterrupt
+        return real(*a, **kw)
+
+    monkeypatch.setattr(insgnss_report, "generate", second_section_interrupts)
+    out = tmp_path / "t2.md"
+    assert main(["sim", "insgnss-report", "--table2-calibrated", "--seeds", "9",
+                 "--out", str(out)]) == 130
+    text = out.read_text(encoding="utf-8")
+    assert text.startswith(f"{insgnss_report.PARTIAL} 1 of 2 Table 2 sections")
+    assert "### Table 2, calibrated" in text and "### Table 2, easier" not in text
+    capsys.readouterr()

@@ -211,10 +211,19 @@ def _max_horizontal(err: Any) -> float:
     return float(np.hypot(err[:, 0], err[:, 1]).max())
 
 
-def done_means(name: str, setup: InsGnssSetup, seeds: Sequence[int]) -> list[Block]:
+def done_means_steps(seeds: Sequence[int]) -> int:
+    """How many times :func:`done_means` calls ``progress``."""
+    return len(seeds) * (1 + len(OTHER_SCENARIOS))
+
+
+def done_means(name: str, setup: InsGnssSetup, seeds: Sequence[int],
+               progress: Callable[[str], None] | None = None) -> list[Block]:
     """The issue-15 checks over ``seeds``: ``paper-continuous`` per seed for the preset's own
     strategy against no robust filtering, and the other three scenarios against plain
-    down-weighting."""
+    down-weighting. ``progress(label)`` after each seed of each scenario. ^C: the seeds and
+    scenarios done so far, the first line starting with :data:`PARTIAL`."""
+    done = progress or (lambda label: None)
+    interrupted = False
     strat = setup.filter.strategy
     per_seed = Table(["seed", "3-D RMS (m)", "none 3-D RMS (m)",
                       "max horiz. during the fault (m)", "coast bound (m)",
@@ -229,25 +238,34 @@ def done_means(name: str, setup: InsGnssSetup, seeds: Sequence[int]) -> list[Blo
     nones: list[float] = []
     horiz: list[float] = []
     over_bound = 0
-    for seed in seeds:
-        data = generate(setup, "paper-continuous", seed)
-        run = run_method(data, setup.filter, strat)
-        none = run_method(data, setup.filter, "none")
-        coast = run_coast(data, setup.filter)
-        r3 = float(np.sqrt(np.mean(np.sum(run.pos_err**2, axis=1))))
-        n3 = float(np.sqrt(np.mean(np.sum(none.pos_err**2, axis=1))))
-        h = _max_horizontal(run.pos_err[FAULT_ROWS])
-        bound = 3.0 * float(coast.sigma_h[FAULT_ROWS].max())
-        over_bound += h > bound
-        rms.append(r3)
-        nones.append(n3)
-        horiz.append(h)
-        for method, lst in others.items():
-            other = run if method == strat else run_method(data, setup.filter, method)
-            lst.append(float(np.sqrt(np.mean(np.sum(other.pos_err**2, axis=1)))))
-        per_seed.add(str(seed), f"{r3:.2f}", f"{n3:.2f}", f"{h:.1f}", f"{bound:.1f}",
-                     f"{_max_horizontal(coast.pos_err[FAULT_ROWS]):.1f}",
-                     f"{others['downweight'][-1]:.2f}", f"{others['three_zone'][-1]:.2f}")
+    try:
+        for seed in seeds:
+            data = generate(setup, "paper-continuous", seed)
+            run = run_method(data, setup.filter, strat)
+            none = run_method(data, setup.filter, "none")
+            coast = run_coast(data, setup.filter)
+            r3 = float(np.sqrt(np.mean(np.sum(run.pos_err**2, axis=1))))
+            n3 = float(np.sqrt(np.mean(np.sum(none.pos_err**2, axis=1))))
+            h = _max_horizontal(run.pos_err[FAULT_ROWS])
+            bound = 3.0 * float(coast.sigma_h[FAULT_ROWS].max())
+            rms_of = {method: float(np.sqrt(np.mean(np.sum(
+                (run if method == strat else run_method(data, setup.filter, method)).pos_err
+                ** 2, axis=1)))) for method in others}
+            # the seed's numbers together (a ^C above leaves none of them)
+            over_bound += h > bound
+            rms.append(r3)
+            nones.append(n3)
+            horiz.append(h)
+            for method, lst in others.items():
+                lst.append(rms_of[method])
+            per_seed.add(str(seed), f"{r3:.2f}", f"{n3:.2f}", f"{h:.1f}", f"{bound:.1f}",
+                         f"{_max_horizontal(coast.pos_err[FAULT_ROWS]):.1f}",
+                         f"{others['downweight'][-1]:.2f}", f"{others['three_zone'][-1]:.2f}")
+            done(f"{name} paper-continuous seed {seed}")
+    except KeyboardInterrupt:
+        interrupted = True
+    if not rms:
+        return [f"{PARTIAL} {name}: no seed done before ^C.", ""]
     med = float(np.median(rms))
     worst = int(np.argmax(rms))
     out += ["", f"Median 3-D RMS {med:.2f} m; worst seed {seeds[worst]} {rms[worst]:.2f} m "
@@ -259,6 +277,9 @@ def done_means(name: str, setup: InsGnssSetup, seeds: Sequence[int]) -> list[Blo
             f"{np.median(others['downweight']):.2f} m (worst {max(others['downweight']):.2f}), "
             f"of three_zone {np.median(others['three_zone']):.2f} m "
             f"(worst {max(others['three_zone']):.2f}).", ""]
+    if interrupted:
+        return [f"{PARTIAL} {name}: {len(rms)} of {len(seeds)} seeds of paper-continuous done "
+                "before ^C.", "", *out, ""]
     against = Table(["scenario", "seeds", "pooled RMS", "downweight pooled RMS", "ratio",
                      "worst seed ratio", "three_zone pooled RMS",
                      "three_zone / downweight, worst seed"], right=range(2, 8))
@@ -268,11 +289,17 @@ def done_means(name: str, setup: InsGnssSetup, seeds: Sequence[int]) -> list[Blo
         a: list[float] = []
         b: list[float] = []
         c: list[float] = []
-        for seed in seeds:
-            data = generate(setup, scenario, seed)
-            for lst, method in ((a, strat), (b, "downweight"), (c, "three_zone")):
-                r = run_method(data, setup.filter, method)
-                lst.append(float(np.sqrt(np.mean(np.sum(r.pos_err**2, axis=1)))))
+        try:
+            for seed in seeds:
+                data = generate(setup, scenario, seed)
+                for lst, method in ((a, strat), (b, "downweight"), (c, "three_zone")):
+                    r = run_method(data, setup.filter, method)
+                    lst.append(float(np.sqrt(np.mean(np.sum(r.pos_err**2, axis=1)))))
+                done(f"{name} {scenario} seed {seed}")
+        except KeyboardInterrupt:
+            done_rows = len(against.rows)
+            return [f"{PARTIAL} {name}: {done_rows} of {len(OTHER_SCENARIOS)} scenarios "
+                    "against down-weighting done before ^C.", "", *out, ""]
         ratios = [x / y for x, y in zip(a, b, strict=True)]
         k = int(np.argmax(ratios))
         tz = [x / y for x, y in zip(c, b, strict=True)]
@@ -289,14 +316,23 @@ def _span(lo_hi: tuple[float, float]) -> float:
 
 def table2_runs(setup: InsGnssSetup, scenario: Scenario, seeds: Sequence[int],
                 methods: Sequence[InsGnssStrategy] = TABLE2_METHODS,
+                progress: Callable[[str], None] | None = None,
                 ) -> dict[str, list[MethodRun]]:
-    """Every method on ``scenario`` for each seed (the same data per seed)."""
+    """Every method on ``scenario`` for each seed (the same data per seed); ``progress(label)``
+    after each seed."""
     out: dict[str, list[MethodRun]] = {m: [] for m in methods}
     for seed in seeds:
         data = generate(setup, scenario, seed)
         for m in methods:
             out[m].append(run_method(data, setup.filter, m))
+        if progress is not None:
+            progress(f"{scenario} seed {seed}")
     return out
+
+
+def table2_steps(seeds: Sequence[int]) -> int:
+    """How many times :func:`table2_calibrated` calls ``progress``."""
+    return 2 * len(seeds)
 
 
 def span_stats(runs: Sequence[MethodRun]) -> dict[str, dict[str, float]]:
@@ -313,10 +349,12 @@ def span_stats(runs: Sequence[MethodRun]) -> dict[str, dict[str, float]]:
 
 
 def table2_calibrated(seeds: Sequence[int], setup: InsGnssSetup | None = None,
-                      easier: InsGnssSetup | None = None) -> list[Block]:
+                      easier: InsGnssSetup | None = None,
+                      progress: Callable[[str], None] | None = None) -> list[Block]:
     """The calibrated reproduction of Table 2 (``table2-calibrated`` on
     ``config/insgnss-table2.toml``), beside the easier scenario (``paper-deviation`` on the
-    paper preset)."""
+    paper preset). ``progress(label)`` after each seed. ^C: the sections done so far, the
+    first line starting with :data:`PARTIAL`."""
     setup = setup if setup is not None else load_setup(TABLE2_PRESET)
     easier = easier if easier is not None else load_setup(CONFIG_DIR / "insgnss-paper.toml")
     out: list[Block] = []
@@ -326,7 +364,11 @@ def table2_calibrated(seeds: Sequence[int], setup: InsGnssSetup | None = None,
         ("easier (uncalibrated): `paper-deviation`, config/insgnss-paper.toml", easier,
          "paper-deviation"),
     ):
-        runs = table2_runs(stp, scen, seeds)  # type: ignore[arg-type]
+        try:
+            runs = table2_runs(stp, scen, seeds, progress=progress)  # type: ignore[arg-type]
+        except KeyboardInterrupt:
+            sections = sum(1 for b in out if isinstance(b, Table))
+            return [f"{PARTIAL} {sections} of 2 Table 2 sections done before ^C.", "", *out]
         none = span_stats(runs["none"])
         sig = np.nanmedian([r.innovation_sigma[0] for r in runs["none"]])
         out += [f"### Table 2, {title}, seeds {seeds[0]}-{seeds[-1]}", "",
@@ -401,14 +443,28 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--json is for the default report (not --done-means or "
                          "--table2-calibrated)")
     if args.done_means or args.table2_calibrated:
+        steps = (table2_steps(args.seeds) if args.table2_calibrated else 0) + (
+            len(presets) * done_means_steps(args.seeds) if args.done_means else 0)
         parts: list[list[Block]] = []
-        if args.table2_calibrated:
-            parts.append(table2_calibrated(args.seeds))
-        if args.done_means:
-            parts += [done_means(name, setup, args.seeds) for name, setup in presets]
+        with Progress(steps, "insgnss-report", unit="seed") as bar:
+            if args.table2_calibrated:
+                parts.append(table2_calibrated(args.seeds, progress=bar.step))
+            if args.done_means:
+                for name, setup in presets:
+                    if parts and is_partial(parts[-1]):
+                        break  # ^C: no new part
+                    parts.append(done_means(name, setup, args.seeds, progress=bar.step))
+        partial = any(is_partial(p) for p in parts)
+        if partial and not is_partial(parts[0]):  # the file says so on its first line
+            parts.insert(0, [f"{PARTIAL} only the parts done before ^C are here.", ""])
         if args.out is not None:
             args.out.write_text("\n".join(report_markdown(p) for p in parts), encoding="utf-8")
         sys.stdout.write("\n".join(report_console(p) for p in parts))
+        if partial:
+            where = f" ({args.out}, marked partial)" if args.out is not None else ""
+            print(f"fdi-bridge sim insgnss-report: interrupted: partial report written{where}",
+                  file=sys.stderr)
+            return 130
         return 0
     scenarios = tuple(args.scenario) if args.scenario else PAPER_SCENARIOS
     runs = len(presets) * len(scenarios) * len(args.seeds) + len(args.sweep_sigma_v) * len(
