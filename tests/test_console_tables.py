@@ -10,8 +10,16 @@ the console."""
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
 import re
+import select
+import struct
+import subprocess
+import sys
+import termios
+import time
 from pathlib import Path
 from typing import Any
 
@@ -410,3 +418,46 @@ def test_table2_interrupted_keeps_the_first_section(monkeypatch: pytest.MonkeyPa
     assert text.startswith(f"{insgnss_report.PARTIAL} 1 of 2 Table 2 sections")
     assert "### Table 2, calibrated" in text and "### Table 2, easier" not in text
     capsys.readouterr()
+
+
+# ---------------------------------------------------------------- the demo's bar, on a terminal
+
+
+def _under_pty(argv: list[str], cwd: Path, timeout: float = 120) -> tuple[int, str]:
+    """The CLI with stdin/stdout/stderr on a real pseudo-terminal; (status, output)."""
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.cli", *argv], cwd=cwd,
+                            env=env, stdin=slave, stdout=slave, stderr=slave, close_fds=True)
+    os.close(slave)
+    chunks: list[bytes] = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([master], [], [], 0.5)
+        if ready:
+            try:
+                data = os.read(master, 65536)
+            except OSError:  # EIO: the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+        elif proc.poll() is not None:
+            break
+    os.close(master)
+    return proc.wait(timeout=30), b"".join(chunks).decode("utf-8", "replace")
+
+
+def test_demo_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
+    argv = ["demo", "--duration", "20", "--presets", "rover", "--out", "d"]
+    status, tty = _under_pty(argv, tmp_path)
+    assert status == 0, tty
+    assert "demo:" in tty and "step" in tty and "\r" in tty  # a refreshing tqdm bar
+    assert re.search(r"^rover +\d+/\d+ ", tty.replace("\r\n", "\n"), re.M)  # and the table
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    piped = subprocess.run([sys.executable, "-m", "firmware_host.cli", *argv[:-1], "p"],
+                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120,
+                           check=False)
+    assert piped.returncode == 0, piped.stderr
+    assert "demo:" not in piped.stderr and "\r" not in piped.stderr

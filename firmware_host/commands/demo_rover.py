@@ -19,6 +19,7 @@ from typing import Any, TextIO
 from fdi.errors import UsageError
 from firmware_host.commands import tables
 from firmware_host.commands.checks import output_dir_arg, positive_float
+from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import run_replay
 from firmware_host.devtools.plots import HAVE_MATPLOTLIB, plot_rover
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
@@ -52,14 +53,18 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--presets {args.presets!r}: no preset named")
     out = args.out or Path(tempfile.mkdtemp(prefix="fdi-bridge-demo-"))
     sc = RoverScenario(rate_hz=args.rate, duration_s=args.duration, seed=args.seed)
-    gen = write_run(sc, out / "run")
-    truth = read_jsonl(out / "run" / "truth.jsonl")
+    names = [p.strip() for p in args.presets.split(",") if p.strip()]
     rows: list[tuple[str, Any, dict[str, Any]]] = []
-    for preset, cfg in zip([p.strip() for p in args.presets.split(",") if p.strip()], configs,
-                           strict=True):
-        summary = run_replay(cfg, out / "run" / "rover.nmea", out / preset)
-        score = score_rover(read_jsonl(out / preset / "epochs.jsonl"), truth)
-        rows.append((preset, score, summary))
+    # about 25 s at the defaults under load: a bar on a terminal (generate, each replay)
+    with Progress(1 + len(names), "demo", unit="step") as bar:
+        gen = write_run(sc, out / "run")
+        truth = read_jsonl(out / "run" / "truth.jsonl")
+        bar.step("generated")
+        for preset, cfg in zip(names, configs, strict=True):
+            summary = run_replay(cfg, out / "run" / "rover.nmea", out / preset)
+            score = score_rover(read_jsonl(out / preset / "epochs.jsonl"), truth)
+            rows.append((preset, score, summary))
+            bar.step(f"replayed {preset}")
     if args.json:  # stdout is the JSON alone; what was written goes to stderr
         print(json.dumps(tables.jsonable({
             "epochs": gen["epochs"], "rate_hz": args.rate, "seed": args.seed, "out": str(out),
