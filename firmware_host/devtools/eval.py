@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import logging
 import math
 import sys
 import time
@@ -679,12 +680,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print the results as JSON instead of tables")
 
 
-def run(args: argparse.Namespace) -> int:
-    import logging
+#: Loggers of the runs under test: their per-epoch warnings (alarms, gate health) go to the
+#: tables instead, for the command's duration.
+QUIET_LOGGERS = ("fdi_bridge.rover", "firmware_host.rov.control")
 
-    # Per-epoch warnings (alarms, gate health) of the runs under test go to the tables instead.
-    for name in ("fdi_bridge.rover", "firmware_host.rov.control"):
+
+def run(args: argparse.Namespace) -> int:
+    saved = {name: logging.getLogger(name).level for name in QUIET_LOGGERS}
+    for name in QUIET_LOGGERS:
         logging.getLogger(name).setLevel(logging.ERROR)
+    try:
+        return _run(args)
+    finally:  # in-process callers (tests, a notebook) get their levels back
+        for name, level in saved.items():
+            logging.getLogger(name).setLevel(level)
+
+
+def _run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     if args.suite:
         with Progress(suite_steps(args.quick), "eval --suite", unit="case") as bar:

@@ -552,6 +552,15 @@ def _progress(bar: Bar) -> Progress:
 
 
 def run(args: argparse.Namespace) -> int:
+    saved = {name: logging.getLogger(name).level for name in QUIET_LOGGERS}
+    try:
+        return _run(args)
+    finally:  # in-process callers (tests, a notebook) get their levels back
+        for name, level in saved.items():
+            logging.getLogger(name).setLevel(level)
+
+
+def _run(args: argparse.Namespace) -> int:
     _quiet_logs()
     if args.workers is not None and args.workers < 1:
         raise ConfigError("--workers", "workers", "a whole number >= 1", str(args.workers))
