@@ -461,3 +461,34 @@ def test_demo_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
                            check=False)
     assert piped.returncode == 0, piped.stderr
     assert "demo:" not in piped.stderr and "\r" not in piped.stderr
+
+
+def test_fleet_interrupted_writes_the_jobs_done(run_dir: Path, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """^C during the second of two jobs (two sweep points): the first job's row is written,
+    marked partial, exit 130."""
+    from firmware_host.devtools import fleet
+
+    calls = {"n": 0}
+    real = fleet.evaluate_log
+
+    def second_interrupts(job: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise KeyboardInterrupt
+        return real(job)
+
+    monkeypatch.setattr(fleet, "evaluate_log", second_interrupts)
+    capsys.readouterr()
+    assert main(["fleet", str(run_dir / "sim"), "--workers", "1", "--sweep",
+                 "rover.detector.gate_sigmas=4,6", "--out", str(tmp_path)]) == 130
+    cap = capsys.readouterr()
+    assert "interrupted: the 1 of 2 jobs done are written" in cap.err
+    no_markdown(cap.out)
+    assert "Partial (interrupted): 1 of 2 jobs done before ^C." in cap.out
+    doc = json.loads((tmp_path / "fleet.json").read_text(encoding="utf-8"))
+    assert doc["partial"] is True and len(doc["rows"]) == 1
+    assert doc["rows"][0]["point"] == "rover.detector.gate_sigmas=4"
+    md = (tmp_path / "fleet.md").read_text(encoding="utf-8")
+    assert "**Partial (interrupted):** 1 of 2 jobs done before ^C." in md

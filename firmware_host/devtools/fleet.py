@@ -98,6 +98,8 @@ class FleetResult:
     points: list[str] = field(default_factory=list)
     executor: str = "serial"
     seconds: float = 0.0
+    jobs: int = 0  # how many were asked for (rows: how many were done)
+    partial: bool = False  # ^C: the rows of the jobs done before it
 
 
 # --------------------------------------------------------------------------- discovery
@@ -305,8 +307,11 @@ def evaluate_log(job: Job) -> dict[str, Any]:
 Progress = Callable[[int, int], None]
 
 
-def run_serial(jobs: Sequence[Job], progress: Progress | None = None) -> list[dict[str, Any]]:
-    rows = []
+def run_serial(jobs: Sequence[Job], progress: Progress | None = None,
+               into: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
+    """The jobs in this process, in order; each row also appended to ``into`` as it is done
+    (what a ^C leaves)."""
+    rows = into if into is not None else []
     for i, job in enumerate(jobs, 1):
         rows.append(evaluate_log(job))
         if progress is not None:
@@ -315,7 +320,8 @@ def run_serial(jobs: Sequence[Job], progress: Progress | None = None) -> list[di
 
 
 def run_dask(jobs: Sequence[Job], *, workers: int | None = None, scheduler: str | None = None,
-             progress: Progress | None = None) -> list[dict[str, Any]]:
+             progress: Progress | None = None,
+             into: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
     """The jobs on a Dask cluster: an embedded ``LocalCluster`` of ``workers`` processes, or the
     scheduler at ``scheduler`` (``tcp://HOST:PORT``)."""
     try:
@@ -340,11 +346,15 @@ def run_dask(jobs: Sequence[Job], *, workers: int | None = None, scheduler: str 
         futures = client.map(evaluate_log, list(jobs), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
         rows: list[dict[str, Any] | None] = [None] * len(futures)
-        for done, fut in enumerate(as_completed(futures), 1):
-            rows[index[fut.key]] = fut.result()
-            if progress is not None:
-                progress(done, len(futures))
-        return [r for r in rows if r is not None]
+        try:
+            for done, fut in enumerate(as_completed(futures), 1):
+                rows[index[fut.key]] = fut.result()
+                if progress is not None:
+                    progress(done, len(futures))
+        finally:  # ^C too: the rows done, in job order
+            out = into if into is not None else []
+            out.extend(r for r in rows if r is not None)
+        return out
     finally:
         client.close()
         if cluster is not None:
@@ -357,12 +367,20 @@ def run_fleet(logs: Sequence[LogEntry], configs: dict[str, BridgeConfig], rov: R
     """Every log at every point; ``workers == 1`` and no scheduler: in this process."""
     jobs = [Job(log, label, cfg, rov) for label, cfg in configs.items() for log in logs]
     t0 = time.perf_counter()
-    if scheduler is None and workers == 1:
-        rows, executor = run_serial(jobs, progress), "serial"
-    else:
-        rows = run_dask(jobs, workers=workers, scheduler=scheduler, progress=progress)
-        executor = f"dask {scheduler}" if scheduler else f"dask LocalCluster x{workers}"
-    return FleetResult(rows, list(configs), executor, time.perf_counter() - t0)
+    rows: list[dict[str, Any]] = []
+    partial = False
+    serial = scheduler is None and workers == 1
+    executor = "serial" if serial else (
+        f"dask {scheduler}" if scheduler else f"dask LocalCluster x{workers}")
+    try:
+        if serial:
+            run_serial(jobs, progress, into=rows)
+        else:
+            run_dask(jobs, workers=workers, scheduler=scheduler, progress=progress, into=rows)
+    except KeyboardInterrupt:
+        partial = True
+    return FleetResult(rows, list(configs), executor, time.perf_counter() - t0, len(jobs),
+                       partial)
 
 
 # --------------------------------------------------------------------------- tables
@@ -467,10 +485,15 @@ def report(result: FleetResult, root: str = "") -> list[Block]:
         f"# Fleet evaluation: {len({r['log'] for r in result.rows})} logs, "
         f"{len(result.points)} point(s), {result.executor}, {result.seconds:.1f} s",
         "", "## Pooled comparison", "", comparison_tab(result)]
+    if result.partial:
+        parts[1:1] = ["", f"{PARTIAL} {len(result.rows)} of {result.jobs} jobs done before ^C."]
     for label in result.points:
         parts += ["", f"## {label}", "",
                   point_tab([r for r in result.rows if r["point"] == label], root)]
     return parts
+
+
+PARTIAL = "**Partial (interrupted):**"
 
 
 def markdown(result: FleetResult, root: str = "") -> str:
@@ -575,17 +598,20 @@ def _run(args: argparse.Namespace) -> int:
     with Bar(len(logs), "fleet", unit="job") as bar:
         result = run_fleet(logs, configs, rov, workers=workers, scheduler=args.scheduler,
                            progress=_progress(bar))
-    doc = {"executor": result.executor, "seconds": round(result.seconds, 3),
-           "points": {label: pooled([r for r in result.rows if r["point"] == label])
-                      for label in result.points},
-           "rows": result.rows}
+    doc: dict[str, Any] = {
+        "executor": result.executor, "seconds": round(result.seconds, 3),
+        "points": {label: pooled([r for r in result.rows if r["point"] == label])
+                   for label in result.points},
+        "rows": result.rows}
+    if result.partial:
+        doc["partial"] = True
     say = sys.stderr if args.json else sys.stdout  # --json: stdout is the JSON alone
     if args.json:
         print(json.dumps(doc))
     else:
         print(console(result, os.path.commonpath([lg.path for lg in logs]) if len(logs) > 1
                       else ""))
-    if args.compare_serial and result.executor != "serial":
+    if args.compare_serial and result.executor != "serial" and not result.partial:
         with Bar(len(logs), "fleet, serial", unit="job") as bar:
             serial = run_fleet(logs, configs, rov, workers=1, progress=_progress(bar))
         same = serial.rows == result.rows
@@ -600,4 +626,9 @@ def _run(args: argparse.Namespace) -> int:
         plotted = plot_tradeoff(result, args.out / "fleet.png")
         print(f"wrote {args.out / 'fleet.md'}, fleet.json" + (", fleet.png" if plotted else ""),
               file=say)
+    if result.partial:
+        where = f" ({args.out}, marked partial)" if args.out is not None else ""
+        print(f"fdi-bridge fleet: interrupted: the {len(result.rows)} of {result.jobs} jobs "
+              f"done are written{where}", file=sys.stderr)
+        return 130
     return 0
