@@ -26,6 +26,7 @@ trade-off (detection against false alarms) when truth files are there.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import json
 import logging
@@ -34,7 +35,7 @@ import os
 import sys
 import time
 import tomllib
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -228,6 +229,18 @@ def _quiet_logs() -> None:
         logging.getLogger(name).setLevel(logging.ERROR)
 
 
+@contextlib.contextmanager
+def _levels_kept() -> Iterator[None]:
+    """The levels of :data:`QUIET_LOGGERS` as they were, once the block is done: an in-process
+    caller (the CLI's tests, a notebook) gets its log output back."""
+    saved = {name: logging.getLogger(name).level for name in QUIET_LOGGERS}
+    try:
+        yield
+    finally:
+        for name, level in saved.items():
+            logging.getLogger(name).setLevel(level)
+
+
 _SCORE_KEYS = ("faulty", "detected", "faulty_min", "detected_min", "clean", "false_alarms",
                "events", "events_detected", "alarms", "raw_rms_all_m", "out_rms_all_m",
                "out_rms_clean_m", "out_max_all_m", "delays_s")
@@ -373,10 +386,12 @@ def run_fleet(logs: Sequence[LogEntry], configs: dict[str, BridgeConfig], rov: R
     executor = "serial" if serial else (
         f"dask {scheduler}" if scheduler else f"dask LocalCluster x{workers}")
     try:
-        if serial:
-            run_serial(jobs, progress, into=rows)
-        else:
-            run_dask(jobs, workers=workers, scheduler=scheduler, progress=progress, into=rows)
+        with _levels_kept():
+            if serial:
+                run_serial(jobs, progress, into=rows)
+            else:
+                run_dask(jobs, workers=workers, scheduler=scheduler, progress=progress,
+                         into=rows)
     except KeyboardInterrupt:
         partial = True
     return FleetResult(rows, list(configs), executor, time.perf_counter() - t0, len(jobs),
@@ -575,12 +590,8 @@ def _progress(bar: Bar) -> Progress:
 
 
 def run(args: argparse.Namespace) -> int:
-    saved = {name: logging.getLogger(name).level for name in QUIET_LOGGERS}
-    try:
+    with _levels_kept():
         return _run(args)
-    finally:  # in-process callers (tests, a notebook) get their levels back
-        for name, level in saved.items():
-            logging.getLogger(name).setLevel(level)
 
 
 def _run(args: argparse.Namespace) -> int:
