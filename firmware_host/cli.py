@@ -85,6 +85,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "firmware_host.commands.config_cmd",
         "check a configuration file, or show it with every default filled in",
     ),
+    "completion": (
+        "firmware_host.commands.completion",
+        "print a shell completion script generated from this parser",
+    ),
+    "man": ("firmware_host.commands.manpage", "print the fdi-bridge(1) man page (roff)"),
 }
 
 # ``fdi-bridge sim KIND``: KIND -> (module, help).
@@ -104,7 +109,7 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "insgnss-report": (
         "firmware_host.devtools.insgnss_report",
-        "INS/GNSS: every scenario, seed and preset as the Markdown tables of docs/insgnss.md",
+        "INS/GNSS: every scenario, seed and preset, the tables of docs/insgnss.md",
     ),
 }
 
@@ -137,6 +142,8 @@ EXAMPLES: dict[str, str] = {
                "udpout:127.0.0.1:14550 --seconds 60",
     "presets": "fdi-bridge presets --json",
     "config": "fdi-bridge config check rover   (or: fdi-bridge config show my-rover.toml)",
+    "completion": "fdi-bridge completion bash --out ~/.fdi-bridge.bash   (then: source it)",
+    "man": "fdi-bridge man --out fdi-bridge.1 && man -l fdi-bridge.1",
     "sim": "fdi-bridge sim rover --duration 60 --out run",
     "sim rover": "fdi-bridge sim rover --duration 60 --kinds jump,ramp --out run",
     "sim rover-harness": "fdi-bridge sim rover-harness --seeds 1,2 --rates 10 --duration 600",

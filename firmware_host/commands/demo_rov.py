@@ -7,10 +7,13 @@ R(k) with their thresholds) and Fig. 4 (heading with and without fault tolerance
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from firmware_host.commands import tables
 from firmware_host.commands.checks import output_dir_arg
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import parse_fault
@@ -28,6 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plant", choices=("nomoto", "nonlinear"), default=None,
                         help="simulated yaw model (default: the config's)")
     parser.add_argument("--gyro", action="store_true", help="the controller gets the yaw gyro")
+    parser.add_argument("--json", action="store_true",
+                        help="print the two runs' summaries as JSON instead of the table "
+                             "(the figures are written either way)")
 
 
 def _err(e: dict[str, Any]) -> float:
@@ -41,22 +47,31 @@ def run(args: argparse.Namespace) -> int:
     faults = [parse_fault(f"drift:{args.drift:g}@70")]
     runs = {ft: run_experiment(cfg, faults, 130.0, ft=ft, seed=args.seed, gyro=args.gyro)
             for ft in (False, True)}
-    print(f"ROV compass drift {args.drift:g} deg at t = 70 s, setpoint {cfg.setpoint_deg:g} deg")
-    print(f"{'':10s} {'suspect t':>10s} {'confirm t':>10s} {'max |err| after':>16s} "
-          f"{'mean err 104-130 s':>19s}")
+    rows = []
+    summaries = {}
     for ft, ep in runs.items():
         s = summarize(ep, faults)
         tail = [_err(e) for e in ep if e["t"] >= 104.0]
-        print(f"{'FT' if ft else 'no FT':10s} {s['first_suspect_t']!s:>10s} "
-              f"{s['first_fault_t']!s:>10s} {s.get('max_abs_err_after_fault_deg', 0.0):16.2f} "
-              f"{sum(tail) / len(tail):19.2f}")
+        s["mean_err_104_130_s_deg"] = sum(tail) / len(tail)
+        summaries["ft" if ft else "no_ft"] = s
+        rows.append(["on" if ft else "off", s["first_suspect_t"], s["first_fault_t"],
+                     s.get("max_abs_err_after_fault_deg", 0.0), s["mean_err_104_130_s_deg"]])
+    if args.json:
+        print(json.dumps(tables.jsonable({"drift_deg": args.drift,
+                                          "setpoint_deg": cfg.setpoint_deg, **summaries})))
+    else:
+        print(f"ROV compass drift {args.drift:g} deg at t = 70 s, "
+              f"setpoint {cfg.setpoint_deg:g} deg")
+        print(tables.table(["fault tolerance", "suspect at (s)", "confirmed at (s)",
+                            "max |err| after (deg)", "mean err 104-130 s (deg)"], rows))
     try:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        print("matplotlib not installed: no figures (pip install 'fdi-bridge[plot]')")
+        print("matplotlib not installed: no figures (pip install 'fdi-bridge[plot]')",
+              file=sys.stderr if args.json else sys.stdout)
         return 0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -106,5 +121,6 @@ def run(args: argparse.Namespace) -> int:
     fig.tight_layout()
     fig.savefig(out / "rov_fig4_heading.png", dpi=100)
     plt.close(fig)
-    print(f"figures: {out / 'rov_fig3_detection.png'}, {out / 'rov_fig4_heading.png'}")
+    print(f"figures: {out / 'rov_fig3_detection.png'}, {out / 'rov_fig4_heading.png'}",
+          file=sys.stderr if args.json else sys.stdout)  # --json: stdout is the JSON alone
     return 0

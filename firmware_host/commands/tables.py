@@ -98,3 +98,103 @@ def summary_rows(summary: Mapping[str, Any]) -> list[tuple[str, Any, str]]:
                 break
         rows.append((key.replace("_", " "), value, unit))
     return rows
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` for ``json.dumps``: NaN and infinities (nothing measured) as ``null``,
+    tuples as lists, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [jsonable(v) for v in value]
+    return value
+
+
+# --------------------------------------------------------------------------- reports
+
+#: Markdown emphasis and code marks, dropped on the console (``**best**`` -> ``best``).
+_MARKS = ("**", "`")
+
+
+def plain(text: str) -> str:
+    """A line of Markdown text as the console shows it: no heading ``#``, bold or code marks,
+    no ``*emphasis*`` around a whole cell."""
+    stripped = text.lstrip("#")
+    if stripped != text and stripped.startswith(" "):
+        text = stripped[1:]
+    for mark in _MARKS:
+        text = text.replace(mark, "")
+    if len(text) > 2 and text[0] == "*" and text[-1] == "*" and "*" not in text[1:-1]:
+        text = text[1:-1]
+    return text
+
+
+class Table:
+    """One table of a report, rendered as Markdown for a file (:meth:`markdown`) or aligned for
+    the console (:meth:`console`, as :func:`table`). ``right`` names the columns right-aligned
+    in the Markdown (``---:``); on the console the columns of numbers are right-aligned, text
+    left-aligned. Cells are preformatted text (the report's own rounding) or numbers
+    (:func:`fmt`)."""
+
+    def __init__(self, headers: Sequence[str], right: Sequence[int] = ()) -> None:
+        self.headers = list(headers)
+        self.right = set(right)
+        self.rows: list[list[Any]] = []
+
+    def add(self, *cells: Any) -> None:
+        if len(cells) != len(self.headers):
+            raise ValueError(f"{len(cells)} cells for {len(self.headers)} columns")
+        self.rows.append(list(cells))
+
+    def markdown(self) -> str:
+        def line(cells: Sequence[Any]) -> str:
+            return "|" + "|".join(f" {c} " if c != "" else " "
+                                  for c in (fmt(x) if not isinstance(x, str) else x
+                                            for x in cells)) + "|"
+
+        sep = "|" + "".join("---:|" if i in self.right else "---|"
+                            for i in range(len(self.headers)))
+        return "\n".join([line(self.headers), sep, *(line(r) for r in self.rows)])
+
+    def console(self, indent: str = "") -> str:
+        cells = [[plain(fmt(c)) for c in row] for row in self.rows]
+        right = [bool(self.rows) and all(
+            _is_number(r[i]) or r[i] is None or _looks_numeric(r[i]) for r in self.rows)
+            for i in range(len(self.headers))]
+        widths = [max([len(h), *(len(r[i]) for r in cells)])
+                  for i, h in enumerate(self.headers)]
+
+        def line(items: Sequence[str]) -> str:
+            parts = [it.rjust(w) if right[i] else it.ljust(w)
+                     for i, (it, w) in enumerate(zip(items, widths, strict=True))]
+            return (indent + "  ".join(parts)).rstrip()
+
+        return "\n".join([line(self.headers), *(line(r) for r in cells)])
+
+
+def _looks_numeric(cell: Any) -> bool:
+    """A preformatted number (``"0.35"``, ``"-"`` for none), right-aligned like one."""
+    if not isinstance(cell, str):
+        return False
+    if cell in (DASH, "–", ""):
+        return True
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+Block = str | Table
+
+
+def report_markdown(blocks: Sequence[Block]) -> str:
+    """A report (lines of Markdown text and tables) as Markdown, one block a line."""
+    return "\n".join(b.markdown() if isinstance(b, Table) else b for b in blocks)
+
+
+def report_console(blocks: Sequence[Block]) -> str:
+    """The same report for the console: aligned tables, text without Markdown marks."""
+    return "\n".join(b.console() if isinstance(b, Table) else plain(b) for b in blocks)

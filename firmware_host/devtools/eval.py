@@ -12,8 +12,8 @@ Two modes.
   and on the independent field error models of issue 13 slow ramps of 0.02-0.3 m/s, a frozen
   receiver (the whole fix), multipath steps and a coarse receiver with every kind;
   the ROV compass faults of issue 3; the INS/GNSS paper scenarios), runs everything on the same
-  data and prints markdown tables; ``DIR/eval.json`` holds every number, ``DIR/eval.md`` the
-  tables, and with matplotlib ``DIR/<scenario>.png`` one figure per rover scenario.
+  data and prints aligned tables; ``DIR/eval.json`` holds every number, ``DIR/eval.md`` the
+  tables (Markdown), and with matplotlib ``DIR/<scenario>.png`` one figure per rover scenario.
 
 Per detector: faulty epochs detected / missed (epochs whose injected offset is at least the
 minimum jump, 3σ = 1.05 m, or a frozen position), false alarms on clean epochs, detection delay
@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import logging
 import math
 import sys
 import time
@@ -49,6 +50,7 @@ from firmware_host.commands.checks import (
 )
 from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import load_input
+from firmware_host.commands.tables import Block, Table, report_console, report_markdown
 from firmware_host.devtools.insgnss_sim import fault_spans, load_setup, run_scenario
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import parse_fault
@@ -255,11 +257,11 @@ def _f(x: float | None, nd: int = 2) -> str:
     return f"{x:.{nd}f}"
 
 
-def rover_table(comparisons: Sequence[RoverComparison]) -> str:
-    head = ("| scenario | method | detected / faulty | missed | events | false alarms / clean "
-            "| delay ep (s) | out RMS clean / faulty / all (m) | out max faulty (m) "
-            "| raw RMS clean / faulty (m) |")
-    lines = [head, "|" + "---|" * 10]
+def rover_tab(comparisons: Sequence[RoverComparison]) -> Table:
+    """One row per scenario and method: detection, false alarms, delay and accuracy."""
+    tab = Table(["scenario", "method", "detected / faulty", "missed", "events",
+                 "false alarms / clean", "delay ep (s)", "out RMS clean / faulty / all (m)",
+                 "out max faulty (m)", "raw RMS clean / faulty (m)"])
     for c in comparisons:
         for m in c.methods:
             s = m.score
@@ -271,13 +273,16 @@ def rover_table(comparisons: Sequence[RoverComparison]) -> str:
                 fa += f" ({s.false_alarms_after_fault} after a fault)"
             delay = f"{_f(s.mean_delay_epochs, 1)} ({_f(s.mean_delay_s, 2)})"
             name = f"**{m.name}**" if m.name == c.default else m.name
-            lines.append(
-                f"| {c.scenario} | {name} | {det} | {s.missed} | {s.events_detected}/{s.events} "
-                f"| {fa} | {delay} | {_f(s.out_rms_clean_m)} / {_f(s.out_rms_faulty_m)} / "
-                f"{_f(s.out_rms_all_m)} | {_f(s.out_max_faulty_m)} | "
-                f"{_f(s.raw_rms_clean_m)} / {_f(s.raw_rms_faulty_m)} |"
-            )
-    return "\n".join(lines)
+            tab.add(c.scenario, name, det, str(s.missed), f"{s.events_detected}/{s.events}", fa,
+                    delay, f"{_f(s.out_rms_clean_m)} / {_f(s.out_rms_faulty_m)} / "
+                    f"{_f(s.out_rms_all_m)}", _f(s.out_max_faulty_m),
+                    f"{_f(s.raw_rms_clean_m)} / {_f(s.raw_rms_faulty_m)}")
+    return tab
+
+
+def rover_table(comparisons: Sequence[RoverComparison]) -> str:
+    """:func:`rover_tab` as Markdown."""
+    return rover_tab(comparisons).markdown()
 
 
 # --------------------------------------------------------------------------- the suite
@@ -376,20 +381,24 @@ def rov_suite(duration_s: float = 130.0, seed: int = 1) -> list[dict[str, Any]]:
     return rows
 
 
-def rov_table(rows: Sequence[dict[str, Any]]) -> str:
-    lines = ["| plant | compass noise (deg) | gyro | fault | fault tolerance | suspect at (s) "
-             "| confirmed at (s) | delay (s) | false confirmations "
-             "| final mean heading error (deg) |", "|" + "---|" * 10]
+def rov_tab(rows: Sequence[dict[str, Any]]) -> Table:
+    """One row per ROV run: plant, noise, gyro, fault, with or without fault tolerance."""
+    tab = Table(["plant", "compass noise (deg)", "gyro", "fault", "fault tolerance",
+                 "suspect at (s)", "confirmed at (s)", "delay (s)", "false confirmations",
+                 "final mean heading error (deg)"])
     for r in rows:
-        lines.append(
-            f"| {r.get('plant', 'nomoto')} | {r.get('noise_deg', 0.5):g} "
-            f"| {'yes' if r.get('gyro') else 'no'} | {' '.join(r['faults'])} "
-            f"| {'on' if r['ft'] else 'off (plain PID)'} "
-            f"| {_f(r['suspect_t'], 1)} | {_f(r['confirmed_t'], 1)} | {_f(r['delay_s'], 1)} "
-            f"| {r.get('false_confirmations', int(r['false_confirmation']))} "
-            f"| {_f(r['final_mean_err_deg'], 2)} |"
-        )
-    return "\n".join(lines)
+        tab.add(r.get("plant", "nomoto"), f"{r.get('noise_deg', 0.5):g}",
+                "yes" if r.get("gyro") else "no", " ".join(r["faults"]),
+                "on" if r["ft"] else "off (plain PID)", _f(r["suspect_t"], 1),
+                _f(r["confirmed_t"], 1), _f(r["delay_s"], 1),
+                str(r.get("false_confirmations", int(r["false_confirmation"]))),
+                _f(r["final_mean_err_deg"], 2))
+    return tab
+
+
+def rov_table(rows: Sequence[dict[str, Any]]) -> str:
+    """:func:`rov_tab` as Markdown."""
+    return rov_tab(rows).markdown()
 
 
 # Seeds of the INS/GNSS part: none of tests/test_insgnss*.py uses them (those take subsets of
@@ -432,19 +441,22 @@ def insgnss_suite(seed: int = 1, scenarios: Sequence[str] | None = None,
     return rows
 
 
-def insgnss_table(rows: Sequence[dict[str, Any]]) -> str:
-    lines = ["| scenario | method | seeds | faulty flagged | clean flagged "
-             "| pooled 3-D RMS (m) | worst seed 3-D RMS (m) | max horizontal error (m) |",
-             "|" + "---|" * 8]
+def insgnss_tab(rows: Sequence[dict[str, Any]]) -> Table:
+    """Per INS/GNSS scenario and method: flags, pooled and worst-seed RMS."""
+    tab = Table(["scenario", "method", "seeds", "faulty flagged", "clean flagged",
+                 "pooled 3-D RMS (m)", "worst seed 3-D RMS (m)", "max horizontal error (m)"])
     for r in rows:
-        lines.append(
-            f"| {r['scenario']} | {r['method']} | {','.join(str(s) for s in r['seeds'])} "
-            f"| {r['fault_epochs_flagged']}/{r['fault_epochs']} "
-            f"| {r['clean_epochs_flagged']}/{r['clean_epochs']} | {r['pooled_rms_3d_m']:.2f} "
-            f"| {r['position_rms_3d_m']:.2f} (seed {r['worst_seed']}) "
-            f"| {r['max_horizontal_error_m']:.2f} |"
-        )
-    return "\n".join(lines)
+        tab.add(r["scenario"], r["method"], ",".join(str(s) for s in r["seeds"]),
+                f"{r['fault_epochs_flagged']}/{r['fault_epochs']}",
+                f"{r['clean_epochs_flagged']}/{r['clean_epochs']}", f"{r['pooled_rms_3d_m']:.2f}",
+                f"{r['position_rms_3d_m']:.2f} (seed {r['worst_seed']})",
+                f"{r['max_horizontal_error_m']:.2f}")
+    return tab
+
+
+def insgnss_table(rows: Sequence[dict[str, Any]]) -> str:
+    """:func:`insgnss_tab` as Markdown."""
+    return insgnss_tab(rows).markdown()
 
 
 def plot_comparison(c: RoverComparison, records: dict[str, list[dict[str, Any]]],
@@ -568,7 +580,7 @@ def run_suite(
         "losses": [loss for c in comps for loss in c.losses()],
         "figures": figures,
     }
-    md = []
+    md: list[Block] = []
     if partial:
         doc["partial"] = True
         md += [f"**Partial (interrupted):** only what was done before ^C "
@@ -576,25 +588,30 @@ def run_suite(
                f"{', the ROV' if rov is not None else ''}"
                f"{', INS/GNSS' if ins is not None else ''}).", ""]
     md += ["## Rover: every baseline beside each of our strategies (same data)", "",
-           rover_table(comps), ""]
+           rover_tab(comps), ""]
     if rov is not None:
         doc["rov"] = rov
-        md += ["## ROV compass (both plants, with and without a yaw gyro)", "", rov_table(rov),
+        md += ["## ROV compass (both plants, with and without a yaw gyro)", "", rov_tab(rov),
                ""]
     if ins is not None:
         doc["insgnss"] = ins
         md += ["## INS/GNSS (paper scenarios, default preset, held-out seeds)", "",
-               insgnss_table(ins), ""]
+               insgnss_tab(ins), ""]
     if doc["losses"]:
         md += ["## Where our default loses to a baseline", ""] + [f"- {x}" for x in doc["losses"]]
     doc["seconds"] = round(time.perf_counter() - t0, 2)
-    doc["markdown"] = "\n".join(md)
+    doc["markdown"] = report_markdown(md)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         (out / "eval.json").write_text(json.dumps(_clean(doc), indent=1) + "\n",
                                        encoding="utf-8")
         (out / "eval.md").write_text(doc["markdown"] + "\n", encoding="utf-8")
+    doc[CONSOLE] = report_console(md)  # after the files: not in eval.json
     return doc
+
+
+#: The key of :func:`run_suite`'s document holding the console tables (in no file, not --json).
+CONSOLE = "console"
 
 
 def suite_steps(quick: bool, include_rov: bool = True, include_insgnss: bool = True) -> int:
@@ -663,12 +680,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print the results as JSON instead of tables")
 
 
-def run(args: argparse.Namespace) -> int:
-    import logging
+#: Loggers of the runs under test: their per-epoch warnings (alarms, gate health) go to the
+#: tables instead, for the command's duration.
+QUIET_LOGGERS = ("fdi_bridge.rover", "firmware_host.rov.control")
 
-    # Per-epoch warnings (alarms, gate health) of the runs under test go to the tables instead.
-    for name in ("fdi_bridge.rover", "firmware_host.rov.control"):
+
+def run(args: argparse.Namespace) -> int:
+    saved = {name: logging.getLogger(name).level for name in QUIET_LOGGERS}
+    for name in QUIET_LOGGERS:
         logging.getLogger(name).setLevel(logging.ERROR)
+    try:
+        return _run(args)
+    finally:  # in-process callers (tests, a notebook) get their levels back
+        for name, level in saved.items():
+            logging.getLogger(name).setLevel(level)
+
+
+def _run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     if args.suite:
         with Progress(suite_steps(args.quick), "eval --suite", unit="case") as bar:
@@ -681,9 +709,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"fdi-bridge eval: interrupted: partial results written{where}",
                   file=sys.stderr)
         if args.json:
-            print(json.dumps(_clean({k: v for k, v in doc.items() if k != "markdown"})))
+            print(json.dumps(_clean({k: v for k, v in doc.items()
+                                     if k not in ("markdown", CONSOLE)})))
             return status
-        print(doc["markdown"])
+        print(doc[CONSOLE])
         print(f"\n{len(doc['rover'])} rover scenarios in {doc['seconds']} s")
         if args.out is not None:
             print(f"wrote {args.out / 'eval.json'} and {args.out / 'eval.md'}")
@@ -702,17 +731,17 @@ def run(args: argparse.Namespace) -> int:
     if truth is None or not truth.exists():
         raise UsageError(f"no truth file beside {epochs} (give --truth)")
     comp = evaluate_run(epochs, truth, capture=args.input, cfg=cfg)
-    table = rover_table([comp])
+    table = rover_tab([comp])
     if args.json:
         print(json.dumps(_clean(comp.as_dict())))
     else:
-        print(table)
+        print(table.console())
         for loss in comp.losses():
             print(f"- {loss}")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "eval.json").write_text(
             json.dumps(_clean(comp.as_dict()), indent=1) + "\n", encoding="utf-8")
-        (args.out / "eval.md").write_text(table + "\n", encoding="utf-8")
+        (args.out / "eval.md").write_text(table.markdown() + "\n", encoding="utf-8")
         print(f"wrote {args.out / 'eval.json'}")
     return 0

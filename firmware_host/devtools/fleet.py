@@ -26,14 +26,16 @@ trade-off (detection against false alarms) when truth files are there.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import json
 import logging
 import math
 import os
+import sys
 import time
 import tomllib
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -41,9 +43,10 @@ from typing import Any, Literal
 from drivers.capture import is_capture
 from drivers.configload import read_toml
 from fdi.errors import ConfigError, FdiBridgeError
-from firmware_host.commands.checks import output_dir_arg, positive_int
+from firmware_host.commands.checks import input_path_arg, output_dir_arg, positive_int
 from firmware_host.commands.progress import Progress as Bar
 from firmware_host.commands.replay import load_input
+from firmware_host.commands.tables import Block, Table, report_console, report_markdown
 from firmware_host.devtools.eval import run_ours
 from firmware_host.devtools.score import score_rover
 from firmware_host.rov.config import RovConfig, load_rov_config
@@ -96,6 +99,8 @@ class FleetResult:
     points: list[str] = field(default_factory=list)
     executor: str = "serial"
     seconds: float = 0.0
+    jobs: int = 0  # how many were asked for (rows: how many were done)
+    partial: bool = False  # ^C: the rows of the jobs done before it
 
 
 # --------------------------------------------------------------------------- discovery
@@ -224,6 +229,18 @@ def _quiet_logs() -> None:
         logging.getLogger(name).setLevel(logging.ERROR)
 
 
+@contextlib.contextmanager
+def _levels_kept() -> Iterator[None]:
+    """The levels of :data:`QUIET_LOGGERS` as they were, once the block is done: an in-process
+    caller (the CLI's tests, a notebook) gets its log output back."""
+    saved = {name: logging.getLogger(name).level for name in QUIET_LOGGERS}
+    try:
+        yield
+    finally:
+        for name, level in saved.items():
+            logging.getLogger(name).setLevel(level)
+
+
 _SCORE_KEYS = ("faulty", "detected", "faulty_min", "detected_min", "clean", "false_alarms",
                "events", "events_detected", "alarms", "raw_rms_all_m", "out_rms_all_m",
                "out_rms_clean_m", "out_max_all_m", "delays_s")
@@ -303,8 +320,11 @@ def evaluate_log(job: Job) -> dict[str, Any]:
 Progress = Callable[[int, int], None]
 
 
-def run_serial(jobs: Sequence[Job], progress: Progress | None = None) -> list[dict[str, Any]]:
-    rows = []
+def run_serial(jobs: Sequence[Job], progress: Progress | None = None,
+               into: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
+    """The jobs in this process, in order; each row also appended to ``into`` as it is done
+    (what a ^C leaves)."""
+    rows = into if into is not None else []
     for i, job in enumerate(jobs, 1):
         rows.append(evaluate_log(job))
         if progress is not None:
@@ -313,7 +333,8 @@ def run_serial(jobs: Sequence[Job], progress: Progress | None = None) -> list[di
 
 
 def run_dask(jobs: Sequence[Job], *, workers: int | None = None, scheduler: str | None = None,
-             progress: Progress | None = None) -> list[dict[str, Any]]:
+             progress: Progress | None = None,
+             into: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
     """The jobs on a Dask cluster: an embedded ``LocalCluster`` of ``workers`` processes, or the
     scheduler at ``scheduler`` (``tcp://HOST:PORT``)."""
     try:
@@ -338,11 +359,15 @@ def run_dask(jobs: Sequence[Job], *, workers: int | None = None, scheduler: str 
         futures = client.map(evaluate_log, list(jobs), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
         rows: list[dict[str, Any] | None] = [None] * len(futures)
-        for done, fut in enumerate(as_completed(futures), 1):
-            rows[index[fut.key]] = fut.result()
-            if progress is not None:
-                progress(done, len(futures))
-        return [r for r in rows if r is not None]
+        try:
+            for done, fut in enumerate(as_completed(futures), 1):
+                rows[index[fut.key]] = fut.result()
+                if progress is not None:
+                    progress(done, len(futures))
+        finally:  # ^C too: the rows done, in job order
+            out = into if into is not None else []
+            out.extend(r for r in rows if r is not None)
+        return out
     finally:
         client.close()
         if cluster is not None:
@@ -355,12 +380,22 @@ def run_fleet(logs: Sequence[LogEntry], configs: dict[str, BridgeConfig], rov: R
     """Every log at every point; ``workers == 1`` and no scheduler: in this process."""
     jobs = [Job(log, label, cfg, rov) for label, cfg in configs.items() for log in logs]
     t0 = time.perf_counter()
-    if scheduler is None and workers == 1:
-        rows, executor = run_serial(jobs, progress), "serial"
-    else:
-        rows = run_dask(jobs, workers=workers, scheduler=scheduler, progress=progress)
-        executor = f"dask {scheduler}" if scheduler else f"dask LocalCluster x{workers}"
-    return FleetResult(rows, list(configs), executor, time.perf_counter() - t0)
+    rows: list[dict[str, Any]] = []
+    partial = False
+    serial = scheduler is None and workers == 1
+    executor = "serial" if serial else (
+        f"dask {scheduler}" if scheduler else f"dask LocalCluster x{workers}")
+    try:
+        with _levels_kept():
+            if serial:
+                run_serial(jobs, progress, into=rows)
+            else:
+                run_dask(jobs, workers=workers, scheduler=scheduler, progress=progress,
+                         into=rows)
+    except KeyboardInterrupt:
+        partial = True
+    return FleetResult(rows, list(configs), executor, time.perf_counter() - t0, len(jobs),
+                       partial)
 
 
 # --------------------------------------------------------------------------- tables
@@ -412,14 +447,14 @@ def _cell(x: Any) -> str:
     return str(x)
 
 
-def point_table(rows: Sequence[dict[str, Any]], root: str = "") -> str:
-    head = ("| log | kind | epochs | faults | alarms | replaced | detected % | false alarms % "
-            "| raw RMS (m) | out RMS (m) | note |")
-    lines = [head, "|" + "---|" * 11]
+def point_tab(rows: Sequence[dict[str, Any]], root: str = "") -> Table:
+    """One row per log of one sweep point (a log that failed: its error as the note)."""
+    tab = Table(["log", "kind", "epochs", "faults", "alarms", "replaced", "detected %",
+                 "false alarms %", "raw RMS (m)", "out RMS (m)", "note"])
     for r in rows:
         name = os.path.relpath(r["log"], root) if root else r["log"]
         if r["error"] is not None:
-            lines.append(f"| {name} | {r['kind']} | | | | | | | | | **{r['error']}** |")
+            tab.add(name, r["kind"], *[""] * 8, f"**{r['error']}**")
             continue
         s = r.get("score")
         det = fa = raw = out = None
@@ -428,37 +463,62 @@ def point_table(rows: Sequence[dict[str, Any]], root: str = "") -> str:
             fa = 100 * s["false_alarms"] / s["clean"] if s["clean"] else None
             raw, out = s["raw_rms_all_m"], s["out_rms_all_m"]
         note = "; ".join(r["notes"]) or (f"gate {r['gate_health']}" if r["gate_health"] else "")
-        lines.append(
-            f"| {name} | {r['kind']} | {r['epochs']} | {r['faults']} | {r['alarms']} | "
-            f"{r['replaced']} | {_cell(det)} | {_cell(fa)} | {_cell(raw)} | {_cell(out)} | "
-            f"{note} |")
-    return "\n".join(lines)
+        tab.add(name, r["kind"], str(r["epochs"]), str(r["faults"]), str(r["alarms"]),
+                str(r["replaced"]), _cell(det), _cell(fa), _cell(raw), _cell(out), note)
+    return tab
+
+
+def point_table(rows: Sequence[dict[str, Any]], root: str = "") -> str:
+    """:func:`point_tab` as Markdown."""
+    return point_tab(rows, root).markdown()
+
+
+def comparison_tab(result: FleetResult) -> Table:
+    """One row per sweep point: the totals and pooled scores over the fleet."""
+    tab = Table(["point", "logs", "errors", "epochs", "faults", "alarms", "replaced",
+                 "detected %", "false alarms %", "events", "mean delay (s)", "raw RMS (m)",
+                 "out RMS (m)"])
+    for label in result.points:
+        p = pooled([r for r in result.rows if r["point"] == label])
+        tab.add(label, *(str(p[k]) for k in ("logs", "errors", "epochs", "faults", "alarms",
+                                              "replaced")),
+                _cell(p.get("detected_pct")), _cell(p.get("false_alarm_pct")),
+                f"{_cell(p.get('events_detected'))}/{_cell(p.get('events'))}",
+                _cell(p.get("mean_delay_s")), _cell(p.get("raw_rms_m")),
+                _cell(p.get("out_rms_m")))
+    return tab
 
 
 def comparison_table(result: FleetResult) -> str:
-    head = ("| point | logs | errors | epochs | faults | alarms | replaced | detected % "
-            "| false alarms % | events | mean delay (s) | raw RMS (m) | out RMS (m) |")
-    lines = [head, "|" + "---|" * 13]
+    """:func:`comparison_tab` as Markdown."""
+    return comparison_tab(result).markdown()
+
+
+def report(result: FleetResult, root: str = "") -> list[Block]:
+    """The fleet report: a title, the pooled comparison, one table per sweep point."""
+    parts: list[Block] = [
+        f"# Fleet evaluation: {len({r['log'] for r in result.rows})} logs, "
+        f"{len(result.points)} point(s), {result.executor}, {result.seconds:.1f} s",
+        "", "## Pooled comparison", "", comparison_tab(result)]
+    if result.partial:
+        parts[1:1] = ["", f"{PARTIAL} {len(result.rows)} of {result.jobs} jobs done before ^C."]
     for label in result.points:
-        p = pooled([r for r in result.rows if r["point"] == label])
-        lines.append(
-            f"| {label} | {p['logs']} | {p['errors']} | {p['epochs']} | {p['faults']} | "
-            f"{p['alarms']} | {p['replaced']} | {_cell(p.get('detected_pct'))} | "
-            f"{_cell(p.get('false_alarm_pct'))} | "
-            f"{_cell(p.get('events_detected'))}/{_cell(p.get('events'))} | "
-            f"{_cell(p.get('mean_delay_s'))} | {_cell(p.get('raw_rms_m'))} | "
-            f"{_cell(p.get('out_rms_m'))} |")
-    return "\n".join(lines)
+        parts += ["", f"## {label}", "",
+                  point_tab([r for r in result.rows if r["point"] == label], root)]
+    return parts
+
+
+PARTIAL = "**Partial (interrupted):**"
 
 
 def markdown(result: FleetResult, root: str = "") -> str:
-    parts = [f"# Fleet evaluation: {len({r['log'] for r in result.rows})} logs, "
-             f"{len(result.points)} point(s), {result.executor}, {result.seconds:.1f} s",
-             "", "## Pooled comparison", "", comparison_table(result)]
-    for label in result.points:
-        parts += ["", f"## {label}", "",
-                  point_table([r for r in result.rows if r["point"] == label], root)]
-    return "\n".join(parts) + "\n"
+    """:func:`report` as Markdown (``fleet.md``)."""
+    return report_markdown(report(result, root)) + "\n"
+
+
+def console(result: FleetResult, root: str = "") -> str:
+    """:func:`report` as aligned console tables."""
+    return report_console(report(result, root))
 
 
 def plot_tradeoff(result: FleetResult, path: Path) -> bool:
@@ -496,7 +556,7 @@ def plot_tradeoff(result: FleetResult, path: Path) -> bool:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("logs", nargs="+",
                         help="log files, directories (searched recursively) or globs")
-    parser.add_argument("--truth-dir", type=Path, default=None,
+    parser.add_argument("--truth-dir", type=input_path_arg, default=None,
                         help="truth files: DIR/<run>.truth.jsonl or DIR/<folder>/truth.jsonl "
                              "(default: a truth.jsonl beside each log)")
     parser.add_argument("--config", default="rover",
@@ -515,6 +575,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also run serially, check the rows are identical, print the ratio")
     parser.add_argument("--out", type=output_dir_arg, default=None,
                         help="write fleet.md, fleet.json and fleet.png here")
+    parser.add_argument("--json", action="store_true",
+                        help="print the results (fleet.json's document) as JSON instead of "
+                             "the tables")
 
 
 def _progress(bar: Bar) -> Progress:
@@ -527,6 +590,11 @@ def _progress(bar: Bar) -> Progress:
 
 
 def run(args: argparse.Namespace) -> int:
+    with _levels_kept():
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     _quiet_logs()
     if args.workers is not None and args.workers < 1:
         raise ConfigError("--workers", "workers", "a whole number >= 1", str(args.workers))
@@ -541,24 +609,37 @@ def run(args: argparse.Namespace) -> int:
     with Bar(len(logs), "fleet", unit="job") as bar:
         result = run_fleet(logs, configs, rov, workers=workers, scheduler=args.scheduler,
                            progress=_progress(bar))
-    print(markdown(result, os.path.commonpath([lg.path for lg in logs]) if len(logs) > 1
-                   else ""))
-    if args.compare_serial and result.executor != "serial":
+    doc: dict[str, Any] = {
+        "executor": result.executor, "seconds": round(result.seconds, 3),
+        "points": {label: pooled([r for r in result.rows if r["point"] == label])
+                   for label in result.points},
+        "rows": result.rows}
+    if result.partial:
+        doc["partial"] = True
+    say = sys.stderr if args.json else sys.stdout  # --json: stdout is the JSON alone
+    if args.json:
+        print(json.dumps(doc))
+    else:
+        print(console(result, os.path.commonpath([lg.path for lg in logs]) if len(logs) > 1
+                      else ""))
+    if args.compare_serial and result.executor != "serial" and not result.partial:
         with Bar(len(logs), "fleet, serial", unit="job") as bar:
             serial = run_fleet(logs, configs, rov, workers=1, progress=_progress(bar))
         same = serial.rows == result.rows
         print(f"serial {serial.seconds:.2f} s, {result.executor} {result.seconds:.2f} s: "
-              f"ratio {result.seconds / serial.seconds:.3f}; rows identical: {same}")
+              f"ratio {result.seconds / serial.seconds:.3f}; rows identical: {same}", file=say)
         if not same:
             return 1
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "fleet.md").write_text(markdown(result), encoding="utf-8")
-        doc = {"executor": result.executor, "seconds": round(result.seconds, 3),
-               "points": {label: pooled([r for r in result.rows if r["point"] == label])
-                          for label in result.points},
-               "rows": result.rows}
         (args.out / "fleet.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         plotted = plot_tradeoff(result, args.out / "fleet.png")
-        print(f"wrote {args.out / 'fleet.md'}, fleet.json" + (", fleet.png" if plotted else ""))
+        print(f"wrote {args.out / 'fleet.md'}, fleet.json" + (", fleet.png" if plotted else ""),
+              file=say)
+    if result.partial:
+        where = f" ({args.out}, marked partial)" if args.out is not None else ""
+        print(f"fdi-bridge fleet: interrupted: the {len(result.rows)} of {result.jobs} jobs "
+              f"done are written{where}", file=sys.stderr)
+        return 130
     return 0

@@ -66,6 +66,7 @@ from drivers.outland.framecodec import Framer, checksum, decode, load_protocol
 from drivers.outland.link import Telemetry, ThrusterCommand, encode_command, encode_telemetry
 from drivers.ratelog import RateLimitedLog
 from fdi.errors import CaptureFormatError, DecodeError
+from firmware_host.commands import tables
 from firmware_host.commands.checks import output_file_arg, positive_float, positive_int
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.runtime.config import resolve_protocol
@@ -593,11 +594,10 @@ def run(args: argparse.Namespace) -> int:
         rep = checksum_strength(inputs=args.inputs or 200_000, seed=args.seed)
         n = rep["inputs_per_model"]
         print(f"undetected corrupt frames per {n} corrupted frames (after the fields' ranges)")
-        print("| checksum | " + " | ".join(ERROR_MODELS) + " |")
-        print("|---" * (len(ERROR_MODELS) + 1) + "|")
-        for kind, res in rep["kinds"].items():
-            cells = [f"{r['undetected']} ({r['after_ranges']})" for r in res.values()]
-            print(f"| {kind} | " + " | ".join(cells) + " |")
+        print(tables.table(["checksum", *ERROR_MODELS],
+                           [[kind, *(f"{r['undetected']} ({r['after_ranges']})"
+                                     for r in res.values())]
+                            for kind, res in rep["kinds"].items()]))
         if args.out is not None:
             args.out.write_text(json.dumps(rep, indent=2) + "\n")
         return 0

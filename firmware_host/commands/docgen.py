@@ -1,0 +1,227 @@
+"""Documents generated from the command line's own parser: a bash completion script and a man
+page (``fdi-bridge completion bash``, ``fdi-bridge man``).
+
+Both walk the whole parser (:func:`firmware_host.cli.build_parser` with no command line, which
+imports every command; only these two commands do), so a new command or option is completed
+and documented without anyone editing a list.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import datetime as dt
+import re
+from dataclasses import dataclass, field
+
+from firmware_host import cli
+
+
+@dataclass
+class Option:
+    """One option of a command: its flags, whether it takes a value, its choices, its help."""
+
+    flags: list[str]
+    metavar: str | None
+    choices: list[str]
+    help: str
+
+
+@dataclass
+class CommandDoc:
+    """One command (``replay``, ``sim rover``, ``demo rov``) as the documents need it."""
+
+    path: str
+    description: str
+    usage: str
+    options: list[Option] = field(default_factory=list)
+    positionals: list[Option] = field(default_factory=list)
+    subcommands: list[str] = field(default_factory=list)
+    epilog: str = ""
+
+
+def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    return {}
+
+
+def _help(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
+    """The help text as ``--help`` shows it (defaults expanded), on one line."""
+    if not action.help or action.help is argparse.SUPPRESS:
+        return ""
+    formatter = cli._HelpFormatter(parser.prog)
+    shown = copy.copy(action)  # the parser's own action stays as it is
+    shown.help = formatter._get_help_string(action)
+    return " ".join(formatter._expand_help(shown).split())
+
+
+def _doc(path: str, parser: argparse.ArgumentParser) -> CommandDoc:
+    doc = CommandDoc(path, parser.description or "", " ".join(parser.format_usage().split()),
+                     epilog=parser.epilog or "")
+    subs = _subparsers(parser)
+    doc.subcommands = list(subs)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            continue
+        choices = [str(c) for c in action.choices] if action.choices else []
+        takes_value = action.nargs != 0
+        metavar = None
+        if takes_value:
+            metavar = action.metavar if isinstance(action.metavar, str) else (
+                action.dest.upper() if action.option_strings else action.dest)
+        opt = Option(list(action.option_strings), metavar, choices, _help(parser, action))
+        if action.option_strings:
+            doc.options.append(opt)
+        elif action.dest != "demo_args":
+            doc.positionals.append(opt)
+    return doc
+
+
+def commands() -> list[CommandDoc]:
+    """The top level, every command, every ``sim`` and ``demo`` kind, in ``--help`` order."""
+    top = cli.build_parser(None)
+    out = [_doc("", top)]
+    for name, parser in _subparsers(top).items():
+        if name == "demo":
+            demo = _doc("demo", parser)
+            demo.subcommands = list(cli.DEMO_COMMANDS)
+            out.append(demo)
+            out += [_doc(f"demo {k}", cli.demo_parser(k)) for k in cli.DEMO_COMMANDS]
+            continue
+        out.append(_doc(name, parser))
+        out += [_doc(f"{name} {k}", p) for k, p in _subparsers(parser).items()]
+    return out
+
+
+# --------------------------------------------------------------------------- bash completion
+
+
+def _words(items: list[str]) -> str:
+    return " ".join(items).replace('"', "")
+
+
+def bash_completion() -> str:
+    """A bash completion script: ``source <(fdi-bridge completion bash)``, or save it as
+    ``/etc/bash_completion.d/fdi-bridge``. It completes commands, ``sim``/``demo`` kinds,
+    each command's options and the values of options with choices; other values and the
+    positional arguments complete as file names."""
+    docs = commands()
+    paths = [d.path for d in docs if d.path]
+    lines = [
+        "# bash completion for fdi-bridge, generated from its parser by",
+        "# `fdi-bridge completion bash` (regenerate it after an upgrade).",
+        "_fdi_bridge() {",
+        '    local cur="${COMP_WORDS[COMP_CWORD]}" prev="${COMP_WORDS[COMP_CWORD-1]}"',
+        '    local path="" at=0 i w',
+        "    for ((i = 1; i < COMP_CWORD; i++)); do",
+        '        w="${COMP_WORDS[i]}"',
+        '        [[ "$w" == -* ]] && continue',
+        '        case "${path:+$path }$w" in',
+        "            " + "|".join(f'"{p}"' for p in paths) + ')',
+        '                path="${path:+$path }$w"; at=$i ;;',
+        "        esac",
+        "    done",
+        '    local opts="" subs="" values=""',
+        '    case "$path" in',
+    ]
+    for d in docs:
+        # the words right after the command: its kinds, or its first argument's choices
+        firsts = d.subcommands or next((p.choices for p in d.positionals if p.choices), [])
+        opts = [f for o in d.options for f in o.flags]
+        values = [f for o in d.options if o.metavar is not None for f in o.flags]
+        lines.append(f'        "{d.path}") opts="{_words(opts)}"; subs="{_words(firsts)}"'
+                     f'; values="{_words(values)}" ;;')
+    lines += ["    esac", '    case "$path|$prev" in']
+    for d in docs:
+        for o in d.options:
+            if o.choices:
+                flags = "|".join(f'"{d.path}|{f}"' for f in o.flags)
+                lines.append(f'        {flags}) COMPREPLY=($(compgen -W "{_words(o.choices)}"'
+                             ' -- "$cur")); return ;;')
+    lines += [
+        "    esac",
+        '    if [[ " $values " == *" $prev "* ]]; then',
+        "        COMPREPLY=()  # a value: file names (complete -o default)",
+        "        return",
+        "    fi",
+        '    if [[ "$cur" == -* ]]; then',
+        '        COMPREPLY=($(compgen -W "$opts" -- "$cur"))',
+        '    elif [[ -n "$subs" && $COMP_CWORD -eq $((at + 1)) ]]; then',
+        '        COMPREPLY=($(compgen -W "$subs" -- "$cur"))',
+        "    else",
+        "        COMPREPLY=()  # a positional argument: file names",
+        "    fi",
+        "}",
+        "complete -o default -F _fdi_bridge fdi-bridge",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- man page
+
+
+def _roff(text: str) -> str:
+    """Text for roff: backslashes and hyphens escaped, no line starting with a control
+    character."""
+    text = text.replace("\\", "\\e").replace("-", "\\-")
+    return re.sub(r"^([.'])", r"\\&\1", text, flags=re.M)
+
+
+def _option_head(o: Option) -> str:
+    flags = ", ".join(f"\\fB{_roff(f)}\\fR" for f in o.flags) if o.flags else \
+        f"\\fI{_roff(o.metavar or '')}\\fR"
+    if o.flags and o.metavar is not None:
+        value = "{" + ",".join(o.choices) + "}" if o.choices else o.metavar
+        flags += f" \\fI{_roff(value)}\\fR"
+    return flags
+
+
+#: Options of every command (help and logging): in the man page once, under OPTIONS.
+COMMON = {"-h", "-v", "-q", "--log-level"}
+
+EXIT_STATUS = (
+    ("0", "success (a bench figure that misses its goal too, unless --strict)"),
+    ("1", "the job failed at run time (a port, a file, damaged input, an internal error)"),
+    ("2", "usage or configuration error: one line naming what was wrong"),
+    ("130", "interrupted (^C); long jobs write their partial results first"),
+)
+
+
+def man_page(date: dt.date | None = None) -> str:
+    """``fdi-bridge(1)`` in roff (``man -l fdi-bridge.1``): synopsis, every command with its
+    options (defaults as ``--help`` shows them) and example, the exit status."""
+    docs = commands()
+    top, rest = docs[0], docs[1:]
+    day = (date or dt.date.today()).isoformat()
+    out = [
+        f'.TH FDI\\-BRIDGE 1 "{day}" "fdi-bridge {_roff(cli.version())}" "User Commands"',
+        ".SH NAME",
+        "fdi\\-bridge \\- " + _roff(top.description.rstrip(".")),
+        ".SH SYNOPSIS",
+        "\\fBfdi\\-bridge\\fR [\\fIOPTIONS\\fR] \\fICOMMAND\\fR [\\fIARGS\\fR]",
+        ".SH DESCRIPTION",
+        _roff("Every command has --help with its defaults and an example. The logging options "
+              "(-v, -q, --log-level) are accepted before and after the command. Generated from "
+              "the parser by `fdi-bridge man`."),
+        ".SH OPTIONS",
+    ]
+    for o in top.options:
+        out += [".TP", _option_head(o), _roff(o.help)]
+    out.append(".SH COMMANDS")
+    for d in rest:
+        out += [f".SS {_roff('fdi-bridge ' + d.path)}", _roff(d.description)]
+        if d.subcommands and not d.options and not d.positionals:
+            out += [".PP", _roff("kinds: " + ", ".join(d.subcommands))]
+        for o in d.positionals + d.options:
+            if not set(o.flags) & COMMON:  # on every command: said once, at the top
+                out += [".TP", _option_head(o), _roff(o.help)]
+        example = d.epilog.split("example:\n", 1)
+        if len(example) == 2:
+            out += [".PP", "Example:", ".RS", ".nf", _roff(example[1].strip()), ".fi", ".RE"]
+    out.append(".SH EXIT STATUS")
+    for code, text in EXIT_STATUS:
+        out += [".TP", f"\\fB{code}\\fR", _roff(text)]
+    out += [".SH SEE ALSO", "The project's README.md and docs/ (architecture, evaluation)."]
+    return "\n".join(out) + "\n"
