@@ -29,6 +29,7 @@ from firmware_host.cli import main
 from firmware_host.commands.tables import Table, plain, report_console, report_markdown
 from firmware_host.devtools import eval as eval_mod
 from firmware_host.devtools import insgnss_report
+from firmware_host.devtools.bench import replay_memory_table
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -492,3 +493,13 @@ def test_fleet_interrupted_writes_the_jobs_done(run_dir: Path, tmp_path: Path,
     assert doc["rows"][0]["point"] == "rover.detector.gate_sigmas=4"
     md = (tmp_path / "fleet.md").read_text(encoding="utf-8")
     assert "**Partial (interrupted):** 1 of 2 jobs done before ^C." in md
+
+
+def test_bench_replay_memory_prints_an_aligned_table() -> None:
+    mem = {"rate_hz": 1.0, "short_s": 60.0, "long_s": 86400.0,
+           "nmea": {"short_mib": 56.6, "long_mib": 56.7, "ratio": 1.0018}}
+    text = replay_memory_table(mem).console()
+    assert "|" not in text
+    lines = text.splitlines()
+    assert lines[0].startswith("replay peak RSS, 1 Hz") and "24 h log (MiB)" in lines[0]
+    assert lines[1].split() == ["nmea", "56.6", "56.7", "1.002", "<=", "1.10"]

@@ -640,14 +640,15 @@ def table(res: dict[str, Any]) -> str:
     return "\n".join(out).strip("\n")
 
 
-def replay_memory_rows(mem: dict[str, Any]) -> list[str]:
-    rows = ["", f"| replay peak RSS (MiB), {mem['rate_hz']:g} Hz | {mem['short_s'] / 60:g} min log "
-            f"| {mem['long_s'] / 3600:g} h log | ratio | goal |", "|---|---|---|---|---|"]
+def replay_memory_table(mem: dict[str, Any]) -> tables.Table:
+    """The peak-RSS figures as a :class:`~firmware_host.commands.tables.Table` (console)."""
+    t = tables.Table([f"replay peak RSS, {mem['rate_hz']:g} Hz", f"{mem['short_s'] / 60:g} min "
+                      "log (MiB)", f"{mem['long_s'] / 3600:g} h log (MiB)", "ratio", "goal"])
     for kind, v in mem.items():
         if isinstance(v, dict):
-            rows.append(f"| {kind} | {v['short_mib']:.1f} | {v['long_mib']:.1f} "
-                        f"| {v['ratio']:.3f} | <= 1.10 |")
-    return rows
+            t.add(kind, f"{v['short_mib']:.1f}", f"{v['long_mib']:.1f}", f"{v['ratio']:.3f}",
+                  "<= 1.10")
+    return t
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -679,7 +680,7 @@ def run(args: argparse.Namespace) -> int:
     against = None if args.against.lower() == "none" else args.against
     if args.only == "replay-memory":
         mem = bench_replay_memory()
-        print("\n".join(replay_memory_rows(mem)[1:]))
+        print(replay_memory_table(mem).console())
         if args.json is not None:
             args.json.write_text(json.dumps({"replay_memory": mem}, indent=2) + "\n")
         return 0
