@@ -3,9 +3,16 @@ and compass faults, line noise and port drops, on a FakeClock (`fdi-bridge soak`
 
 from __future__ import annotations
 
+import json
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 from firmware_host.devtools.soak import run_soak
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_short_soak_counters_consistent(tmp_path: Path) -> None:
@@ -27,3 +34,33 @@ def test_short_soak_counters_consistent(tmp_path: Path) -> None:
     assert r["recorder"]["files_opened"] >= 1 and r["recorder"]["write_errors"] == 0
     assert r["memory"]["growth_mb"] < 10.0
     assert r["ok"]
+
+
+def test_a_stopped_soak_reports_what_ran_as_partial(tmp_path: Path) -> None:
+    calls = [0]
+
+    def stop() -> bool:  # as a ^C between two steps, after 120 s simulated
+        calls[0] += 1
+        return calls[0] > 1200
+
+    r = run_soak(10.0, seed=4, record_dir=tmp_path, gps_drops=1, rov_drops=1, stop=stop)
+    assert r["partial"] is True and r["ok"] is False
+    assert r["simulated_s"] == 120.0
+    assert all(r["checks"].values()), r["checks"]  # the byte accounting holds for what ran
+    assert 1100 <= r["rover"]["epochs"] <= 1200 and r["rov"]["steps"] == 600
+
+
+def test_soak_interrupted_by_sigint_writes_partial_figures(tmp_path: Path) -> None:
+    out = tmp_path / "soak.json"
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.cli", "soak", "--minutes",
+                             "600", "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(4.0)  # well into the run (600 simulated minutes take far longer)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "interrupted" in stderr
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    assert doc["partial"] is True and 0 < doc["simulated_s"] < 36000
+    assert all(doc["checks"].values()), doc["checks"]
+    assert "PARTIAL" in stdout

@@ -33,7 +33,10 @@ import argparse
 import json
 import math
 import os
+import signal
+import sys
 import tempfile
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -248,8 +251,11 @@ def run_soak(
     garbage_p: float = 0.005,
     progress: Callable[[float], None] | None = None,
     background_sync: bool = True,
+    stop: Callable[[], bool] | None = None,
 ) -> dict[str, Any]:
-    """Run the soak for ``minutes`` simulated minutes; return the figures (see module doc)."""
+    """Run the soak for ``minutes`` simulated minutes; return the figures (see module doc).
+    ``stop()`` true (checked between steps, e.g. after a ^C): end there, with the figures of
+    what ran, ``partial`` and not ``ok``."""
     duration = minutes * 60.0
     clock = FakeClock(0.0)
     rng = np.random.default_rng(seed)
@@ -312,10 +318,14 @@ def run_soak(
     k = 0
     steps = round(duration / rover_period)
     rov_every = round(rov_period / rover_period)
+    interrupted = False
     try:
         rover.start()
         rov_runner.start()
         while k < steps:
+            if stop is not None and stop():
+                interrupted = True
+                break
             clock.now = k * rover_period  # absolute deadlines: next = k * period
             gps.pump()  # the devices' own work (simulation) is not timed as the bridge's
             rov.pump()
@@ -335,8 +345,9 @@ def run_soak(
                 rss_warm = rss_bytes()
             if progress is not None and k % 6000 == 0:
                 progress(clock())
-        clock.now = steps * rover_period
-        rover.step()
+        if not interrupted:
+            clock.now = steps * rover_period
+            rover.step()
     finally:
         summ = rover.close()
         rov_summ = rov_runner.close()
@@ -361,7 +372,7 @@ def run_soak(
         "recorder: no write errors": recorder.write_errors == 0,
     }
     result: dict[str, Any] = {
-        "simulated_s": duration,
+        "simulated_s": round(k * rover_period, 1) if interrupted else duration,
         "seed": seed,
         "rover": {
             "epochs": summ["epochs"], "faults": summ["faults"], "alarms": summ["alarms"],
@@ -392,6 +403,9 @@ def run_soak(
         "ok": all(checks.values()) and rover_over == 0 and rov_over == 0
         and (rss_end - (rss_warm or rss0)) < 10e6,
     }
+    if interrupted:  # what ran is checked and reported; a partial soak is not a pass
+        result["partial"] = True
+        result["ok"] = False
     if tmp is not None:
         tmp.cleanup()
     if not math.isfinite(result["memory"]["growth_mb"]):
@@ -426,7 +440,7 @@ def soak_text(r: dict[str, Any]) -> str:
     memory and the byte-accounting checks."""
     ro, rv = r["rover"], r["rov"]
     rp, vp = ro["port"], rv["port"]
-    verdict = "ok" if r["ok"] else "FAILED"
+    verdict = "PARTIAL (interrupted)" if r.get("partial") else "ok" if r["ok"] else "FAILED"
     head = (f"soak: {fmt(r['simulated_s'] / 60)} min simulated in {fmt(r.get('real_s'))} s, "
             f"seed {r['seed']}: {verdict}")
     rows: list[list[Any]] = [
@@ -472,11 +486,21 @@ def run(args: argparse.Namespace) -> int:
             bar.step(n=max(0, minute - done[0]))
             done[0] = max(done[0], minute)
 
-        result = run_soak(args.minutes, seed=args.seed, record_dir=args.record_dir,
-                          progress=progress)
+        # ^C: the soak stops between two steps and reports what ran (partial), exit 130.
+        interrupted = threading.Event()
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: interrupted.set())
+        try:
+            result = run_soak(args.minutes, seed=args.seed, record_dir=args.record_dir,
+                              progress=progress, stop=interrupted.is_set)
+        finally:
+            signal.signal(signal.SIGINT, previous)
     result["real_s"] = round(time.perf_counter() - t0, 1)
     text = json.dumps(result, indent=2)
     print(text if args.json else soak_text(result))
     if args.out is not None:
         args.out.write_text(text + "\n")
+    if result.get("partial"):
+        print(f"soak interrupted at {result['simulated_s']:g} s simulated: partial figures",
+              file=sys.stderr)
+        return 130
     return 0 if result["ok"] else 1
