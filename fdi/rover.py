@@ -29,7 +29,8 @@ Beyond the paper, for real data (each is a parameter, and the paper preset turns
 * ``drift_test`` (issue 13, :mod:`fdi.drift`): the fix against its own Doppler displacement
   over horizons in seconds (1, 3, 10, 30 s), a GLR with σ calibrated once per receiver and
   never learned; it catches slow ramps and frozen receivers. A receiver that repeats its whole
-  fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed.
+  fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed,
+  and sooner while its own speed says it moved ``stale_move_m`` meanwhile.
 * isolation after a level change (:mod:`fdi.level`): when the drift test fires, a frozen fix
   is seen, or the fixes stay off after ``max_consecutive`` replacements, the isolator holds the
   old track (the last trusted Doppler-free value moved by the Doppler) and decides with the
@@ -110,6 +111,8 @@ class RoverDetectorParams:
     drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
     drift_lag_sd_s: float = field(default=0.15, metadata={"ge": 0.0})
     stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
+    # ... or while its own speed says it moved this far (0: off); beyond a coordinate quantum
+    stale_move_m: float = field(default=0.3, metadata={"ge": 0.0})
     hold_exit_sigmas: float = field(default=3.0, metadata={"gt": 0.0})
     hold_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
     hold_exit_s: float = field(default=1.0, metadata={"ge": 0.0})  # the short fixed lag
@@ -560,7 +563,14 @@ class RoverIsolator:
         self._prev_sig = sig
         self._prev_t = fix.t_s
         since = self._stale_since
-        return since is not None and fix.t_s - since >= self.p.stale_s - 1e-9
+        if since is None:
+            return False
+        held = fix.t_s - since
+        # A live receiver that says it moved stale_move_m (more than a coordinate quantum:
+        # 0.19 m at 4 decimals of minutes) cannot repeat its position bit for bit.
+        move = self.p.stale_move_m
+        return held >= self.p.stale_s - 1e-9 or (
+            move > 0.0 and fix.speed_mps is not None and fix.speed_mps * held >= move)
 
     def _enter_hold(self, t_s: float, dres: DriftResult | None, reason: str,
                     slow: bool) -> bool:
