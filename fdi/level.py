@@ -37,6 +37,10 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
   when neither side is shown wrong, the raw fix is never worse than doing nothing, and the
   old track may be the faulty side (a late exit costs the epochs of the lag, 3-12 m off at
   1 Hz after a frozen stretch or a missed ramp: ``sim rover-harness``);
+* a slow hold ends (``consistent``) when the receiver has been consistent with its own Doppler
+  at every horizon up to CONSISTENT_S (30 s) for that long: a drift of 0.05 m/s still
+  running would show there; held on, the old track only grows stale (a late-caught ramp
+  whose anchor sat inside it held an alarm 40-120 s after the ramp ended);
 * otherwise the old track is kept: passed on (flagged) for ``output_s``, then the alarm with
   nothing passed on (section 2.2: "stop automatic navigation") up to ``max_s``, after which
   the receiver's level is accepted again under the alarm (no lock-in). A hold that began with
@@ -59,7 +63,9 @@ from typing import Literal
 
 from fdi.drift import sigma_at
 
-HoldAction = Literal["track", "raw", "alarm", "exit", "ended", "new_level", "give_up"]
+HoldAction = Literal["track", "raw", "alarm", "exit", "ended", "new_level", "consistent",
+                     "give_up"]
+CONSISTENT_S = 30.0  # a receiver consistent with its own Doppler this long ends a slow hold
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,8 +91,8 @@ class HoldStep:
 class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
-    __slots__ = ("_agree_b", "_agree_since", "_dev", "_recent", "anchor_b", "anchor_t", "anchor_v",
-                 "matched_t", "old", "p", "prefer_raw", "slow", "stale_m", "t0")
+    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_recent", "anchor_b", "anchor_t",
+                 "anchor_v", "matched_t", "old", "p", "prefer_raw", "slow", "stale_m", "t0")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
                  anchor_b: tuple[float, float], anchor_v: tuple[float, float],
@@ -107,6 +113,7 @@ class LevelHold:
         self._agree_b = (0.0, 0.0)
         self._dev: deque[tuple[float, float]] = deque()  # (t, |b − b_a|) over 2L
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
+        self._long: deque[tuple[float, float, float]] = deque()  # ... over CONSISTENT_S
 
     def step(self, t: float, b: tuple[float, float], v: tuple[float, float],
              d: tuple[float, float], stale: bool, dt: float, fresh: bool = False) -> HoldStep:
@@ -173,6 +180,31 @@ class LevelHold:
                 and t - rec[0][0] >= p.exit_lag_s - 1e-9):
             self.matched_t = at_old
             return HoldStep("new_level", track, g)
+        # A slow hold whose receiver has been consistent with its own Doppler at every
+        # horizon up to CONSISTENT_S, for that long: a drift still running at 0.05 m/s would
+        # show there (1.5 m against σ(30 s) of 0.2-0.6 m); the fault is over.
+        lg = self._long
+        if stale or not self_ok:
+            lg.clear()
+        else:
+            lg.append((t, b[0], b[1]))
+        if self.slow and lg and t - lg[0][0] >= CONSISTENT_S - 1e-9:
+            ok = True
+            for h in p.horizons_s:
+                if h > CONSISTENT_S:
+                    break
+                j = 0
+                while j + 1 < len(lg) and lg[j + 1][0] <= t - h:
+                    j += 1
+                _, oe, on = lg[j]
+                if math.hypot(b[0] - oe, b[1] - on) > p.exit_sigmas * sigma_at(
+                        t - lg[j][0], p.horizons_s, p.sigma_m):
+                    ok = False
+                    break
+            if ok:
+                return HoldStep("consistent", track, g)
+        while len(lg) > 1 and lg[1][0] <= t - CONSISTENT_S:
+            lg.popleft()
         if t - self.t0 > (p.max_s if self.slow else p.output_s):
             return HoldStep("give_up", track, g)
         if not stale and (g <= p.exit_sigmas or not math.isnan(at_old)

@@ -619,7 +619,7 @@ class RoverIsolator:
         hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt, self._stale_since is None)
         t.drift = hs.g
         reason = self._hold_reason
-        if hs.action in ("exit", "ended", "new_level"):
+        if hs.action in ("exit", "ended", "new_level", "consistent"):
             # The new fixes agree with the old track (the receiver is right again), or sit at
             # the older references' level while the old track does not (the old track was
             # the faulty side: its references go).
@@ -631,7 +631,7 @@ class RoverIsolator:
             elif hs.action == "new_level":
                 # The old track was the faulty side: its references go, the older levels stay.
                 drift.forget_after(hold.matched_t)
-            elif hs.action == "ended":
+            elif hs.action in ("ended", "consistent"):
                 # A slow fault ended: the references near its start may carry part of it.
                 drift.reset_short()
             return self._resume(fix, z, r, d, v, b, t, "hold_" + hs.action)
