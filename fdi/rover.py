@@ -30,7 +30,13 @@ Beyond the paper, for real data (each is a parameter, and the paper preset turns
   over horizons in seconds (1, 3, 10, 30 s), a GLR with σ calibrated once per receiver and
   never learned; it catches slow ramps and frozen receivers. A receiver that repeats its whole
   fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed,
-  and sooner while its own speed says it moved ``stale_move_m`` meanwhile.
+  and sooner while its own speed says it moved ``stale_move_m`` meanwhile. Between
+  ``drift_warn_sigmas`` and ``drift_sigmas`` the fix is flagged (a warning) but passed on as it
+  is, and kept out of the drift test's references and the gates' learning: a slow fault is
+  reported sooner without holding the old track on weaker evidence.
+* never worse than doing nothing: an abrupt step *back* to an older trusted level the track
+  had left (the end of a fault that was missed or taken as the receiver's level) passes the
+  receiver's fix on, flagged, instead of the old track (``step_back``).
 * isolation after a level change (:mod:`fdi.level`): when the drift test fires, a frozen fix
   is seen, or the fixes stay off after ``max_consecutive`` replacements, the isolator holds the
   old track (the last trusted Doppler-free value moved by the Doppler) and decides with the
@@ -108,6 +114,8 @@ class RoverDetectorParams:
     drift_sigma_m: tuple[float, ...] = (0.3, 0.4, 0.6, 0.9, 1.4)
     drift_calibrate_s: float = field(default=300.0, metadata={"ge": 0.0})  # 0: as configured
     drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
+    # Flag (warn) from this statistic on, the fix still passed on as it is (0: off).
+    drift_warn_sigmas: float = field(default=4.5, metadata={"ge": 0.0})
     drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
     drift_lag_sd_s: float = field(default=0.15, metadata={"ge": 0.0})
     stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
@@ -436,9 +444,14 @@ class RoverIsolator:
         stale_fault = stale and b is not None
         if not (grey_fault or chi2_fault or doppler_fault or quality or drift_fault
                 or stale_fault):
-            self._accepted(fix, z, t)
+            # Between the warning and the alarm threshold of the drift test: passed on as it
+            # is but flagged, and neither a reference of the drift test nor learned from.
+            warn = dres is not None and 0.0 < p.drift_warn_sigmas < dres.g
+            self._accepted(fix, z, t, learn=not warn)
             self._window_append(z, d)
             self.kf.update(z, r)
+            if warn:
+                return self._accept(z, t, "drift_warn", fault=True)
             if b is not None and drift is not None and v is not None:
                 drift.commit(fix.t_s, b, v)
             return self._accept(z, t, "")
@@ -732,16 +745,18 @@ class RoverIsolator:
             t.drift,
         )
 
-    def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests) -> None:
-        """Bookkeeping for a fix passed on as it is: the run of replacements ends."""
+    def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests,
+                  learn: bool = True) -> None:
+        """Bookkeeping for a fix passed on as it is: the run of replacements ends; ``learn``:
+        the gates learn from it (not while the drift test warns)."""
         self._consec = 0
         self._stepped_back = False
         self._coast_since = None
-        if t.doppler_res is not None and len(self._acc_hist) == self.p.window:
+        if learn and t.doppler_res is not None and len(self._acc_hist) == self.p.window:
             self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, self._ewma)
         d = self._disp
         self._acc_hist.append((z[0], z[1], d[0], d[1]))
-        if t.pred is not None:
+        if learn and t.pred is not None:
             self._learn_spread(z, t.pred, t.res_u is not None)
 
     def _accept(

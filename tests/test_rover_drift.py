@@ -154,3 +154,34 @@ def test_hold_after_a_frozen_stretch_trusts_the_live_receiver() -> None:
     assert "exit" not in frozen
     live = _hold_run(hold, [(6.0, 0.0)] * 30, 15.0, 0.1)
     assert "exit" in live
+
+
+def test_hold_passes_the_live_receiver_on_at_once_after_a_freeze() -> None:
+    """Never worse than doing nothing: the first fresh fix after a frozen stretch is passed on
+    (``raw``) while the evidence to end the hold builds up, not the void-Doppler track."""
+    for fresh, action in ((True, "raw"), (False, "track")):
+        hold = LevelHold(HP, 10.0, 9.0, (0.0, 0.0), (1.0, 0.0), stale_m=1.0)
+        # 6 m off the track, 12 sigma with the frozen stretch's 0.5 m: not agreeing with it.
+        step = hold.step(10.1, (6.0, 0.0), (1.0, 0.0), (0.0, 0.0), False, 0.1, fresh=fresh)
+        assert step.action == action and step.g > HP.exit_sigmas
+
+
+def test_hold_after_a_step_back_passes_the_consistent_receiver_on() -> None:
+    hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), prefer_raw=True, slow=False)
+    assert set(_hold_run(hold, [(6.0, 0.0)] * 20, 100.0, 0.1)) == {"raw"}
+    jumpy = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), prefer_raw=True, slow=False)
+    acts = _hold_run(jumpy, [(6.0 + 2.0 * (j % 2), 0.0) for j in range(20)], 100.0, 0.1)
+    assert "track" in acts  # not consistent with its own Doppler: the track
+    plain = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), slow=False)
+    assert set(_hold_run(plain, [(6.0, 0.0)] * 20, 100.0, 0.1)) == {"track"}
+
+
+def test_slow_hold_ends_when_the_receiver_is_consistent_for_30_s() -> None:
+    hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0))
+    acts = _hold_run(hold, [(6.0, 0.0)] * 400, 100.0, 0.1)
+    assert "consistent" in acts
+    assert 295 <= acts.index("consistent") <= 310  # CONSISTENT_S at 10 Hz
+    # A receiver still drifting (0.1 m/s) is not consistent with its own Doppler.
+    drifting = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0))
+    acts = _hold_run(drifting, [(6.0 + 0.01 * j, 0.0) for j in range(400)], 100.0, 0.1)
+    assert "consistent" not in acts
