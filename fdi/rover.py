@@ -701,7 +701,7 @@ class RoverIsolator:
         for t_o, (oe, on) in drift.levels_between(r_t - LEVEL_KEEP_S, r_t - 20.0):
             e_track = math.hypot(re_ - oe, rn - on)
             s_age = sigma_at(t_s - t_o, hp.horizons_s, sig)
-            if e_track < max(s_side, hp.side_sigmas * s_age):
+            if e_track < s_side:
                 continue  # the track has not left that level by more than its own noise
             e_new = math.hypot(b[0] - oe, b[1] - on)
             if e_new <= e_track / 2.0 and e_new <= hp.exit_sigmas * s_age:

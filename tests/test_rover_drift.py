@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fdi.drift import DriftTest, calibrate, sigma_at
+from fdi.drift import DriftTest, calibrate, concave_cap, sigma_at
 from fdi.errors import ConfigError
 from fdi.level import HoldParams, LevelHold
 from fdi.rover import FixInput, RoverDetectorParams, RoverIsolator
@@ -225,3 +225,12 @@ def test_a_jump_is_still_replaced_by_the_prediction() -> None:
     d = run[150][3]
     assert d.fault and d.action == "replace" and "step_back" not in d.reason
     assert run[150][2] is not None and run[150][2] < 0.2
+
+
+def test_concave_cap_bounds_long_horizons_by_the_shorter_ones() -> None:
+    """(D5): σ_H <= σ_h √(H/h); a long horizon inflated by pairs across faults is capped."""
+    capped = concave_cap(H, (0.1, 0.15, 0.27, 0.9, 1.8))
+    assert capped[:3] == (0.1, 0.15, 0.27)
+    assert capped[3] == pytest.approx(0.27 * math.sqrt(3.0))
+    assert capped[4] == pytest.approx(capped[3] * math.sqrt(100.0 / 30.0))
+    assert concave_cap(H, SIG) == SIG  # a consistent calibration is unchanged
