@@ -686,10 +686,13 @@ class RoverIsolator:
         newest reference) that the newest reference has left? The time of that level.
 
         The end of a slow fault or a level step that was missed or accepted (an undetected
-        ramp, a multipath step taken after ``hold_output_s``): the old track is the faulty
-        side, and replacing the returning fix by it would be worse than the receiver (the
-        criterion of ``new_level`` in fdi/level.py, plus |b − b_o| within ``hold_exit_sigmas``
-        of the drift σ at the level's age)."""
+        ramp, a multipath step taken as the receiver's level): the old track is the faulty
+        side, and replacing the returning fix by it would be worse than the receiver. The
+        track left the level by at least ``hold_side_sigmas`` x σ(30 s) (fdi/level.py's
+        ``new_level``), and the fix is within half that departure of it and within
+        ``hold_exit_sigmas`` of the drift σ at the level's age. It only chooses what is passed
+        on (the caller's state goes on as for a replacement), so a jump that happens to land
+        there costs that epoch the raw fix, never more."""
         drift, hp = self._drift, self._hold_p
         assert drift is not None and hp is not None
         ref = drift.at_or_before(t_s)
