@@ -39,8 +39,8 @@ the configured σ) or, with ``calibrate_s > 0``, once at start: over the first `
 seconds of committed references the test runs with the configured σ (meant to be wide) and
 collects the references' differences at each horizon; then σ_H becomes 1.4826 × their median
 absolute value (robust: faults that slip into the calibration, up to a large minority of the
-time, barely move it, and only upwards), never below ``floor_frac`` of the configured σ, and
-is frozen for good.
+time, barely move it, and only upwards), never below ``floor_frac`` of the configured σ,
+capped by (D5) (:func:`concave_cap`), and is frozen for good.
 
 Units: metres, seconds; shapes: 2-tuples (east, north).
 """
@@ -184,7 +184,7 @@ class DriftTest:
                     continue
                 est = 1.4826 * xs[len(xs) // 2]
                 out.append(max(est, self.floor_frac * configured))
-            self.sigmas = tuple(out)
+            self.sigmas = concave_cap(self.horizons, out)
             self.calibrated = True
             self._cal = []
 
@@ -249,6 +249,25 @@ class DriftTest:
         return DriftResult(g_max, ref.horizon_s, ref.ref_t, ref.ref_b, ref.ref_v)
 
 
+def concave_cap(horizons_s: Sequence[float], sigmas: Sequence[float]) -> tuple[float, ...]:
+    """σ_H capped at σ_h·√(H/h) from each shorter horizon h (D5).
+
+    The error model's components (Gauss-Markov processes, white noise, the random walk of the
+    Doppler's integrated noise) all have an increment variance D(H) = E[(b(t) − b(t−H))²]
+    that is concave in H with D(0) ≥ 0, so D(H)/H does not grow with H:
+
+        σ_H ≤ σ_h·√(H/h)  for H ≥ h                                  (D5)
+
+    A calibration whose long horizons exceed it has pairs that straddle a fault (a long
+    horizon's pairs reach across more of the recording: on fault-dense runs σ(30 s) came out
+    3x σ(10 s) where (D5) allows 1.7x); the shorter horizons are the better estimate."""
+    out = list(sigmas)
+    for i in range(1, len(out)):
+        cap = min(out[j] * math.sqrt(horizons_s[i] / horizons_s[j]) for j in range(i))
+        out[i] = min(out[i], cap)
+    return tuple(out)
+
+
 def calibrate(samples: Sequence[tuple[float, float, float]],
               horizons_s: Sequence[float]) -> tuple[float, ...]:
     """Per-axis σ of (D2) at each horizon from a clean recording, once per receiver.
@@ -270,4 +289,4 @@ def calibrate(samples: Sequence[tuple[float, float, float]],
             raise ValueError(f"no pair of samples {h} s apart to calibrate on")
         diffs.sort()
         out.append(1.4826 * diffs[len(diffs) // 2])
-    return tuple(out)
+    return concave_cap(horizons_s, out)

@@ -30,6 +30,17 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
   track and stay consistent with their own Doppler for L: their distance from it falls by
   more than half within L, by more than ``exit_sigmas`` of the 1 s σ (a drift ends at once;
   the anchor may sit a little into the drift, so agreement alone can come late);
+* while the evidence is not yet complete but points to the new fixes (they agree with the old
+  track within ``exit_sigmas``, sit at an older level as above, or come live from a receiver
+  that was frozen, or stepped back towards an older level before the hold and stay consistent
+  with their own Doppler), the hold goes on but passes the *receiver's* fix on, flagged (``raw``):
+  when neither side is shown wrong, the raw fix is never worse than doing nothing, and the
+  old track may be the faulty side (a late exit costs the epochs of the lag, 3-12 m off at
+  1 Hz after a frozen stretch or a missed ramp: ``sim rover-harness``);
+* a slow hold ends (``consistent``) when the receiver has been consistent with its own Doppler
+  at every horizon up to CONSISTENT_S (30 s) for that long: a drift of 0.05 m/s still
+  running would show there; held on, the old track only grows stale (a late-caught ramp
+  whose anchor sat inside it held an alarm 40-120 s after the ramp ended);
 * otherwise the old track is kept: passed on (flagged) for ``output_s``, then the alarm with
   nothing passed on (section 2.2: "stop automatic navigation") up to ``max_s``, after which
   the receiver's level is accepted again under the alarm (no lock-in). A hold that began with
@@ -52,7 +63,9 @@ from typing import Literal
 
 from fdi.drift import sigma_at
 
-HoldAction = Literal["track", "alarm", "exit", "ended", "new_level", "give_up"]
+HoldAction = Literal["track", "raw", "alarm", "exit", "ended", "new_level", "consistent",
+                     "give_up"]
+CONSISTENT_S = 30.0  # a receiver consistent with its own Doppler this long ends a slow hold
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,15 +91,16 @@ class HoldStep:
 class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
-    __slots__ = ("_agree_b", "_agree_since", "_dev", "_recent", "anchor_b", "anchor_t", "anchor_v",
-                 "matched_t", "old", "p", "slow", "stale_m", "t0")
+    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_recent", "anchor_b", "anchor_t",
+                 "anchor_v", "matched_t", "old", "p", "prefer_raw", "slow", "stale_m", "t0")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
                  anchor_b: tuple[float, float], anchor_v: tuple[float, float],
                  stale_m: float = 0.0,
                  old: list[tuple[float, tuple[float, float]]] | None = None,
-                 slow: bool = True) -> None:
+                 slow: bool = True, prefer_raw: bool = False) -> None:
         self.p = p
+        self.prefer_raw = prefer_raw  # the fixes stepped back to an older level before it
         self.t0 = t0
         self.anchor_t = anchor_t
         self.anchor_b = anchor_b
@@ -99,11 +113,13 @@ class LevelHold:
         self._agree_b = (0.0, 0.0)
         self._dev: deque[tuple[float, float]] = deque()  # (t, |b − b_a|) over 2L
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
+        self._long: deque[tuple[float, float, float]] = deque()  # ... over CONSISTENT_S
 
     def step(self, t: float, b: tuple[float, float], v: tuple[float, float],
-             d: tuple[float, float], stale: bool, dt: float) -> HoldStep:
+             d: tuple[float, float], stale: bool, dt: float, fresh: bool = False) -> HoldStep:
         """The receiver's Doppler-free value ``b`` at ``t``, its Doppler ``v`` and the
-        integrated displacement ``d``; ``stale``: the receiver repeats its whole fix."""
+        integrated displacement ``d``; ``stale``: the receiver repeats its whole fix;
+        ``fresh``: this fix differs from the previous one (position, speed or course)."""
         p = self.p
         lag = p.lag_s
         track = (self.anchor_b[0] + d[0] + lag * v[0], self.anchor_b[1] + d[1] + lag * v[1])
@@ -151,17 +167,49 @@ class LevelHold:
             if (t - hist[0][0] >= p.exit_lag_s and dev <= 0.5 * before
                     and before - dev >= p.exit_sigmas * p.sigma_m[0]):
                 return HoldStep("ended", track, g)
-        if (self.old and not stale and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
-                and t - rec[0][0] >= p.exit_lag_s - 1e-9):
+        at_old = math.nan
+        if self.old and not stale:
             s_side = p.side_sigmas * sigma_at(30.0, p.horizons_s, p.sigma_m)
             for t_o, (oe, on) in self.old:
                 e_new = math.hypot(b[0] - oe, b[1] - on)
                 e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)
                 if e_new <= e_track / 3.0 and e_track >= s_side:
-                    self.matched_t = t_o
-                    return HoldStep("new_level", track, g)
+                    at_old = t_o
+                    break
+        if (not math.isnan(at_old) and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
+                and t - rec[0][0] >= p.exit_lag_s - 1e-9):
+            self.matched_t = at_old
+            return HoldStep("new_level", track, g)
+        # A slow hold whose receiver has been consistent with its own Doppler at every
+        # horizon up to CONSISTENT_S, for that long: a drift still running at 0.05 m/s would
+        # show there (1.5 m against σ(30 s) of 0.2-0.6 m); the fault is over.
+        lg = self._long
+        if stale or not self_ok:
+            lg.clear()
+        else:
+            lg.append((t, b[0], b[1]))
+        if self.slow and lg and t - lg[0][0] >= CONSISTENT_S - 1e-9:
+            ok = True
+            for h in p.horizons_s:
+                if h > CONSISTENT_S:
+                    break
+                j = 0
+                while j + 1 < len(lg) and lg[j + 1][0] <= t - h:
+                    j += 1
+                _, oe, on = lg[j]
+                if math.hypot(b[0] - oe, b[1] - on) > p.exit_sigmas * sigma_at(
+                        t - lg[j][0], p.horizons_s, p.sigma_m):
+                    ok = False
+                    break
+            if ok:
+                return HoldStep("consistent", track, g)
+        while len(lg) > 1 and lg[1][0] <= t - CONSISTENT_S:
+            lg.popleft()
         if t - self.t0 > (p.max_s if self.slow else p.output_s):
             return HoldStep("give_up", track, g)
+        if not stale and (g <= p.exit_sigmas or not math.isnan(at_old)
+                          or (self.stale_m > 0.0 and fresh) or (self.prefer_raw and self_ok)):
+            return HoldStep("raw", track, g)
         if t - self.t0 <= p.output_s:
             return HoldStep("track", track, g)
         return HoldStep("alarm", track, g)

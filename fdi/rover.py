@@ -29,7 +29,14 @@ Beyond the paper, for real data (each is a parameter, and the paper preset turns
 * ``drift_test`` (issue 13, :mod:`fdi.drift`): the fix against its own Doppler displacement
   over horizons in seconds (1, 3, 10, 30 s), a GLR with σ calibrated once per receiver and
   never learned; it catches slow ramps and frozen receivers. A receiver that repeats its whole
-  fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed.
+  fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed,
+  and sooner while its own speed says it moved ``stale_move_m`` meanwhile. Between
+  ``drift_warn_sigmas`` and ``drift_sigmas`` the fix is flagged (a warning) but passed on as it
+  is, and kept out of the drift test's references and the gates' learning: a slow fault is
+  reported sooner without holding the old track on weaker evidence.
+* never worse than doing nothing: an abrupt step *back* to an older trusted level the track
+  had left (the end of a fault that was missed or taken as the receiver's level) passes the
+  receiver's fix on, flagged, instead of the old track (``step_back``).
 * isolation after a level change (:mod:`fdi.level`): when the drift test fires, a frozen fix
   is seen, or the fixes stay off after ``max_consecutive`` replacements, the isolator holds the
   old track (the last trusted Doppler-free value moved by the Doppler) and decides with the
@@ -48,7 +55,7 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 from fdi.chi2 import threshold
-from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest
+from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
 from fdi.grey import gm11_predict_shifted
 from fdi.kalman import GpsKalman
 from fdi.level import HoldParams, LevelHold
@@ -107,9 +114,13 @@ class RoverDetectorParams:
     drift_sigma_m: tuple[float, ...] = (0.3, 0.4, 0.6, 0.9, 1.4)
     drift_calibrate_s: float = field(default=300.0, metadata={"ge": 0.0})  # 0: as configured
     drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
+    # Flag (warn) from this statistic on, the fix still passed on as it is (0: off).
+    drift_warn_sigmas: float = field(default=4.5, metadata={"ge": 0.0})
     drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
     drift_lag_sd_s: float = field(default=0.15, metadata={"ge": 0.0})
     stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
+    # ... or while its own speed says it moved this far (0: off); beyond a coordinate quantum
+    stale_move_m: float = field(default=0.3, metadata={"ge": 0.0})
     hold_exit_sigmas: float = field(default=3.0, metadata={"gt": 0.0})
     hold_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
     hold_exit_s: float = field(default=1.0, metadata={"ge": 0.0})  # the short fixed lag
@@ -181,6 +192,7 @@ class RoverIsolator:
         self._last_up = 0.0
         self._up_seen = False
         self._consec = 0
+        self._stepped_back = False  # this run of replacements began with a step back
         # Accepted fixes (east, north) with the Doppler displacement at each, last `window`.
         self._acc_hist: deque[tuple[float, float, float, float]] = deque(maxlen=n)
         # The receiver's own recent fixes with the Doppler displacement at each: is it
@@ -246,6 +258,7 @@ class RoverIsolator:
         for gate in self._zone_gates:
             gate.reset()
         self._consec = 0
+        self._stepped_back = False
         self._hold = None
 
     def _r(self, fix: FixInput) -> tuple[float, float, float]:
@@ -431,9 +444,14 @@ class RoverIsolator:
         stale_fault = stale and b is not None
         if not (grey_fault or chi2_fault or doppler_fault or quality or drift_fault
                 or stale_fault):
-            self._accepted(fix, z, t)
+            # Between the warning and the alarm threshold of the drift test: passed on as it
+            # is but flagged, and neither a reference of the drift test nor learned from.
+            warn = dres is not None and 0.0 < p.drift_warn_sigmas < dres.g
+            self._accepted(fix, z, t, learn=not warn)
             self._window_append(z, d)
             self.kf.update(z, r)
+            if warn:
+                return self._accept(z, t, "drift_warn", fault=True)
             if b is not None and drift is not None and v is not None:
                 drift.commit(fix.t_s, b, v)
             return self._accept(z, t, "")
@@ -449,6 +467,15 @@ class RoverIsolator:
         # replacement limit): hold the old track and let the Doppler decide (fdi/level.py).
         # A jump the grey or chi-square test sees is replaced first (below), as the paper does.
         abrupt = grey_fault or chi2_fault
+        # An abrupt step back to an older level the track had left: the end of a fault that
+        # was missed or accepted, or a jump that happens to land there. Either way the old
+        # track is not shown right: the receiver's fix is passed on (flagged, as replaced),
+        # while the state goes on as for a replacement, so a jump is told apart at the next
+        # epoch and a step that stays goes to the hold, whose "new_level" ends it.
+        back = (abrupt and b is not None and drift is not None and not quality
+                and not stale_fault
+                and ((self._stepped_back and raw_consistent)
+                     or self._back_at_old_level(fix.t_s, b) is not None))
         if (b is not None and v is not None and drift is not None and not quality
                 and (stale_fault or (drift_fault and not abrupt)
                      or self._consec >= p.max_consecutive)
@@ -463,6 +490,9 @@ class RoverIsolator:
             self._window_append(t.pred, d)
             f = p.replaced_r_factor
             self.kf.update(t.pred, (r[0] * f, r[1] * f, r[2] * f))
+            if back:
+                self._stepped_back = True
+                return self._replace(z, t, "+".join(reasons) + "+step_back")
             return self._replace(t.pred, t, "+".join(reasons))
         # Too many in a row (or nothing to replace with): alarm, stop automatic navigation.
         # Restart on the receiver's data when its own fixes are consistent with its Doppler
@@ -546,7 +576,14 @@ class RoverIsolator:
         self._prev_sig = sig
         self._prev_t = fix.t_s
         since = self._stale_since
-        return since is not None and fix.t_s - since >= self.p.stale_s - 1e-9
+        if since is None:
+            return False
+        held = fix.t_s - since
+        # A live receiver that says it moved stale_move_m (more than a coordinate quantum:
+        # 0.19 m at 4 decimals of minutes) cannot repeat its position bit for bit.
+        move = self.p.stale_move_m
+        return held >= self.p.stale_s - 1e-9 or (
+            move > 0.0 and fix.speed_mps is not None and fix.speed_mps * held >= move)
 
     def _enter_hold(self, t_s: float, dres: DriftResult | None, reason: str,
                     slow: bool) -> bool:
@@ -571,7 +608,8 @@ class RoverIsolator:
             stale_m = math.hypot(*a_v) * (t_s - self._stale_since)
         # The hold's clock starts with the run of replacements that led to it (seconds).
         t0 = self._run_t0 if self._consec > 0 else t_s
-        self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow)
+        self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow,
+                               prefer_raw=self._stepped_back)
         self._hold_reason = reason
         self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
         return True
@@ -591,10 +629,10 @@ class RoverIsolator:
         hold = self._hold
         drift = self._drift
         assert hold is not None and drift is not None
-        hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt)
+        hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt, self._stale_since is None)
         t.drift = hs.g
         reason = self._hold_reason
-        if hs.action in ("exit", "ended", "new_level"):
+        if hs.action in ("exit", "ended", "new_level", "consistent"):
             # The new fixes agree with the old track (the receiver is right again), or sit at
             # the older references' level while the old track does not (the old track was
             # the faulty side: its references go).
@@ -606,27 +644,72 @@ class RoverIsolator:
             elif hs.action == "new_level":
                 # The old track was the faulty side: its references go, the older levels stay.
                 drift.forget_after(hold.matched_t)
-            elif hs.action == "ended":
+            elif hs.action in ("ended", "consistent"):
                 # A slow fault ended: the references near its start may carry part of it.
                 drift.reset_short()
-            self._win.clear()
-            self._win.append((z[0] - d[0], z[1] - d[1], z[2] - d[2]))
-            self._acc_hist.clear()
-            self._acc_hist.append((z[0], z[1], d[0], d[1]))
-            self._raw_hist.clear()
-            self.kf.reset(z, r)
-            self._consec = 0
-            self._coast_since = None
-            drift.commit(fix.t_s, b, v)
-            return self._accept(z, t, "hold_" + hs.action)
+            return self._resume(fix, z, r, d, v, b, t, "hold_" + hs.action)
         if hs.action == "give_up":
             return self._raise_alarm(z, r, reason + "+hold_timeout", t, keep_levels=True)
         out = (hs.track[0], hs.track[1], self._hold_up)
         t.pred = out
         self._window_append(out, d)  # the filter is not fed: it only predicts
+        if hs.action == "raw":
+            # Not decided yet, but the evidence points to the receiver (fdi/level.py): its
+            # fix is passed on, flagged as not verified, the hold goes on.
+            return self._replace(z, t, reason + "+hold_raw")
         if hs.action == "track":
             return self._replace(out, t, reason + "+hold")
         return self._coast(out, t, reason + "+hold")
+
+    def _resume(self, fix: FixInput, z: tuple[float, float, float],
+                r: tuple[float, float, float], d: list[float], v: tuple[float, float],
+                b: tuple[float, float], t: _Tests, reason: str) -> Decision:
+        """The receiver is right again: restart the window, the filter and the Doppler
+        history on ``z`` (the drift test's references are the caller's to prune)."""
+        drift = self._drift
+        assert drift is not None
+        self._hold = None
+        self._win.clear()
+        self._win.append((z[0] - d[0], z[1] - d[1], z[2] - d[2]))
+        self._acc_hist.clear()
+        self._acc_hist.append((z[0], z[1], d[0], d[1]))
+        self._raw_hist.clear()
+        self.kf.reset(z, r)
+        self._consec = 0
+        self._stepped_back = False
+        self._coast_since = None
+        drift.commit(fix.t_s, b, v)
+        return self._accept(z, t, reason)
+
+    def _back_at_old_level(self, t_s: float, b: tuple[float, float]) -> float | None:
+        """An abrupt step back: is the fix at an older trusted level (20-300 s before the
+        newest reference) that the newest reference has left? The time of that level.
+
+        The end of a slow fault or a level step that was missed or accepted (an undetected
+        ramp, a multipath step taken as the receiver's level): the old track is the faulty
+        side, and replacing the returning fix by it would be worse than the receiver. The
+        track left the level by at least ``hold_side_sigmas`` x σ(30 s) (fdi/level.py's
+        ``new_level``), and the fix is within half that departure of it and within
+        ``hold_exit_sigmas`` of the drift σ at the level's age. It only chooses what is passed
+        on (the caller's state goes on as for a replacement), so a jump that happens to land
+        there costs that epoch the raw fix, never more."""
+        drift, hp = self._drift, self._hold_p
+        assert drift is not None and hp is not None
+        ref = drift.at_or_before(t_s)
+        if ref is None:
+            return None
+        r_t, (re_, rn), _ = ref
+        sig = drift.sigmas
+        s_side = hp.side_sigmas * sigma_at(30.0, hp.horizons_s, sig)
+        for t_o, (oe, on) in drift.levels_between(r_t - LEVEL_KEEP_S, r_t - 20.0):
+            e_track = math.hypot(re_ - oe, rn - on)
+            s_age = sigma_at(t_s - t_o, hp.horizons_s, sig)
+            if e_track < s_side:
+                continue  # the track has not left that level by more than its own noise
+            e_new = math.hypot(b[0] - oe, b[1] - on)
+            if e_new <= e_track / 2.0 and e_new <= hp.exit_sigmas * s_age:
+                return t_o
+        return None
 
     # -------------------------------------------------------------- outcomes
 
@@ -665,15 +748,18 @@ class RoverIsolator:
             t.drift,
         )
 
-    def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests) -> None:
-        """Bookkeeping for a fix passed on as it is: the run of replacements ends."""
+    def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests,
+                  learn: bool = True) -> None:
+        """Bookkeeping for a fix passed on as it is: the run of replacements ends; ``learn``:
+        the gates learn from it (not while the drift test warns)."""
         self._consec = 0
+        self._stepped_back = False
         self._coast_since = None
-        if t.doppler_res is not None and len(self._acc_hist) == self.p.window:
+        if learn and t.doppler_res is not None and len(self._acc_hist) == self.p.window:
             self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, self._ewma)
         d = self._disp
         self._acc_hist.append((z[0], z[1], d[0], d[1]))
-        if t.pred is not None:
+        if learn and t.pred is not None:
             self._learn_spread(z, t.pred, t.res_u is not None)
 
     def _accept(

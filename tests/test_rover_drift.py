@@ -4,13 +4,15 @@ synthetic Doppler-free series with known noise (seeded)."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from fdi.drift import DriftTest, calibrate, sigma_at
+from fdi.drift import DriftTest, calibrate, concave_cap, sigma_at
 from fdi.errors import ConfigError
 from fdi.level import HoldParams, LevelHold
+from fdi.rover import FixInput, RoverDetectorParams, RoverIsolator
 
 H = (1.0, 3.0, 10.0, 30.0, 100.0)
 SIG = (0.07, 0.1, 0.16, 0.27, 0.35)
@@ -154,3 +156,81 @@ def test_hold_after_a_frozen_stretch_trusts_the_live_receiver() -> None:
     assert "exit" not in frozen
     live = _hold_run(hold, [(6.0, 0.0)] * 30, 15.0, 0.1)
     assert "exit" in live
+
+
+def test_hold_passes_the_live_receiver_on_at_once_after_a_freeze() -> None:
+    """Never worse than doing nothing: the first fresh fix after a frozen stretch is passed on
+    (``raw``) while the evidence to end the hold builds up, not the void-Doppler track."""
+    for fresh, action in ((True, "raw"), (False, "track")):
+        hold = LevelHold(HP, 10.0, 9.0, (0.0, 0.0), (1.0, 0.0), stale_m=1.0)
+        # 6 m off the track, 12 sigma with the frozen stretch's 0.5 m: not agreeing with it.
+        step = hold.step(10.1, (6.0, 0.0), (1.0, 0.0), (0.0, 0.0), False, 0.1, fresh=fresh)
+        assert step.action == action and step.g > HP.exit_sigmas
+
+
+def test_hold_after_a_step_back_passes_the_consistent_receiver_on() -> None:
+    hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), prefer_raw=True, slow=False)
+    assert set(_hold_run(hold, [(6.0, 0.0)] * 20, 100.0, 0.1)) == {"raw"}
+    jumpy = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), prefer_raw=True, slow=False)
+    acts = _hold_run(jumpy, [(6.0 + 2.0 * (j % 2), 0.0) for j in range(20)], 100.0, 0.1)
+    assert "track" in acts  # not consistent with its own Doppler: the track
+    plain = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), slow=False)
+    assert set(_hold_run(plain, [(6.0, 0.0)] * 20, 100.0, 0.1)) == {"track"}
+
+
+def test_slow_hold_ends_when_the_receiver_is_consistent_for_30_s() -> None:
+    hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0))
+    acts = _hold_run(hold, [(6.0, 0.0)] * 400, 100.0, 0.1)
+    assert "consistent" in acts
+    assert 295 <= acts.index("consistent") <= 310  # CONSISTENT_S at 10 Hz
+    # A receiver still drifting (0.1 m/s) is not consistent with its own Doppler.
+    drifting = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0))
+    acts = _hold_run(drifting, [(6.0 + 0.01 * j, 0.0) for j in range(400)], 100.0, 0.1)
+    assert "consistent" not in acts
+
+
+def _isolator_run(ramp_mps: float, jump_at: int | None = None) -> list[tuple[object, ...]]:
+    """1 Hz, 2 m/s east, a wiggle of 2 cm; a ramp north from t = 200 s for 80 s that the tests
+    miss (under their gates), then the fixes step back to the truth; optionally a 1.5 m jump
+    at ``jump_at``. Returns (t, error of the fix, error of the output, decision) per epoch."""
+    p = replace(RoverDetectorParams(), drift_sigma_m=(0.1, 0.15, 0.25, 0.4, 0.6),
+                drift_calibrate_s=0.0, drift_warn_sigmas=0.0)
+    iso = RoverIsolator(p)
+    out: list[tuple[object, ...]] = []
+    for k in range(400):
+        t = float(k)
+        err_n = 0.02 * math.sin(0.3 * k) + (ramp_mps * (k - 199) if 200 <= k < 280 else 0.0)
+        if k == jump_at:
+            err_n += 1.5
+        z = (2.0 * t, err_n, 0.0)
+        d = iso.step(FixInput(t, z, 2.0, 90.0))
+        o = d.out_enu
+        out.append((t, abs(err_n), None if o is None else math.hypot(o[0] - 2.0 * t, o[1]), d))
+    return out
+
+
+def test_a_step_back_after_a_missed_ramp_passes_the_receiver_on() -> None:
+    run = _isolator_run(0.03)
+    ramp = [r for r in run if 200 <= r[0] < 280]
+    assert not any(r[3].fault for r in ramp)  # missed: the step back is what is tested here
+    first = run[280][3]
+    assert first.fault and "step_back" in first.reason
+    # Never worse than the receiver in the 10 s after the ramp's end.
+    for t, raw, o, _ in run[280:291]:
+        assert o is None or o <= raw + 1e-6, (t, raw, o)
+
+
+def test_a_jump_is_still_replaced_by_the_prediction() -> None:
+    run = _isolator_run(0.0, jump_at=150)
+    d = run[150][3]
+    assert d.fault and d.action == "replace" and "step_back" not in d.reason
+    assert run[150][2] is not None and run[150][2] < 0.2
+
+
+def test_concave_cap_bounds_long_horizons_by_the_shorter_ones() -> None:
+    """(D5): σ_H <= σ_h √(H/h); a long horizon inflated by pairs across faults is capped."""
+    capped = concave_cap(H, (0.1, 0.15, 0.27, 0.9, 1.8))
+    assert capped[:3] == (0.1, 0.15, 0.27)
+    assert capped[3] == pytest.approx(0.27 * math.sqrt(3.0))
+    assert capped[4] == pytest.approx(capped[3] * math.sqrt(100.0 / 30.0))
+    assert concave_cap(H, SIG) == SIG  # a consistent calibration is unchanged
