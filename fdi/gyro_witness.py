@@ -31,7 +31,9 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   line (without the farthest sample) within ``spread_ratio`` sigmas. Dismissed: the fast CUSUM
   back at 0 and the slow one under ``slow_h / 4``, or ``max_suspect_s`` elapsed.
 * Noise burst: the trimmed short scale of the innovation's first differences
-  (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` sigmas resets the CUSUMs.
+  (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` sigmas resets the CUSUMs,
+  unless the last three innovations are one level beyond ``jump_sigmas`` sigmas and 3
+  short-scale sigmas (same side, within 2.5 sigma of a difference of each other): a step.
 * At a confirmation the output loop's corrections since the change began are undone.
 * Recovery: ``|nu| <= max(recover_gate, 3 sigma)`` for ``recover_samples`` periods with the
   compass alive (not repeating; the caller says so) and their mean within ``recover_gate``
@@ -144,6 +146,7 @@ class GyroWitness:
         self._suspect_k = 0
         self.confirmed_fast = False  # the last confirmation came from the fast CUSUM
         self._nu_prev: float | None = None
+        self._x_last: deque[float] = deque(maxlen=3)  # normalised innovations (burst test)
         self._ref_n = 0
         # Page's change-time estimate: the last step at which each CUSUM side was 0, and the
         # output loop's corrections since, undone at a confirmation.
@@ -225,10 +228,23 @@ class GyroWitness:
         xs = max(-p.slow_clip, min(p.slow_clip, x))
         self.gs_pos = max(0.0, self.gs_pos + xs - p.slow_kappa)
         self.gs_neg = max(0.0, self.gs_neg - xs - p.slow_kappa)
+        self._x_last.append(x)
         ss = self.short.sigma
         if self.short.full and ss > p.burst_ratio * sigma:
-            burst = True  # the compass is noisy, not biased
-            self.clear()
+            burst = True  # the compass is noisy, not biased ...
+            # ... unless the last 3 innovations are one level beyond the jump test and 3
+            # short-scale (the burst's) sigmas, on the same side and within the noise of each
+            # other (2.5 sigma of a difference): a step after a chance run of large
+            # differences (a 10 deg step once waited 2 more samples; against sigma alone, 3 deg
+            # bursts that dwelt on one side confirmed; 4 short sigmas delayed 10 deg steps at
+            # 1 deg noise)
+            xs3 = self._x_last
+            lo = min(abs(v) for v in xs3) if len(xs3) == 3 else 0.0
+            level = (lo >= p.jump_sigmas and lo * sigma >= 3.0 * ss
+                     and (min(xs3) > 0.0 or max(xs3) < 0.0)
+                     and max(xs3) - min(xs3) <= 2.5 * math.sqrt(2.0))
+            if not level:
+                self.clear()
         fast = max(self.g_pos, self.g_neg)
         slow = max(self.gs_pos, self.gs_neg)
         level = max(fast / p.h, slow / p.slow_h)
