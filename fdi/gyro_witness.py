@@ -240,10 +240,10 @@ class GyroWitness:
             # 1 deg noise)
             xs3 = self._x_last
             lo = min(abs(v) for v in xs3) if len(xs3) == 3 else 0.0
-            level = (lo >= p.jump_sigmas and lo * sigma >= 3.0 * ss
-                     and (min(xs3) > 0.0 or max(xs3) < 0.0)
-                     and max(xs3) - min(xs3) <= 2.5 * math.sqrt(2.0))
-            if not level:
+            a_step = (lo >= p.jump_sigmas and lo * sigma >= 3.0 * ss
+                      and (min(xs3) > 0.0 or max(xs3) < 0.0)
+                      and max(xs3) - min(xs3) <= 2.5 * math.sqrt(2.0))
+            if not a_step:
                 self.clear()
         fast = max(self.g_pos, self.g_neg)
         slow = max(self.gs_pos, self.gs_neg)
