@@ -2,7 +2,8 @@
 
 Every scenario runs the same :class:`~firmware_host.rov.control.RovController` step-locked on the
 simulated vehicle (:func:`~firmware_host.devtools.rov_experiment.run_experiment`), with the yaw
-gyro fed in-process or not. Per criterion the WORST seed is kept (and which seed it was).
+gyro fed in-process or not, and the heading hold set up for the plant's thrusters
+(:data:`PLANT_PID`). Per criterion the WORST seed is kept (and which seed it was).
 
 Scenarios, per seed (onsets after the 20 s warm-up):
 
@@ -53,10 +54,28 @@ GOALS: dict[str, tuple[str, float]] = {
 INF = float("inf")
 
 
-def plant_config(cfg: RovConfig, plant: Plant, noise_deg: float | None = None) -> RovConfig:
-    """``cfg`` on ``plant`` with its harness compass noise (or ``noise_deg``)."""
+# The heading hold configured for each simulated vehicle, as a field engineer sets it up for
+# the thrusters fitted (ArduSub: MOT_THST_EXPO, MOT_SPIN_MIN): the nonlinear plant's thrusters
+# give thrust ~ c|c| outside a 3 % dead band, so the PID asks for thrust through that curve's
+# inverse, and its gains are the Nomoto ones x 0.25 (1 deg/s per % thrust x 0.85 for the
+# reversed thruster, against the Nomoto plant's 0.2 deg/s per %). No fault, seeds 101-110,
+# worst |heading error| 20-200 s: 2.10 deg with the Nomoto gains on the raw command, 1.03
+# with these (x 0.35: 1.04).
+PLANT_PID: dict[str, dict[str, float]] = {
+    "nomoto": {},
+    "nonlinear": {"thrust_dead_band_pct": 3.0, "thrust_expo": 1.0,
+                  "kp": 0.75, "ki": 0.075, "kd": 0.5},
+}
+
+
+def plant_config(cfg: RovConfig, plant: Plant, noise_deg: float | None = None,
+                 vehicle_pid: bool = True) -> RovConfig:
+    """``cfg`` on ``plant`` with its harness compass noise (or ``noise_deg``) and, with
+    ``vehicle_pid``, the heading hold set up for that plant's thrusters (:data:`PLANT_PID`;
+    False: ``cfg``'s PID as it is)."""
     n = PLANT_NOISE_DEG[plant] if noise_deg is None else noise_deg
-    return replace(cfg, sim=replace(cfg.sim, plant=plant, compass_noise_deg=n))
+    pid = replace(cfg.pid, **PLANT_PID[plant]) if vehicle_pid else cfg.pid
+    return replace(cfg, sim=replace(cfg.sim, plant=plant, compass_noise_deg=n), pid=pid)
 
 
 def _err(e: dict[str, Any]) -> float:
@@ -181,11 +200,12 @@ def measure(
     return {k: v.as_dict() for k, v in w.items() if v.runs}
 
 
-def hold_floor(cfg: RovConfig, plant: Plant, seeds: Sequence[int], *, gyro: bool
-               ) -> dict[str, Any]:
+def hold_floor(cfg: RovConfig, plant: Plant, seeds: Sequence[int], *, gyro: bool,
+               vehicle_pid: bool = True) -> dict[str, Any]:
     """No fault: the worst |heading error| after 25 s over 100 s (what the plant and the PID
-    achieve with a healthy compass: the floor under the "heading error" criteria)."""
-    c = plant_config(cfg, plant)
+    achieve with a healthy compass: the floor under the "heading error" criteria);
+    ``vehicle_pid`` as in :func:`plant_config`."""
+    c = plant_config(cfg, plant, vehicle_pid=vehicle_pid)
     w = Worst()
     for seed in seeds:
         ep = run_experiment(c, [], 100.0, ft=True, seed=seed, gyro=gyro)
