@@ -24,6 +24,8 @@ SHORTFALL: dict[tuple[str, str], tuple[float, str]] = {
     # noise, 20 s of warm-up: ~0.02 deg/s, up to 0.05) until the offset is learned (10 s),
     # and the hold itself is 1.3 deg with no fault on this plant (hold floor below).
     ("nonlinear", "step.err_after_deg"): (2.4, "dead reckoning 10 s + hold floor 1.3 deg"),
+    # Beyond the same seed's no-fault run: 1.62 deg on seed 6 drift:20@35 (0.97 on 101-120).
+    ("nonlinear", "step.err_excess_deg"): (1.7, "10 s of dead reckoning before the offset"),
     # A ramp's compass cannot anchor the heading: 60 s of gyro dead reckoning (was 2.86 with
     # the PID on the raw command; 3.30 -> 3.51 on seeds 101-120, never met there).
     ("nonlinear", "ramp.err_after_deg"): (3.3, "60 s of dead reckoning on the gyro bias"),
