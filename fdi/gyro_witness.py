@@ -22,8 +22,8 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   frozen while a fault is suspected. Two two-sided CUSUMs (Page), each clipped,
   ``g+ = max(0, g+ + min(s, clip) - kappa)`` and the mirror ``g-``: a fast one (``kappa``,
   ``clip``, ``h``) for a level of several sigmas, and a slow one (``slow_*``) for a small level
-  or a ramp. Since ``h > 3 (clip - kappa)`` (likewise for the slow one), a spike of 1 to 3
-  samples cannot confirm, whatever its size.
+  or a ramp. Since ``h > 3 (clip - kappa)``
+  (likewise for the slow one), a spike of 1 to 3 samples cannot confirm, whatever its size.
 * Suspect (the loops, the bias and sigma frozen; ``psi`` is gyro dead reckoning): fast CUSUM
   above ``h_suspect``, slow above ``slow_h / 2``, or ``|s| >= jump_sigmas``. Confirmed: either
   reaches its ``h`` and the innovations since the change began (Page's estimate: the last step
@@ -31,12 +31,18 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   line (without the farthest sample) within ``spread_ratio`` sigmas. Dismissed: the fast CUSUM
   back at 0 and the slow one under ``slow_h / 4``, or ``max_suspect_s`` elapsed.
 * Noise burst: the trimmed short scale of the innovation's first differences
-  (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` sigmas resets the CUSUMs.
+  (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` sigmas resets the CUSUMs,
+  unless the last three innovations are one level beyond ``jump_sigmas`` sigmas and 3
+  short-scale sigmas (same side, within 2.5 sigma of a difference of each other): a step.
 * At a confirmation the output loop's corrections since the change began are undone.
 * Recovery: ``|nu| <= max(recover_gate, 3 sigma)`` for ``recover_samples`` periods with the
   compass alive (not repeating; the caller says so) and their mean within ``recover_gate``
   (a slow drift passing near the dead reckoning is not taken back); both headings are then
   re-aligned to the compass by that mean.
+
+* Offset compensation (``comp_samples`` > 0) after a step confirmed by the fast CUSUM: the
+  compass minus its offset, once the offset is known to be a level, steers ``psi`` again
+  (:meth:`GyroWitness._compensate`), so that the dead reckoning's drift stays bounded.
 
 The heading to use is ``psi`` at every step: the filtered compass when it is trusted, the gyro
 dead reckoning from the last trusted state when it is not, so switching is bumpless.
@@ -95,6 +101,8 @@ class WitnessParams:
     warmup_samples: int = 100
     recover_gate_deg: float = 1.5
     recover_samples: int = 10
+    comp_samples: int = 50  # after a step's confirmation: the offset learned over this many
+    comp_max_slope_dps: float = 0.25  # ... if a level (slope within this); 0 samples: off
 
 
 @dataclass(frozen=True)
@@ -144,11 +152,18 @@ class GyroWitness:
         self._suspect_k = 0
         self.confirmed_fast = False  # the last confirmation came from the fast CUSUM
         self._nu_prev: float | None = None
+        self._x_last: deque[float] = deque(maxlen=3)  # normalised innovations (burst test)
         self._ref_n = 0
         # Page's change-time estimate: the last step at which each CUSUM side was 0, and the
         # output loop's corrections since, undone at a confirmation.
         self._zero_at = [0, 0, 0, 0]  # fast +, fast -, slow +, slow -
         self._corr: deque[tuple[int, float]] = deque(maxlen=600)
+        # Offset compensation after a step: (t, nu_o) since the confirmation, the offset once
+        # learned, whether this fault may be compensated, and the CUSUMs that watch it.
+        self._comp: list[tuple[float, float]] = []
+        self.offset: float | None = None
+        self._comp_ok = False
+        self._gc = [0.0, 0.0]
 
     @property
     def ready(self) -> bool:
@@ -218,6 +233,10 @@ class GyroWitness:
                 self.psi_t += sum(b for _, b in self._agree) / n_ok
                 self._agree.clear()
                 recovered = True
+            if not recovered and self._comp_ok:
+                self._compensate(nu_o, nu, sigma)
+            elif recovered:
+                self._end_comp()
             return WitnessStep(self.psi, nu, 0.0, sigma, self.suspect, False, False, recovered,
                                False)
         self.g_pos = max(0.0, self.g_pos + s - p.kappa)
@@ -225,10 +244,23 @@ class GyroWitness:
         xs = max(-p.slow_clip, min(p.slow_clip, x))
         self.gs_pos = max(0.0, self.gs_pos + xs - p.slow_kappa)
         self.gs_neg = max(0.0, self.gs_neg - xs - p.slow_kappa)
+        self._x_last.append(x)
         ss = self.short.sigma
         if self.short.full and ss > p.burst_ratio * sigma:
-            burst = True  # the compass is noisy, not biased
-            self.clear()
+            burst = True  # the compass is noisy, not biased ...
+            # ... unless the last 3 innovations are one level beyond the jump test and 3
+            # short-scale (the burst's) sigmas, on the same side and within the noise of each
+            # other (2.5 sigma of a difference): a step after a chance run of large
+            # differences (a 10 deg step once waited 2 more samples; against sigma alone, 3 deg
+            # bursts that dwelt on one side confirmed; 4 short sigmas delayed 10 deg steps at
+            # 1 deg noise)
+            xs3 = self._x_last
+            lo = min(abs(v) for v in xs3) if len(xs3) == 3 else 0.0
+            a_step = (lo >= p.jump_sigmas and lo * sigma >= 3.0 * ss
+                      and (min(xs3) > 0.0 or max(xs3) < 0.0)
+                      and max(xs3) - min(xs3) <= 2.5 * math.sqrt(2.0))
+            if not a_step:
+                self.clear()
         fast = max(self.g_pos, self.g_neg)
         slow = max(self.gs_pos, self.gs_neg)
         level = max(fast / p.h, slow / p.slow_h)
@@ -244,6 +276,8 @@ class GyroWitness:
             self.suspect = True
             self._agree.clear()
             self._rollback()
+            self._end_comp()
+            self._comp_ok = p.comp_samples > 0 and self.confirmed_fast
         elif was and self.k - self._suspect_k > p.max_suspect_s / dt:
             # A suspect that neither confirms nor fades within max_suspect_s is a steady offset
             # that the frozen loops cannot follow (their own dead-reckoning drift): dismissed.
@@ -349,8 +383,68 @@ class GyroWitness:
               (self.gs_pos / p.slow_h, 2), (self.gs_neg / p.slow_h, 3))
         return max(gs)[1]
 
+    def _end_comp(self) -> None:
+        self._comp.clear()
+        self.offset = None
+        self._comp_ok = False
+        self._gc = [0.0, 0.0]
+
+    def _compensate(self, nu_o: float, nu: float, sigma: float) -> None:
+        """A confirmed step (fast CUSUM): a compass off by a constant still carries the
+        heading's changes, and the gyro dead reckoning drifts by the bias estimate's error
+        (0.05 deg/s made 3 deg in the minute after a step 3 s after the warm-up). Over
+        ``comp_samples`` after the confirmation the innovation ``nu_o`` is fitted with a line
+        (again without the samples beyond 3 sigma of it: compass outliers):
+        if its slope is within ``comp_max_slope_dps`` (a level; its slope is the dead
+        reckoning's drift) and its spread within ``spread_ratio`` sigmas, the offset is the
+        line at the confirmation, and from then on the compass minus the offset steers the
+        output heading as a healthy compass does (the heading loop, ``heading_tau_s``). A jump
+        (``jump_sigmas``) of the compensated innovation is not used, and a slow CUSUM on it
+        (``slow_*``) ends the compensation for this fault (a ramp, or the compass healing:
+        the recovery test then takes it back)."""
+        p = self.p
+        assert self.psi is not None
+        if self.offset is None:
+            self._comp.append((self.t, nu_o))
+            if len(self._comp) < p.comp_samples:
+                return
+            t_first = self._comp[0][0]
+            pts = self._comp
+            for _ in range(2):  # the line, then again without the outliers (> 3 sigma)
+                n = len(pts)
+                mt = sum(t for t, _ in pts) / n
+                mx = sum(x for _, x in pts) / n
+                stt = sum((t - mt) ** 2 for t, _ in pts)
+                slope = sum((t - mt) * (x - mx) for t, x in pts) / stt
+                res = [x - mx - slope * (t - mt) for t, x in pts]
+                sd = math.sqrt(sum(e * e for e in res) / (n - 2))
+                kept = [q for q, e in zip(pts, res, strict=True) if abs(e) <= 3.0 * sigma]
+                if len(kept) < max(4, len(pts) // 2):
+                    break
+                pts = kept
+            if abs(slope) <= p.comp_max_slope_dps and sd <= p.spread_ratio * sigma:
+                self.offset = mx + slope * (t_first - mt)
+            else:
+                self._comp_ok = False  # not a level: dead reckoning for this fault
+            self._comp.clear()
+            return
+        x = (nu_o - self.offset) / sigma
+        xs_ = max(-p.slow_clip, min(p.slow_clip, x))
+        self._gc[0] = max(0.0, self._gc[0] + xs_ - p.slow_kappa)
+        self._gc[1] = max(0.0, self._gc[1] - xs_ - p.slow_kappa)
+        if max(self._gc) >= p.slow_h:
+            self._end_comp()
+            return
+        if abs(x) >= p.jump_sigmas:
+            return
+        c = max(-p.clip * sigma, min(p.clip * sigma, nu_o - self.offset))
+        a = self._dt / p.heading_tau_s
+        self.psi += a * c
+        self.psi_t += a * c
+
     def force_fault(self, samples_back: int) -> None:
         """A fault found by another test (a stuck compass) that began ``samples_back`` ago."""
+        self._end_comp()
         self.fault = self.suspect = True
         self.var.frozen = True
         self._agree.clear()

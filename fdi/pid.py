@@ -28,10 +28,32 @@ class PidConfig:
         "ge": 0.0, "doc": "integrate only while |error| < this (0: always)"})
     out_min: float = -100.0
     out_max: float = 100.0
+    # The thrusters' curve, inverted so that the PID's output is thrust, not command (what
+    # ArduSub's MOT_THST_EXPO and MOT_SPIN_MIN do): thrust fraction T = (1 - e) x + e x^2 of
+    # x = (|c| - db) / (100 - db) outside the dead band db. 0 and 0: the identity (a linear
+    # thruster, the Nomoto plant's and the paper's).
+    thrust_dead_band_pct: float = field(default=0.0, metadata={
+        "ge": 0.0, "lt": 100.0, "doc": "thruster dead band to step over (% command)"})
+    thrust_expo: float = field(default=0.0, metadata={
+        "ge": 0.0, "le": 1.0, "doc": "thrust curve: 0 linear, 1 quadratic (c|c|)"})
 
     def __post_init__(self) -> None:
         if self.out_min >= self.out_max:
             raise ValueError("out_min must be < out_max")
+
+
+def thrust_to_command(cfg: PidConfig, thrust_pct: float) -> float:
+    """The command (%) that gives ``thrust_pct`` (% of full) on the configured curve
+    (T = (1 - e) x + e x^2 solved for x >= 0, then c = db + (100 - db) x; the identity when
+    both are 0)."""
+    db, e = cfg.thrust_dead_band_pct, cfg.thrust_expo
+    if db == 0.0 and e == 0.0:
+        return thrust_pct
+    t = min(abs(thrust_pct), 100.0) / 100.0
+    if t <= 1e-9:
+        return 0.0
+    x = t if e <= 1e-9 else (-(1.0 - e) + math.sqrt((1.0 - e) ** 2 + 4.0 * e * t)) / (2.0 * e)
+    return math.copysign(db + (100.0 - db) * x, thrust_pct)
 
 
 class HeadingPid:

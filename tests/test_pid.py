@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from fdi.pid import HeadingPid, PidConfig
+from fdi.pid import HeadingPid, PidConfig, thrust_to_command
+from firmware_host.devtools.rov_sim import NonlinearRovPlant
+from firmware_host.rov.config import SimConfig
 
 
 def test_error_is_wrapped_across_north() -> None:
@@ -46,3 +48,20 @@ def test_derivative_on_measurement_damps_turn() -> None:
     pid.update(0.0, 0.0, 0.2)
     assert pid.update(0.0, 2.0, 0.2) == pytest.approx(-10.0)  # 10 deg/s turning right
     assert pid.update(50.0, 2.0, 0.2) == pytest.approx(0.0)  # setpoint change: no kick
+
+
+def test_thrust_curve_inverse() -> None:
+    """The PID asks for thrust; the command steps over the dead band and inverts c|c|, so the
+    nonlinear plant's own thrust curve gives back what was asked (identity by default)."""
+    assert thrust_to_command(PidConfig(), 7.5) == 7.5
+    cfg = PidConfig(thrust_dead_band_pct=3.0, thrust_expo=1.0)
+    plant = NonlinearRovPlant(SimConfig(plant="nonlinear", dead_band_pct=3.0))
+    assert thrust_to_command(cfg, 0.0) == 0.0
+    for t in (0.01, 1.0, 12.5, 50.0, 100.0):
+        c = thrust_to_command(cfg, t)
+        assert 3.0 < c <= 100.0
+        assert plant.thrust(c) == pytest.approx(t, rel=1e-9)
+        assert thrust_to_command(cfg, -t) == -c
+    half = PidConfig(thrust_expo=0.5)  # T = 0.5 x + 0.5 x^2
+    x = thrust_to_command(half, 37.5) / 100.0
+    assert 0.5 * x + 0.5 * x * x == pytest.approx(0.375)

@@ -20,13 +20,15 @@ QUICK = ("step", "ramp", "ramp_slow", "stuck", "spike", "burst")
 
 # SHORTFALLS (measured, seeds 1-10; docs/rov.md): the bound asserted instead of the goal.
 SHORTFALL: dict[tuple[str, str], tuple[float, str]] = {
-    # A step right after the warm-up on seed 7 (drift:10@26): the short noise scale flagged a
-    # burst at the step, resetting the CUSUM; confirmed 1 sample late.
-    ("nomoto", "step.delay_samples"): (6.0, "burst flag at the step"),
-    ("nonlinear", "step.delay_samples"): (6.0, "burst flag at the step"),
-    # The plant and the PID alone (no fault) reach 2.9 deg on this plant after 25 s (hold
-    # floor below): dead band and c|c| thrust after the start turn; not the FDI's error.
-    ("nonlinear", "step.err_after_deg"): (3.7, "hold floor 2.9 deg without any fault"),
+    # After a step the gyro dead reckoning drifts by the bias estimate's error (1 deg compass
+    # noise, 20 s of warm-up: ~0.02 deg/s, up to 0.05) until the offset is learned (10 s),
+    # and the hold itself is 1.3 deg with no fault on this plant (hold floor below).
+    ("nonlinear", "step.err_after_deg"): (2.4, "dead reckoning 10 s + hold floor 1.3 deg"),
+    # Beyond the same seed's no-fault run: 1.62 deg on seed 6 drift:20@35 (0.97 on 101-120).
+    ("nonlinear", "step.err_excess_deg"): (1.7, "10 s of dead reckoning before the offset"),
+    # A ramp's compass cannot anchor the heading: 60 s of gyro dead reckoning (was 2.86 with
+    # the PID on the raw command; 3.30 -> 3.51 on seeds 101-120, never met there).
+    ("nonlinear", "ramp.err_after_deg"): (3.3, "60 s of dead reckoning on the gyro bias"),
     # 1 deg compass noise and a 20 s warm-up leave the gyro bias known to ~0.02 deg/s (1
     # sigma): a 0.1 deg/s drift from 40 s is not separable in 60 s on every seed.
     ("nonlinear", "ramp_slow.delay_s"): (float("inf"), "bias known to ~0.02 deg/s at 40 s"),
@@ -86,7 +88,10 @@ def test_without_gyro_stuck_is_taken_back_and_spikes_bursts_pass(cfg: RovConfig,
 
 
 def test_hold_floor_is_what_the_shortfall_says(cfg: RovConfig) -> None:
-    """The nonlinear plant's no-fault heading error, the reason given above."""
+    """The nonlinear plant's no-fault heading error, the reason given above: through the
+    thrust-curve inverse (the harness's vehicle PID) and, for comparison, on the raw command."""
     floor = hold_floor(cfg, "nonlinear", SEEDS, gyro=True)["worst"]
-    assert 2.0 < floor < 3.5
+    assert 0.5 < floor < 1.5
+    raw = hold_floor(cfg, "nonlinear", SEEDS, gyro=True, vehicle_pid=False)["worst"]
+    assert 2.0 < raw < 3.5
     assert hold_floor(cfg, "nomoto", SEEDS, gyro=True)["worst"] < 0.5

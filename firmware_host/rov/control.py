@@ -13,7 +13,7 @@ from typing import Any
 from drivers.outland.link import NEUTRAL, ThrusterCommand
 from drivers.ratelog import RateLimitedLog
 from fdi.heading_ft import FaultTolerantHeading, HeadingDecision
-from fdi.pid import HeadingPid
+from fdi.pid import HeadingPid, thrust_to_command
 from firmware_host.rov.config import RovConfig
 
 log = logging.getLogger(__name__)
@@ -47,6 +47,8 @@ class RovController:
         than the protocol's ``max_rate``); it opens a suspect at once, so this sample is not
         steered on (:meth:`fdi.heading_ft.FaultTolerantHeading.step`).
         """
+        # The FIR's input is the thrust the last command gave (the command itself unless a
+        # thrust curve is configured): then its model of thrust -> heading is the linear one.
         dec = self.heading.step(self.command.yaw_pct, heading_meas, yaw_rate_dps, dt,
                                 heading_suspect=heading_suspect)
         if heading_meas is None:
@@ -65,7 +67,9 @@ class RovController:
         else:
             self._since_telemetry = 0.0
             assert dec.heading_used is not None
-            u = self.pid.update(self.setpoint_deg, dec.heading_used, dt)
+            # the PID asks for thrust; the configured curve's inverse gives the command
+            u = thrust_to_command(self.cfg.pid,
+                                  self.pid.update(self.setpoint_deg, dec.heading_used, dt))
             s = self.cfg.surge_pct
             cmd = ThrusterCommand(min(max(s + u, -100.0), 100.0), min(max(s - u, -100.0), 100.0))
             self._last_safe = cmd
