@@ -1,7 +1,8 @@
 """The live INS/GNSS vehicle end to end: a simulated autopilot writes real MAVLink IMU packets to
 one pty and NMEA to another (firmware_host/devtools/insgnss_live.py), the vehicle runs on the
 Runner and writes epochs.jsonl / summary.json. Runs are shortened (150 of the paper's 501
-epochs) and played 50x faster than real time to keep the wall time modest."""
+epochs) and played 50x faster than real time to keep the wall time modest; the full-length
+numbers (all six scenario/seed pairs) are measured in docs/insgnss-live.md."""
 
 from __future__ import annotations
 
@@ -13,11 +14,13 @@ import numpy as np
 import pytest
 
 from drivers.mavlink.io import MavEndpoint
+from firmware_host.cli import main
 from firmware_host.commands.launch import vehicle_from_file
 from firmware_host.devtools import insgnss_sim as sim
 from firmware_host.devtools.insgnss_live import (
     LinkImpairment,
     LiveRun,
+    compare,
     offline_aligned,
     rms,
     run_live,
@@ -28,11 +31,11 @@ from firmware_host.runtime.config import CONFIG_DIR, load_bridge_file
 EPOCHS = 150
 
 
-def _setup() -> sim.InsGnssSetup:
+def _setup(rest_s: int = 0, epochs: int = EPOCHS) -> sim.InsGnssSetup:
     setup = sim.load_setup(None)  # the paper preset, as `sim insgnss` by default
     # paper-random keeps the paper's density of faults: 100 in 500 epochs
-    return replace(setup, sim=replace(setup.sim, epochs=EPOCHS,
-                                      random_faults=round(100 * (EPOCHS - 1) / 500)))
+    return replace(setup, sim=replace(setup.sim, epochs=epochs, rest_s=rest_s,
+                                      random_faults=round(100 * (epochs - 1) / 500)))
 
 
 def _check_records(lr: LiveRun) -> None:
@@ -50,17 +53,36 @@ def _check_records(lr: LiveRun) -> None:
     assert summary["ins"]["refused"] == ""
 
 
-@pytest.mark.parametrize("scenario,seed", [("paper-single", 1), ("paper-single", 2),
-                                           ("paper-random", 1), ("paper-random", 3)])
+@pytest.mark.parametrize("scenario,seed", [("paper-single", 1), ("paper-random", 3)])
+def test_live_vehicle_within_10_percent_of_sim_insgnss(scenario: sim.Scenario, seed: int,
+                                                       tmp_path: Path) -> None:
+    """The done-means of issue 12 at full length (the paper's 501 epochs) on two of the six
+    pairs (docs/insgnss-live.md has all six and more seeds; the worst, paper-random seed 1, is
+    at 1.10): the scenario starts like a real vehicle (120 s at rest, a 20 s take-off roll,
+    then the paper's flight) in both runs; the live vehicle aligns itself at rest (levelling,
+    gyrocompassing, ZUPTs) and its 3-D position RMS over the paper's epochs is within 10 % of
+    ``sim insgnss`` on the same seed (the offline filter started from the truth, with the
+    same ZUPTs at rest), below "none" by the same factor within 10 %."""
+    c = compare(_setup(rest_s=120, epochs=501), scenario, seed, tmp_path)
+    ins = c.run.summary["ins"]
+    assert ins["alignment"]["method"] == "gyrocompass"
+    assert ins["zupts"] > 50  # at rest after the alignment
+    assert c.live_epochs == c.offline_epochs == 500  # every paper epoch by the INS
+    assert 0.9 <= c.ratio <= 1.1, c.row()
+    assert 0.9 <= c.factor_live / c.factor_offline <= 1.1, c.row()
+
+
+@pytest.mark.parametrize("scenario,seed", [("paper-single", 2), ("paper-random", 1)])
 def test_live_vehicle_is_the_offline_filter(scenario: sim.Scenario, seed: int,
                                             tmp_path: Path) -> None:
-    """Over real ptys the live vehicle gives the offline filter's result on the same data with
-    the same alignment (its timing, ordering and time mapping add nothing), and the gate beats
-    no gate by far."""
+    """Aligned in flight (no rest: heading from the GNSS course), over real ptys the live
+    vehicle gives the offline filter's result on the same data with the same alignment (its
+    timing, ordering and time mapping add nothing), and the gate beats no gate by far."""
     setup = _setup()
     data = sim.generate(setup, scenario, seed)
     lr = run_live(setup, data, tmp_path, seed=seed)
     _check_records(lr)
+    assert lr.summary["ins"]["alignment"]["method"] == "gnss course"
     j0 = int(lr.epochs[0]) - 1  # the alignment epoch
     ref = offline_aligned(data, setup.filter, j0)
     none = offline_aligned(data, setup.filter, j0, "none")
@@ -164,9 +186,73 @@ def test_gps_input_carries_the_filter_covariance(tmp_path: Path) -> None:
         assert g.horiz_accuracy == pytest.approx(r["ins"]["acc_h_m"], rel=1e-5)
         assert g.vert_accuracy == pytest.approx(r["ins"]["acc_v_m"], rel=1e-5)
         la, lo, _ = r["ins"]["lla"]
-        assert g.lat == round(la * 1e7) and g.lon == round(lo * 1e7)
+        # the record keeps 9 decimals, GPS_INPUT 1e-7 deg of the unrounded value
+        assert abs(g.lat - la * 1e7) <= 0.51 and abs(g.lon - lo * 1e7) <= 0.51
     replaced = [g.horiz_accuracy for r, g in pairs if "replace" in r["ins"]["actions"][:2]]
     accepted = [g.horiz_accuracy for r, g in pairs if r["ins"]["actions"][:2] == ["accept"] * 2]
     assert replaced and accepted
     # sqrt(P⁻ + R) against sqrt(P⁺) (the first epochs after the alignment have a large P⁺)
     assert min(replaced) > 2.0 * float(np.median(accepted))
+
+
+def _replay_config(tmp_path: Path) -> Path:
+    """The file the simulated session ran with (run_live: the paper preset, the rover's
+    defaults, HIGHRES_IMU); the ports are never opened by a replay."""
+    cfg = tmp_path / "live.toml"
+    cfg.write_text((CONFIG_DIR / "insgnss-paper.toml").read_text(encoding="utf-8")
+                   + '\n[rover]\n[rover.port]\nurl = "/dev/ttyUSB0"\ntimeout_s = 0.02\n'
+                   '[insgnss.live]\nimu_url = "/dev/ttyAMA1"\nimu_message = "HIGHRES_IMU"\n',
+                   encoding="utf-8")
+    return cfg
+
+
+def test_replay_of_the_recording_is_byte_for_byte(tmp_path: Path) -> None:
+    """``fdi-bridge run`` with the recorder on (over an impaired IMU link: drops, duplicates,
+    shuffled bursts), then ``fdi-bridge replay`` of its capture: the same epochs.jsonl, byte
+    for byte; with another filter strategy the records differ (the comparison can fail)."""
+    setup = replace(_setup(rest_s=40), sim=replace(_setup().sim, epochs=40, rest_s=40))
+    data = sim.generate(setup, "paper-single", 1)
+    lr = run_live(setup, data, tmp_path / "live", seed=1, record_dir=tmp_path / "rec",
+                  impair=LinkImpairment(drop=0.1, duplicate=0.01, burst_every_s=2.0,
+                                        shuffle_bursts=True))
+    assert lr.summary["ins"]["epochs"]["ins"] > 50 and lr.summary["ins"]["zupts"] > 0
+    (cap,) = sorted((tmp_path / "rec").glob("*.cap"))
+    cfg = _replay_config(tmp_path)
+    assert main(["replay", str(cap), "--config", str(cfg), "--out", str(tmp_path / "re")]) == 0
+    want = (tmp_path / "live" / "epochs.jsonl").read_bytes()
+    assert want.count(b"\n") == 100  # 60 s of lead-in and 40 paper epochs
+    assert (tmp_path / "re" / "epochs.jsonl").read_bytes() == want
+    s = json.loads((tmp_path / "re" / "summary.json").read_text(encoding="utf-8"))
+    assert s["vehicle"] == "insgnss"
+    for key in ("epochs", "imu", "aligned_at", "zupts"):
+        assert s["ins"][key] == lr.summary["ins"][key], key
+    other = tmp_path / "other.toml"
+    other.write_text(cfg.read_text(encoding="utf-8").replace(
+        'strategy = "three_zone"', 'strategy = "none"'), encoding="utf-8")
+    assert main(["replay", str(cap), "--config", str(other), "--out", str(tmp_path / "o")]) == 0
+    assert (tmp_path / "o" / "epochs.jsonl").read_bytes() != want
+
+
+def test_replay_needs_the_live_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    setup = replace(_setup(), sim=replace(_setup().sim, epochs=20))
+    data = sim.generate(setup, "clean", 1)
+    run_live(setup, data, tmp_path / "live", seed=1, record_dir=tmp_path / "rec")
+    (cap,) = sorted((tmp_path / "rec").glob("*.cap"))
+    assert main(["replay", str(cap), "--out", str(tmp_path / "re")]) == 1
+    assert "give --config" in capsys.readouterr().err
+
+
+def test_a_mems_gyro_does_not_gyrocompass(tmp_path: Path) -> None:
+    """The filter configured for a MEMS gyro (10 deg/h: the Earth's rate is 12.5 deg/h here)
+    does not take a heading from it at rest; it waits, and aligns by the GNSS course once in
+    steady flight (after the take-off roll's acceleration)."""
+    base = _setup()
+    mems = replace(base.filter, imu=replace(base.filter.imu, gyro_bias_deg_h=10.0))
+    setup = replace(base, filter=mems, sim=replace(base.sim, epochs=20, rest_s=40))
+    data = sim.generate(setup, "clean", 1)
+    lr = run_live(setup, data, tmp_path, seed=1)
+    ins = lr.summary["ins"]
+    assert ins["alignment"]["method"] == "gnss course"
+    assert ins["align_wait"]["at rest, the gyro cannot gyrocompass: heading from the course"] > 0
+    assert ins["aligned_at"] > 43200.0 - 20.0  # not before the take-off roll
+    assert ins["zupts"] == 0

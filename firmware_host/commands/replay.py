@@ -40,6 +40,8 @@ from firmware_host.runtime.config import BridgeConfig, load_config
 # An ROV recording (firmware_host.rov.vehicle's TICK and LINK channels) goes to the ROV's
 # replay, loaded only then (as the CLI loads a command): the rover's replay stays light.
 ROV_TICK, ROV_LINK_RX, ROV_REPLAY = "rov tick", "rov link rx", "firmware_host.rov.replay"
+# A live INS/GNSS recording (both inputs of firmware_host.insgnss.vehicle) likewise.
+INS_RX, INS_REPLAY = ("gps rx", "imu rx"), "firmware_host.insgnss.replay"
 _TIME_RE = re.compile(rb"^\$..(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
 
 
@@ -331,6 +333,11 @@ def run(args: argparse.Namespace) -> int:
         names = {c.name for c in CaptureReader(args.capture).channels}
         if {ROV_TICK, ROV_LINK_RX} <= names:
             return _print_rov(args, importlib.import_module(ROV_REPLAY).run(args))
+        if set(INS_RX) <= names:
+            ins = importlib.import_module(INS_REPLAY)
+            s = ins.run(args)
+            print(json.dumps(s) if args.json else ins.result_text(s, args.out))
+            return 0
         if ROV_LINK_RX in names:
             raise FdiBridgeError(f"{args.capture}: an ROV recording without step ticks (made "
                                  "before they were recorded): it cannot be replayed step by "

@@ -68,6 +68,7 @@ from fdi.insgnss import (
     measure_imu_rate,
 )
 from fdi.three_zone import Action
+from firmware_host.insgnss import align
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
 from firmware_host.rover.vehicle import rover_mavlink_spec
@@ -172,6 +173,14 @@ class InsGnssVehicle:
                               tuple[float, float] | None] | None = None
         self.kf: InsGnssFilter | None = None
         self.aligned_at: float | None = None
+        self.alignment: align.Alignment | None = None
+        self._last_f: np.ndarray | None = None  # the previous epoch's mean specific force
+        self._prev_t: float | None = None  # the previous epoch's time
+        self._rest_f = np.zeros(3)  # sums over the current rest (consecutive still epochs)
+        self._rest_w = np.zeros(3)
+        self._rest_n = 0
+        self._rest_t0: float | None = None
+        self.zupts = 0
         self.align_wait: Counter[str] = Counter()
         self.resets: Counter[str] = Counter()
         self.modes: Counter[str] = Counter()
@@ -392,30 +401,80 @@ class InsGnssVehicle:
     def _epoch(self, out: EpochOutcome, t_g: float) -> None:
         if self.kf is None:
             self._try_align(out, t_g)
+            self._prev_t = t_g
             return
         kf = self.kf
+        zupt = False
         try:
-            for t, s in self._take(t_g):
+            samples = self._take(t_g)
+            for t, s in samples:
                 if t <= kf.t_s:
                     self.stats.late += 1
                     continue
                 kf.propagate(t, s.gyro_rad_s, s.accel_m_s2)
                 self.stats.integrated += 1
+            still = self._stationary(out, [s for _, s in samples])
             enu = self._fix_enu(out)
             if enu is None:
                 kf.coast(t_g)
-                self._emit_ins(out, t_g, None)
-                return
-            self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
-            rep = kf.update(t_g, enu)
+                rep = None
+            else:
+                self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
+                rep = kf.update(t_g, enu)
+            if still and not kf.bias_active:
+                kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
+                self.zupts += 1
+                zupt = True
         except EstimatorError as err:
             self.resets[str(err).split(" ")[0] or "error"] += 1
             self.ratelog.warning("ins reset", f"{err}; realigning, rover detector meanwhile")
             self.kf = None
             self.aligned_at = None
+            self._rest_reset()
             self._emit_rover(out, t_g, "reset")
             return
-        self._emit_ins(out, t_g, rep)
+        finally:
+            self._prev_t = t_g
+        self._emit_ins(out, t_g, rep, zupt)
+
+    # ------------------------------------------------------------------ alignment
+
+    def _stationary(self, out: EpochOutcome, window: list[ImuSample]) -> bool:
+        """At rest over this epoch's interval: GNSS speed at most ``rest_max_speed_m_s``, no
+        rotation above ``align_max_gyro_deg_s``, ``|f|`` within ``align_max_accel_dev_m_s2``
+        of g and the mean specific force within ``rest_max_accel_m_s2`` of the previous
+        epoch's (a start is seen by the accelerometers before the GNSS speed)."""
+        lv = self.live
+        if not window:
+            self._last_f = None
+            return False
+        f_all = np.array([s.accel_m_s2 for s in window])
+        f = f_all.mean(axis=0)
+        last, self._last_f = self._last_f, f
+        speed = out.epoch.speed_mps
+        if speed is None or speed > lv.rest_max_speed_m_s or last is None:
+            return False
+        w = np.array([s.gyro_rad_s for s in window])
+        if float(np.max(np.linalg.norm(w, axis=1))) > lv.align_max_gyro_deg_s * DEG:
+            return False
+        if abs(float(np.linalg.norm(f)) - self.params.earth.g0) > lv.align_max_accel_dev_m_s2:
+            return False
+        return float(np.linalg.norm(f - last)) <= lv.rest_max_accel_m_s2
+
+    def _rest_reset(self) -> None:
+        self._rest_f = np.zeros(3)
+        self._rest_w = np.zeros(3)
+        self._rest_n = 0
+        self._rest_t0 = None
+
+    def _rest_add(self, window: list[ImuSample], t_g: float) -> float:
+        """Adds the epoch's samples to the current rest; returns its length (s)."""
+        if self._rest_t0 is None:
+            self._rest_t0 = self._prev_t if self._prev_t is not None else t_g
+        self._rest_f += np.sum([s.accel_m_s2 for s in window], axis=0)
+        self._rest_w += np.sum([s.gyro_rad_s for s in window], axis=0)
+        self._rest_n += len(window)
+        return t_g - self._rest_t0
 
     @staticmethod
     def _fix_enu(out: EpochOutcome) -> tuple[float, float, float] | None:
@@ -430,33 +489,59 @@ class InsGnssVehicle:
         lv = self.live
         samples = self._take(t_g)
         window = [s for t, s in samples if t >= t_g - lv.align_s]
-        reason = self._align_reason(out, window)
-        if reason:
+        still = self._stationary(out, [s for _, s in samples])
+        rest_s = self._rest_add([s for _, s in samples], t_g) if still else 0.0
+        if not still:
+            self._rest_reset()
+        reason = self._fix_reason(out)
+        a: align.Alignment | None = None
+        if not reason and still:
+            a, reason = self._align_at_rest(rest_s)
+        elif not reason:
+            reason = self._motion_reason(out, window)
+            if not reason:
+                f = np.mean([s.accel_m_s2 for s in window], axis=0)
+                speed = float(out.epoch.speed_mps or 0.0)
+                course = float(out.epoch.course_deg or 0.0) * DEG
+                yaw = self.attitude_yaw if lv.heading_source == "attitude" else None
+                a = align.in_motion(self.params, f, lv.align_s, speed, course,
+                                    lv.course_sigma_deg, yaw, lv.attitude_sigma_deg)
+        if a is None:
             self.align_wait[reason] += 1
             self._emit_rover(out, t_g, f"aligning: {reason}")
             return
-        f = np.mean([s.accel_m_s2 for s in window], axis=0)
-        roll = math.atan2(-f[1], -f[2])  # FRD: at rest f = (0, 0, −g)
-        pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
-        if lv.heading_source == "attitude":
-            assert self.attitude_yaw is not None
-            yaw = self.attitude_yaw
-            speed = out.epoch.speed_mps or 0.0
-            course = (out.epoch.course_deg or 0.0) * DEG
-        else:
-            speed = float(out.epoch.speed_mps or 0.0)
-            course = yaw = float(out.epoch.course_deg or 0.0) * DEG
         enu = self._fix_enu(out)
         assert enu is not None
-        vel = (speed * math.sin(course), speed * math.cos(course), 0.0)
-        self.kf = InsGnssFilter(self.params, t_g, enu, vel, (roll, pitch, yaw))
+        if a.method == "gnss course" or not still:
+            speed = float(out.epoch.speed_mps or 0.0)
+            course = float(out.epoch.course_deg or 0.0) * DEG
+            vel = (speed * math.sin(course), speed * math.cos(course), 0.0)
+        else:
+            vel = (0.0, 0.0, 0.0)
+        self.kf = InsGnssFilter(a.params(self.params), t_g, enu, vel, (a.roll, a.pitch, a.yaw))
         self.aligned_at = t_g
-        log.info("INS/GNSS aligned at t = %.3f s: roll %.2f pitch %.2f yaw %.2f deg", t_g,
-                 roll / DEG, pitch / DEG, yaw / DEG)
+        self.alignment = a
+        log.info("INS/GNSS aligned at t = %.3f s by %s: roll %.3f pitch %.3f yaw %.3f deg "
+                 "(1σ tilt %.4f, yaw %.4f deg)", t_g, a.method, a.roll / DEG, a.pitch / DEG,
+                 a.yaw / DEG, a.sigma_tilt_deg, a.sigma_yaw_deg)
         self._emit_rover(out, t_g, "aligned")
 
-    def _align_reason(self, out: EpochOutcome, window: list[ImuSample]) -> str:
+    def _align_at_rest(self, rest_s: float) -> tuple[align.Alignment | None, str]:
         lv = self.live
+        if rest_s < lv.rest_align_s:
+            return None, "at rest: levelling and gyrocompassing"
+        n = max(self._rest_n, 1)
+        f, w = self._rest_f / n, self._rest_w / n
+        if lv.heading_source == "attitude":
+            if self.attitude_yaw is None:
+                return None, "no ATTITUDE yet"
+            return align.at_rest(self.params, f, w, rest_s, self.attitude_yaw,
+                                 lv.attitude_sigma_deg, lv.rest_sigma_vel_m_s), ""
+        if align.gyrocompass_sigma(self.params, rest_s) > lv.gyrocompass_max_sigma_deg * DEG:
+            return None, "at rest, the gyro cannot gyrocompass: heading from the course"
+        return align.at_rest(self.params, f, w, rest_s, None, 0.0, lv.rest_sigma_vel_m_s), ""
+
+    def _fix_reason(self, out: EpochOutcome) -> str:
         enu = self._fix_enu(out)
         if enu is None:
             return "no 3D fix"
@@ -474,6 +559,10 @@ class InsGnssVehicle:
                          enu[1] - prev[1][1] - 0.5 * (v0[1] + v1[1]) * dt)
         if res > 3.0 * math.sqrt(2.0) * self.params.gnss_sigma_h_m:
             return "fix inconsistent with the previous one"
+        return ""
+
+    def _motion_reason(self, out: EpochOutcome, window: list[ImuSample]) -> str:
+        lv = self.live
         n_need = int(lv.align_s * self.params.min_imu_rate_hz * 0.5)
         if len(window) < max(n_need, 2):
             return "too few IMU samples"
@@ -516,7 +605,8 @@ class InsGnssVehicle:
         self.write_record(record)
         self._send(out)
 
-    def _emit_ins(self, out: EpochOutcome, t_g: float, rep: Any | None) -> None:
+    def _emit_ins(self, out: EpochOutcome, t_g: float, rep: Any | None,
+                  zupt: bool = False) -> None:
         kf = self.kf
         pipeline = self.pipeline
         assert kf is not None and pipeline is not None
@@ -542,7 +632,7 @@ class InsGnssVehicle:
             "sigma_pos": [_r(x, 3) for x in sig[0:3]], "sigma_vel": [_r(x, 4) for x in sig[3:6]],
             "sigma_att_deg": [_r(x / DEG, 4) for x in sig[6:9]],
             "acc_h_m": round(acc_h, 3), "acc_v_m": round(acc_v, 3),
-            "bias_active": kf.bias_active,
+            "bias_active": kf.bias_active, "zupt": zupt,
         }
         if rep is not None:
             ins["zones"] = [int(d.zone.value) for d in rep.decisions]
@@ -589,6 +679,11 @@ class InsGnssVehicle:
             "refused": self.refused, "imu_rate_hz": None if self.rate_hz is None
             else round(self.rate_hz, 2), "time_map": self.time_map,
             "aligned_at": self.aligned_at, "epochs": dict(self.modes),
+            "alignment": None if self.alignment is None else {
+                "method": self.alignment.method,
+                "sigma_tilt_deg": round(self.alignment.sigma_tilt_deg, 5),
+                "sigma_yaw_deg": round(self.alignment.sigma_yaw_deg, 5)},
+            "zupts": self.zupts,
             "align_wait": dict(self.align_wait), "resets": dict(self.resets),
             "gate_actions": dict(self.gate_actions),
             "imu": {"received": st.received, "integrated": st.integrated,
