@@ -256,3 +256,16 @@ def test_a_mems_gyro_does_not_gyrocompass(tmp_path: Path) -> None:
     assert ins["align_wait"]["at rest, the gyro cannot gyrocompass: heading from the course"] > 0
     assert ins["aligned_at"] > 43200.0 - 20.0  # not before the take-off roll
     assert ins["zupts"] == 0
+
+
+def test_demo_insgnss_runs_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                      ) -> None:
+    """``fdi-bridge demo insgnss``: ptys and GPS_INPUT on 127.0.0.1, the comparison printed."""
+    out = tmp_path / "demo"
+    assert main(["demo", "insgnss", "--epochs", "20", "--rest", "40", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "aligned by gyrocompass" in text and "live / sim" in text
+    assert "GPS_INPUT received on 127.0.0.1:" in text
+    assert " 0 GPS_INPUT" not in text
+    assert (out / "epochs.jsonl").read_bytes().count(b"\n") == 80
+    assert main(["demo", "insgnss", "--epochs", "5", "--out", str(out)]) == 2

@@ -345,7 +345,7 @@ COMPARISON_HEADER = ["scenario", "seed", "live epochs", "live RMS m", "sim insgn
 
 def compare(setup: InsGnssSetup, scenario: Scenario, seed: int, out_dir: Path, *,
             speed: float = 50.0, imu_message: str = "HIGHRES_IMU",
-            impair: LinkImpairment | None = None) -> Comparison:
+            impair: LinkImpairment | None = None, mavlink_url: str = "") -> Comparison:
     """Generate the scenario, run ``sim insgnss``'s filter (the preset's strategy) and "none"
     offline, play the same data to the live vehicle over ptys; see :class:`Comparison`."""
     data = generate(setup, scenario, seed)
@@ -354,7 +354,7 @@ def compare(setup: InsGnssSetup, scenario: Scenario, seed: int, out_dir: Path, *
                                   for s in (strategy, "none")}
     summary = summarize(data, runs, scenario, seed, setup)
     lr = run_live(setup, data, out_dir, imu_message=imu_message, impair=impair, seed=seed,
-                  speed=speed)
+                  speed=speed, mavlink_url=mavlink_url)
     return Comparison(scenario, seed, rms(lr.pos_err),
                       summary["methods"][strategy]["position_rms_3d_m"],
                       summary["methods"]["none"]["position_rms_3d_m"], len(lr.pos_err),

@@ -10,6 +10,11 @@ GNSS data with errors, and injected GNSS faults. This module does the same:
   white noise, from ``[sim.imu]``;
 - GNSS at 1 Hz: true position plus white noise (σ = ``gnss_sigma_h_m`` east/north,
   ``gnss_sigma_v_m`` up) and velocity plus white noise;
+- optionally a lead-in before the paper's t = 0 (``[sim] rest_s``, ``takeoff_s``; none by
+  default): at rest, then a straight take-off roll up to the paper's speed, without faults, so
+  that a vehicle can align itself as a real one does (the live INS/GNSS of
+  docs/insgnss-live.md); the offline filter runs through it too (a zero-velocity update at
+  each rest epoch, as the live vehicle does), and the results are those of the paper's epochs;
 - scenarios (faults added to the GNSS position, epochs are whole seconds 1..500):
   ``paper-random`` 100 distinct random epochs, +100 m east and north, +20 m up;
   ``paper-single`` every 10 s, +100/+100/+20 m; ``paper-continuous`` every epoch 10..200 s,

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import numpy.typing as npt
 
-from fdi.insgnss import DEG, InsGnssParams, euler_to_quat, quat_rotate
+from fdi.insgnss import DEG, InsGnssParams, euler_to_quat, quat_rotate, quat_to_dcm
 
 Vec = npt.ArrayLike | tuple[float, float, float]
 OMEGA_IE = 7.292115e-5  # rad/s (WGS 84)
@@ -117,3 +117,55 @@ def in_motion(params: InsGnssParams, f: np.ndarray, seconds: float, speed_m_s: f
         sig_yaw, method = yaw_sigma_deg * DEG, "attitude"
     return Alignment(roll, pitch, yaw, max(params.gnss_sigma_h_m, params.gnss_sigma_v_m),
                      params.gnss_sigma_vel_m_s, sig_tilt / DEG, sig_yaw / DEG, method)
+
+
+def attitude_dcm(f_mean: Vec, w_mean: Vec, yaw: float | None = None) -> npt.NDArray[np.float64]:
+    """``C_b^n`` of the alignment at rest from the mean specific force and gyro (the heading
+    ``yaw`` instead of gyrocompassing if given)."""
+    roll, pitch = level(f_mean)
+    psi = gyrocompass(w_mean, roll, pitch) if yaw is None else yaw
+    return quat_to_dcm(euler_to_quat(roll, pitch, psi))
+
+
+def rest_covariance(params: InsGnssParams, a: Alignment, f_mean: Vec, w_mean: Vec,
+                    seconds: float, yaw: float | None = None) -> npt.NDArray[np.float64]:
+    """The initial 15×15 covariance of an alignment at rest, with the attitude error tied to
+    the sensor biases that cause it.
+
+    The levelling and the gyrocompass take the biases for the Earth's gravity and rate: with
+    the error state of :mod:`fdi.insgnss` (true minus estimate, ``C_b^n = (I − [φ×]) Ĉ``) the
+    attitude error is ``φ = J [δb_a; δb_g] + noise``, ``J = ∂φ/∂b`` of the alignment (by finite
+    differences of :func:`attitude_dcm`). So ``P_φφ = J P_bb Jᵀ + N``, ``P_φb = J P_bb``: when
+    the filter later learns a bias (in manoeuvres), it corrects the attitude the bias had
+    spoiled, as it would have if it had aligned itself. ``N``: the sensor noise over
+    ``seconds`` (VRW, ARW), ``yaw`` given (ATTITUDE): its own 1σ, no gyro term."""
+    imu = params.imu
+    sb_a = max(imu.accel_bias_m_s2, 1e-6)
+    sb_g = max(imu.gyro_bias_rad_s, 1e-9)
+    f = np.asarray(f_mean, dtype=float)
+    w = np.asarray(w_mean, dtype=float)
+    c0 = attitude_dcm(f, w, yaw)
+    jac = np.zeros((3, 6))
+    for i in range(6):
+        eps = (1e-4 if i < 3 else 1e-8)
+        df, dw = np.zeros(3), np.zeros(3)
+        (df if i < 3 else dw)[i % 3] = eps
+        c1 = attitude_dcm(f - df, w - dw, yaw)  # the truth if the bias were eps larger
+        s = 0.5 * ((c1 @ c0.T) - (c1 @ c0.T).T)  # = −[φ×]
+        jac[:, i] = np.array([-s[2, 1], -s[0, 2], -s[1, 0]]) / eps
+    g0 = params.earth.g0
+    t = max(seconds, 1e-3)
+    tilt_n = imu.accel_vrw_m_s_sqrt_s / math.sqrt(t) / g0
+    if yaw is None:
+        yaw_n = imu.gyro_arw_rad_sqrt_s / math.sqrt(t) / (
+            OMEGA_IE * math.cos(params.latitude_deg * DEG))
+    else:
+        yaw_n = a.sigma_yaw_deg * DEG
+    pbb = np.diag([sb_a**2] * 3 + [sb_g**2] * 3)
+    P = np.diag(np.concatenate([
+        np.full(3, a.sigma_pos_m**2), np.full(3, a.sigma_vel_m_s**2),
+        np.array([tilt_n, tilt_n, yaw_n]) ** 2, np.diag(pbb)]))
+    P[6:9, 6:9] += jac @ pbb @ jac.T
+    P[6:9, 9:15] = jac @ pbb
+    P[9:15, 6:9] = (jac @ pbb).T
+    return P

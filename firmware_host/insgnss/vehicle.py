@@ -21,12 +21,21 @@ Rate: the median interval of the first ``rate_samples`` samples is checked again
 ``min_imu_rate_hz`` (:func:`fdi.insgnss.check_imu_rate`); below it the INS is refused, said
 once in the log and in the summary, and the receiver's fixes go through the rover detector.
 
-Alignment: level from the mean specific force over ``align_s`` when the vehicle is steady
-(gyro below ``align_max_gyro_deg_s``, ``|f|`` within ``align_max_accel_dev_m_s2`` of g: at
-rest, or flying straight and level), heading from the GNSS course once the speed exceeds
-``align_min_speed_m_s`` (or the autopilot's ATTITUDE yaw, ``heading_source = "attitude"``),
-position from a fix the rover detector accepted. Until then, and after any filter error (an
-IMU gap it cannot bridge), the rover detector alone drives the outputs.
+Alignment (:mod:`firmware_host.insgnss.align`, from the vehicle's own sensors): an epoch is
+*at rest* when the GNSS speed is below ``rest_max_speed_m_s``, nothing turns faster than
+``align_max_gyro_deg_s``, ``|f|`` is within ``align_max_accel_dev_m_s2`` of g and the mean
+specific force moved less than ``rest_max_accel_m_s2`` since the previous epoch. After
+``rest_align_s`` at rest: level from the mean specific force, heading by gyrocompassing from
+the mean gyro when the configured gyro can (its heading 1σ at most
+``gyrocompass_max_sigma_deg``: navigation grade; or the autopilot's ATTITUDE yaw,
+``heading_source = "attitude"``), velocity zero, the initial covariance with the attitude error
+tied to the biases that cause it; then a zero-velocity update (ZUPT, ``rest_sigma_vel_m_s``) on
+every epoch still at rest. Otherwise (moving, or a MEMS gyro), in steady motion: level from the
+specific force over ``align_s``, heading from the GNSS course once the speed exceeds
+``align_min_speed_m_s`` (1σ at least ``course_sigma_deg``), velocity from the receiver. The
+position is a fix that agrees with the previous one and the receiver's velocity. Until aligned,
+and after any filter error (an IMU gap it cannot bridge), the rover detector alone drives the
+outputs.
 
 GNSS observation: position only. NMEA gives horizontal speed and course but no vertical
 velocity, and the filter's velocity update takes the three components together, so the live
@@ -181,6 +190,7 @@ class InsGnssVehicle:
         self._rest_n = 0
         self._rest_t0: float | None = None
         self.zupts = 0
+        self._align_P: np.ndarray | None = None
         self.align_wait: Counter[str] = Counter()
         self.resets: Counter[str] = Counter()
         self.modes: Counter[str] = Counter()
@@ -519,6 +529,9 @@ class InsGnssVehicle:
         else:
             vel = (0.0, 0.0, 0.0)
         self.kf = InsGnssFilter(a.params(self.params), t_g, enu, vel, (a.roll, a.pitch, a.yaw))
+        if self._align_P is not None:  # at rest: the attitude error tied to the biases
+            self.kf.P = self._align_P
+            self._align_P = None
         self.aligned_at = t_g
         self.alignment = a
         log.info("INS/GNSS aligned at t = %.3f s by %s: roll %.3f pitch %.3f yaw %.3f deg "
@@ -532,14 +545,17 @@ class InsGnssVehicle:
             return None, "at rest: levelling and gyrocompassing"
         n = max(self._rest_n, 1)
         f, w = self._rest_f / n, self._rest_w / n
+        yaw: float | None = None
         if lv.heading_source == "attitude":
             if self.attitude_yaw is None:
                 return None, "no ATTITUDE yet"
-            return align.at_rest(self.params, f, w, rest_s, self.attitude_yaw,
-                                 lv.attitude_sigma_deg, lv.rest_sigma_vel_m_s), ""
-        if align.gyrocompass_sigma(self.params, rest_s) > lv.gyrocompass_max_sigma_deg * DEG:
+            yaw = self.attitude_yaw
+        elif align.gyrocompass_sigma(self.params, rest_s) > lv.gyrocompass_max_sigma_deg * DEG:
             return None, "at rest, the gyro cannot gyrocompass: heading from the course"
-        return align.at_rest(self.params, f, w, rest_s, None, 0.0, lv.rest_sigma_vel_m_s), ""
+        a = align.at_rest(self.params, f, w, rest_s, yaw, lv.attitude_sigma_deg,
+                          lv.rest_sigma_vel_m_s)
+        self._align_P = align.rest_covariance(self.params, a, f, w, rest_s, yaw)
+        return a, ""
 
     def _fix_reason(self, out: EpochOutcome) -> str:
         enu = self._fix_enu(out)
