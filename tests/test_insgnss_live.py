@@ -53,16 +53,16 @@ def _check_records(lr: LiveRun) -> None:
     assert summary["ins"]["refused"] == ""
 
 
-@pytest.mark.parametrize("scenario,seed", [("paper-single", 1), ("paper-random", 3)])
+@pytest.mark.parametrize("scenario,seed", [("paper-single", 1), ("paper-random", 1)])
 def test_live_vehicle_within_10_percent_of_sim_insgnss(scenario: sim.Scenario, seed: int,
                                                        tmp_path: Path) -> None:
-    """The done-means of issue 12 at full length (the paper's 501 epochs) on two of the six
-    pairs (docs/insgnss-live.md has all six and more seeds; the worst, paper-random seed 1, is
-    at 1.10): the scenario starts like a real vehicle (120 s at rest, a 20 s take-off roll,
-    then the paper's flight) in both runs; the live vehicle aligns itself at rest (levelling,
-    gyrocompassing, ZUPTs) and its 3-D position RMS over the paper's epochs is within 10 % of
-    ``sim insgnss`` on the same seed (the offline filter started from the truth, with the
-    same ZUPTs at rest), below "none" by the same factor within 10 %."""
+    """The done-means of issue 12 at full length (the paper's 501 epochs) on the two worst of
+    the six pairs (docs/insgnss-live.md has all six, and seeds 4-5): the scenario starts like
+    a real vehicle (120 s at rest, a 20 s take-off roll, then the paper's flight) in both runs;
+    the live vehicle aligns itself at rest (levelling, gyrocompassing, ZUPTs) and its 3-D
+    position RMS over the paper's epochs is within 10 % of ``sim insgnss`` on the same seed
+    (the offline filter started from the truth, with the same ZUPTs at rest), below "none" by
+    the same factor within 10 %."""
     c = compare(_setup(rest_s=120, epochs=501), scenario, seed, tmp_path)
     ins = c.run.summary["ins"]
     assert ins["alignment"]["method"] == "gyrocompass"
