@@ -7,6 +7,8 @@ numbers (all six scenario/seed pairs) are measured in docs/insgnss-live.md."""
 from __future__ import annotations
 
 import json
+import threading
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -14,6 +16,7 @@ import numpy as np
 import pytest
 
 from drivers.mavlink.io import MavEndpoint
+from drivers.ptypair import PtyPair
 from firmware_host.cli import main
 from firmware_host.commands.launch import vehicle_from_file
 from firmware_host.devtools import insgnss_sim as sim
@@ -21,12 +24,14 @@ from firmware_host.devtools.insgnss_live import (
     LinkImpairment,
     LiveRun,
     compare,
+    nmea_epoch,
     offline_aligned,
     rms,
     run_live,
 )
 from firmware_host.insgnss.vehicle import InsGnssVehicle
-from firmware_host.runtime.config import CONFIG_DIR, load_bridge_file
+from firmware_host.runtime.config import CONFIG_DIR, BridgeConfig, load_bridge_file
+from firmware_host.runtime.runner import Runner
 
 EPOCHS = 150
 
@@ -269,3 +274,52 @@ def test_demo_insgnss_runs_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixt
     assert " 0 GPS_INPUT" not in text
     assert (out / "epochs.jsonl").read_bytes().count(b"\n") == 80
     assert main(["demo", "insgnss", "--epochs", "5", "--out", str(out)]) == 2
+
+
+def test_the_imu_over_the_routers_autopilot_link(tmp_path: Path) -> None:
+    """``imu_url = "router"`` with a ``[mavlink]`` router: the IMU goes as UDP datagrams on
+    127.0.0.1 to the router's autopilot link, the vehicle takes it from there (no IMU port of
+    its own); the same filter result as over its own pty, and the recording replays byte for
+    byte (the router's packets are recorded as ``imu rx``)."""
+    setup = replace(_setup(), sim=replace(_setup().sim, epochs=40, rest_s=40))
+    data = sim.generate(setup, "paper-single", 1)
+    pty = run_live(setup, data, tmp_path / "pty", seed=1)
+    rt = run_live(setup, data, tmp_path / "router", seed=1, via_router=True,
+                  record_dir=tmp_path / "rec")
+    ins = rt.summary["ins"]
+    assert ins["refused"] == "" and ins["alignment"]["method"] == "gyrocompass"
+    assert ins["imu"]["received"] >= 0.99 * pty.summary["ins"]["imu"]["received"]
+    assert len(rt.pos_err) == len(pty.pos_err) == 39
+    assert abs(rms(rt.pos_err) / rms(pty.pos_err) - 1.0) < 0.1
+    (cap,) = sorted((tmp_path / "rec").glob("*.cap"))
+    cfg = _replay_config(tmp_path)
+    cfg.write_text(cfg.read_text(encoding="utf-8").replace('"/dev/ttyAMA1"', '"router"'),
+                   encoding="utf-8")
+    assert main(["replay", str(cap), "--config", str(cfg), "--out", str(tmp_path / "re")]) == 0
+    assert (tmp_path / "re" / "epochs.jsonl").read_bytes() == (
+        tmp_path / "router" / "epochs.jsonl").read_bytes()
+
+
+def test_router_imu_without_a_router_is_refused(tmp_path: Path) -> None:
+    """``imu_url = "router"`` but no ``[mavlink]``: said, in the summary, the rover detector
+    alone (and no IMU port opened)."""
+    base = BridgeConfig()
+    setup = replace(_setup(), live=replace(_setup().live, imu_url="router"))
+    with PtyPair() as gps:
+        cfg = replace(base, rover=replace(base.rover, port=replace(base.rover.port, url=gps.url,
+                                                                   timeout_s=0.02)))
+        vehicle = InsGnssVehicle(cfg, setup)
+        assert [p.name for p in vehicle.ports()] == ["gps"]
+        def feed() -> None:
+            time.sleep(0.3)  # the runner opens the port first
+            for j in range(6):
+                gps.write(nmea_epoch(float(j), (34.25, 8.5, 300.0), (10.0, 0.0)))
+                time.sleep(0.05)
+
+        thread = threading.Thread(target=feed, daemon=True)
+        thread.start()
+        summary = Runner(vehicle, out_dir=tmp_path, handle_signals=False,
+                         duration_s=1.5).run()
+        thread.join(2.0)
+    assert "needs the router" in summary["ins"]["refused"]
+    assert set(summary["ins"]["epochs"]) == {"rover"} and summary["ins"]["epochs"]["rover"] >= 5

@@ -21,6 +21,7 @@ from __future__ import annotations
 import calendar
 import json
 import math
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -32,6 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
+from drivers.mavlink.framer import MavFramer
 from drivers.mavlink.imu import MG_TO_M_S2, MRAD_TO_RAD
 from drivers.mavlink.io import MavPacker
 from drivers.ptypair import PtyPair
@@ -46,7 +48,8 @@ from firmware_host.devtools.insgnss_sim import (
     summarize,
 )
 from firmware_host.insgnss import align
-from firmware_host.insgnss.vehicle import InsGnssVehicle
+from firmware_host.insgnss.vehicle import ROUTER, InsGnssVehicle
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
@@ -194,12 +197,14 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              imu_message: str = "HIGHRES_IMU", decimate: int = 1,
              impair: LinkImpairment | None = None, seed: int = 0,
              speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "",
-             record_dir: Path | None = None) -> LiveRun:
+             record_dir: Path | None = None, via_router: bool = False) -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
     ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
     the vehicle's GPS_INPUT and corrected NMEA outputs; ``record_dir``: a flight recorder there
-    (both inputs, for ``fdi-bridge replay``)."""
+    (both inputs, for ``fdi-bridge replay``); ``via_router``: the IMU over UDP on 127.0.0.1 to
+    the autopilot link of a ``[mavlink]`` router, ``imu_url = "router"``, one datagram a
+    packet (GPS_INPUT then goes out through the router too)."""
     lat = setup.filter.latitude_deg
     events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
                           impair=impair, seed=seed)
@@ -207,18 +212,36 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
     rc = base.rover
     rover = replace(rc, port=replace(rc.port, timeout_s=0.02),
                     output=replace(rc.output, nmea_url=nmea_url, mavlink_url=mavlink_url))
-    with PtyPair() as gps, PtyPair() as imu:
+    mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+                        gcs=(EndpointConfig("udpin:127.0.0.1:0"),)) if via_router else None
+    with PtyPair() as gps, PtyPair() as imu, socket.socket(socket.AF_INET,
+                                                           socket.SOCK_DGRAM) as udp:
         cfg = replace(base, rover=replace(rover, port=replace(rover.port, url=gps.url)))
-        live = replace(setup, live=replace(setup.live, imu_url=imu.url,
+        live = replace(setup, live=replace(setup.live, imu_url=ROUTER if via_router else imu.url,
                                            imu_message=imu_message))  # type: ignore[arg-type]
         vehicle = InsGnssVehicle(cfg, live)
+        recorder = None if record_dir is None else FlightRecorder(
+            record_dir, RecorderConfig(dir=str(record_dir)))
+        runner = Runner(vehicle, out_dir=out_dir, recorder=recorder, mavlink=mav,
+                        handle_signals=False)
+        imu_write: Writer = imu.write
+        if via_router:
+            runner.start()  # the router's autopilot port, before the autopilot sends
+            assert runner.router is not None
+            addr = runner.router.endpoints[0].link.local_address
+            assert addr is not None
+            ap = ("127.0.0.1", int(addr[1]))
+
+            def imu_write(data: bytes) -> None:  # one datagram per packet, as an autopilot
+                for frame in MavFramer().feed(data):
+                    udp.sendto(frame.raw, ap)
         done = threading.Event()
         stop = threading.Event()
 
         def feed() -> None:
             time.sleep(0.2)  # the runner opens the ports first
             try:
-                play(events, (imu.write, gps.write), speed=speed, stop=stop)
+                play(events, (imu_write, gps.write), speed=speed, stop=stop)
             finally:
                 done.set()
 
@@ -235,10 +258,7 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
         t0 = time.monotonic()
         thread.start()
         try:
-            recorder = None if record_dir is None else FlightRecorder(
-                record_dir, RecorderConfig(dir=str(record_dir)))
-            summary = Runner(vehicle, out_dir=out_dir, recorder=recorder,
-                             handle_signals=False).run(until=until)
+            summary = runner.run(until=until)
         finally:
             stop.set()
             thread.join(5.0)

@@ -4,8 +4,13 @@ three-zone gate, or the preset's ``fault_state``) and the rover's outputs.
 
 Ports: ``gps`` (``[rover.port]``, the receiver, through the rover's own pipeline: every fix
 also goes through the rover detector) and ``imu`` (``[insgnss.live] imu_url``, the
-autopilot's MAVLink link: a serial device, a pty, ``socket://HOST:PORT``). Both are recorded
-by the flight recorder. Paced by data.
+autopilot's MAVLink link: a serial device, a pty, ``socket://HOST:PORT``). With
+``imu_url = "router"`` (:data:`ROUTER`) and a ``[mavlink]`` table there is no ``imu`` port:
+the IMU messages, SYSTEM_TIME and ATTITUDE are taken from the router's autopilot link
+(:meth:`Router.listen <firmware_host.mavlink.router.Router.listen>`, one process), queued
+by the router's thread and read by the vehicle's step in arrival order. Both inputs are
+recorded by the flight recorder (``gps rx``, ``imu rx``; from the router the packets as the
+step takes them). Paced by data.
 
 IMU time (never arrival time): each sample carries the autopilot's ``time_usec`` /
 ``time_boot_ms``; the autopilot time is mapped to GNSS time **once**, by the first
@@ -62,7 +67,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from drivers.mavlink.framer import MavFramer
+from drivers.mavlink.framer import MavFrame, MavFramer
 from drivers.mavlink.imu import ImuSample, imu_from_message
 from drivers.mavlink.io import decode_packet
 from drivers.ratelog import RateLimitedLog
@@ -87,6 +92,7 @@ from firmware_host.runtime.failsafe import RoverFailsafe
 from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
 log = logging.getLogger("fdi_bridge.insgnss")
+ROUTER = "router"  # [insgnss.live] imu_url: the IMU from the router's autopilot link
 
 
 class _Discard:
@@ -199,13 +205,15 @@ class InsGnssVehicle:
         self._idle_s = 0.0
         self._prior_var = np.zeros(3)
         self.output_errors = 0
+        self._router_q: deque[bytes] = deque()  # appended by the router's thread
+        self._imu_tap: Callable[[bytes], None] | None = None
 
     # ------------------------------------------------------------------ what it needs
 
     def ports(self) -> list[PortSpec]:
         rc = self.cfg.rover
         specs = [PortSpec("gps", rc.port, rc.reconnect_max_s, opener=open_port_nonblocking)]
-        if self.live.imu_url:
+        if self.live.imu_url and self.live.imu_url != ROUTER:
             s = SerialSettings(url=self.live.imu_url, baudrate=self.live.imu_baudrate,
                                timeout_s=0.0)
             specs.append(PortSpec("imu", s, rc.reconnect_max_s, opener=open_port_nonblocking))
@@ -220,6 +228,15 @@ class InsGnssVehicle:
         self.clock = self.collect.clock = ctx.clock
         self.gps = ctx.ports["gps"]
         self.imu = ctx.ports.get("imu")
+        if self.live.imu_url == ROUTER and self.imu is None and not self.refused:
+            # (a replay hands the recorded "imu rx" as the port instead)
+            if ctx.router is None:
+                self.refused = (f'[insgnss.live] imu_url = "{ROUTER}" needs the router (a '
+                                "[mavlink] table); the rover detector alone")
+            else:
+                for kind in (self.live.imu_message, "SYSTEM_TIME", "ATTITUDE"):
+                    ctx.router.listen(kind, self._on_router_frame)
+                self._imu_tap = ctx.tap("imu rx", ROUTER, 0, "rx")
         self.write_record = ctx.epochs.write
         self.pipeline = RoverPipeline(rc, jsonl=_Discard(),  # type: ignore[arg-type]
                                       sinks=[self.collect])
@@ -248,6 +265,13 @@ class InsGnssVehicle:
             if data:
                 got = True
                 self._feed_imu(data)
+        elif self._router_q:
+            q = self._router_q
+            data = b"".join(q.popleft() for _ in range(len(q)))
+            got = True
+            if self._imu_tap is not None:
+                self._imu_tap(data)
+            self._feed_imu(data)
         data = self.gps.read_some(65536)
         if data:
             got = True
@@ -284,6 +308,10 @@ class InsGnssVehicle:
                 sink.close()
 
     # ------------------------------------------------------------------ IMU
+
+    def _on_router_frame(self, frame: MavFrame) -> None:
+        """The router's thread: keep the packet for the next step (deque appends are atomic)."""
+        self._router_q.append(frame.raw)
 
     def _feed_imu(self, data: bytes) -> None:
         want = self.live.imu_message
@@ -381,7 +409,9 @@ class InsGnssVehicle:
         while q:
             out, arrived = q[0]
             t_g = self._gnss_time(out)
-            if self.refused or t_g is None or (not self.buffer and self.kf is None and not force):
+            # "no imu": none has come yet (an empty buffer after one has is a wait below:
+            # the records must not depend on which link's bytes were read first)
+            if self.refused or t_g is None or (self.newest_us is None and not force):
                 q.popleft()
                 self._emit_rover(out, t_g, "no imu" if not self.refused else "refused")
                 n += 1

@@ -51,7 +51,8 @@ class InsGnssLiveParams:
 
     imu_url: str = field(default="", metadata={
         "doc": "the autopilot's MAVLink link carrying the IMU (a serial device, a pty, "
-               "socket://HOST:PORT); empty: no INS, the rover detector alone"})
+               "socket://HOST:PORT); \"router\": the [mavlink] router's autopilot link; "
+               "empty: no INS, the rover detector alone"})
     imu_baudrate: int = field(default=921600, metadata={"gt": 0})
     imu_message: Literal["RAW_IMU", "HIGHRES_IMU", "SCALED_IMU", "SCALED_IMU2",
                          "SCALED_IMU3"] = "RAW_IMU"
