@@ -154,12 +154,17 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
 
 def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer], *,
          speed: float = 10.0, stop: threading.Event | None = None,
-         chunk_s: float = 0.01) -> int:
-    """Write the events to the two links, ``speed`` times faster than real time; returns how
-    many were written (fewer when ``stop`` is set)."""
+         chunk_s: float = 0.01, gnss_after_s: float = 0.3) -> int:
+    """Write the events to the two links, ``speed`` times faster than real time from the
+    first event; returns how many were written (fewer when ``stop`` is set). The receiver's
+    bytes wait until the IMU has streamed ``gnss_after_s`` of wall clock (an autopilot is up
+    before the receiver's first fix), so that which link the vehicle reads first does not
+    depend on the scheduler."""
     t0 = time.monotonic()
+    t_first = events[0][0] if events else 0.0
     i = 0
     n = len(events)
+    held = bytearray()
     while i < n:
         if stop is not None and stop.is_set():
             break
@@ -168,13 +173,16 @@ def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer],
         while i < n and events[i][0] < base + chunk_s:
             bufs[events[i][1]] += events[i][2]
             i += 1
-        due = t0 + base / speed
+        due = t0 + (base - t_first) / speed
         wait = due - time.monotonic()
         if wait > 0:
             time.sleep(wait)
-        for link in (0, 1):
-            if bufs[link]:
-                writers[link](bytes(bufs[link]))
+        if bufs[0]:
+            writers[0](bytes(bufs[0]))
+        held += bufs[1]
+        if held and (time.monotonic() - t0 >= gnss_after_s or i >= n):
+            writers[1](bytes(held))
+            held.clear()
     return i
 
 

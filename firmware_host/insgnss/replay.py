@@ -27,7 +27,7 @@ from drivers.capture import CaptureReader
 from drivers.resilient import ResilientPort
 from fdi.errors import CaptureFormatError, FdiBridgeError
 from firmware_host.insgnss.vehicle import InsGnssVehicle
-from firmware_host.runtime.config import bridge_config, load_bridge_file, vehicle_of
+from firmware_host.runtime.config import BridgeConfig, bridge_config, load_bridge_file, vehicle_of
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.loop import FakeClock
 from firmware_host.runtime.records import EpochLog
@@ -80,7 +80,7 @@ def replay_insgnss(cfg_file: Path, capture: Path, out_dir: Path) -> dict[str, An
                        config_name=str(cfg_file))
 
 
-def replay_with(cfg: Any, setup: InsGnssSetup, reader: CaptureReader, out_dir: Path, *,
+def replay_with(cfg: BridgeConfig, setup: InsGnssSetup, reader: CaptureReader, out_dir: Path, *,
                 config_name: str = "") -> dict[str, Any]:
     """The replay of :func:`replay_insgnss` with the configuration already loaded."""
     ids = {c.name: i for i, c in enumerate(reader.channels)}
