@@ -323,3 +323,22 @@ def test_router_imu_without_a_router_is_refused(tmp_path: Path) -> None:
         thread.join(2.0)
     assert "needs the router" in summary["ins"]["refused"]
     assert set(summary["ins"]["epochs"]) == {"rover"} and summary["ins"]["epochs"]["rover"] >= 5
+
+
+def test_heading_from_the_autopilots_attitude(tmp_path: Path) -> None:
+    """``heading_source = "attitude"``: at rest the heading is the autopilot's ATTITUDE yaw
+    (here 2 deg off, its compass error) with ``attitude_sigma_deg``, not the gyrocompass; the
+    filter starts from it and still beats no gate by far."""
+    base = _setup()
+    setup = replace(base, sim=replace(base.sim, epochs=80, rest_s=40),
+                    live=replace(base.live, heading_source="attitude"))
+    data = sim.generate(setup, "paper-single", 2)
+    lr = run_live(setup, data, tmp_path, seed=2, attitude_error_deg=2.0)
+    ins = lr.summary["ins"]
+    assert ins["alignment"]["method"] == "attitude"
+    assert ins["alignment"]["sigma_yaw_deg"] == pytest.approx(setup.live.attitude_sigma_deg)
+    first = next(r for r in lr.records if r["mode"] == "ins")
+    assert first["ins"]["rpy_deg"][2] == pytest.approx(30.0 + 2.0, abs=0.5)
+    none = sim.run_method(data, setup.filter, "none")
+    assert len(lr.pos_err) == 79
+    assert rms(lr.pos_err) < rms(none.pos_err) / 3.0

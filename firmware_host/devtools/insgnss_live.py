@@ -93,9 +93,12 @@ def nmea_epoch(t_s: float, lla: tuple[float, float, float], v_enu: tuple[float, 
 
 def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGHRES_IMU",
                  decimate: int = 1, impair: LinkImpairment | None = None, seed: int = 0,
-                 gnss_latency_s: float = 0.05) -> list[tuple[float, int, bytes]]:
+                 gnss_latency_s: float = 0.05, attitude_error_deg: float | None = None,
+                 ) -> list[tuple[float, int, bytes]]:
     """Every packet with its send time (s of trajectory time) and link (0 IMU, 1 GNSS), in
-    send order."""
+    send order. ``attitude_error_deg``: also ATTITUDE at 10 Hz on the IMU link, the
+    autopilot's own estimate, modelled as the attitude with a constant heading error of that
+    many degrees (a compass error)."""
     imp = impair or LinkImpairment()
     rng = np.random.default_rng(seed)
     packer = MavPacker(source_system=1, source_component=1)
@@ -141,6 +144,13 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
         add(when, 0, raw)
         if imp.duplicate and rng.random() < imp.duplicate:
             add(when, 0, raw)
+    if attitude_error_deg is not None:
+        rpy = data.traj.rpy
+        for k in range(0, len(t), 10):
+            tk = float(t[k])
+            add(tk, 0, packer.send_attitude(round((boot + tk) * 1e3), float(rpy[k, 0]),
+                                            float(rpy[k, 1]),
+                                            float(rpy[k, 2]) + math.radians(attitude_error_deg)))
     frame = frame_of(latitude_deg)
     for j in range(len(data.gnss_t)):
         p = data.gnss_p[j]
@@ -205,7 +215,8 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              imu_message: str = "HIGHRES_IMU", decimate: int = 1,
              impair: LinkImpairment | None = None, seed: int = 0,
              speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "",
-             record_dir: Path | None = None, via_router: bool = False) -> LiveRun:
+             record_dir: Path | None = None, via_router: bool = False,
+             attitude_error_deg: float | None = None) -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
     ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
@@ -215,7 +226,7 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
     packet (GPS_INPUT then goes out through the router too)."""
     lat = setup.filter.latitude_deg
     events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
-                          impair=impair, seed=seed)
+                          impair=impair, seed=seed, attitude_error_deg=attitude_error_deg)
     base = BridgeConfig()
     rc = base.rover
     rover = replace(rc, port=replace(rc.port, timeout_s=0.02),
