@@ -609,6 +609,22 @@ class InsGnssFilter:
         self.P = 0.5 * (self.P + self.P.T)
         self._inject(K @ y)
 
+    def zero_velocity(self, sigma_m_s: float) -> None:
+        """Zero-velocity update (ZUPT): the vehicle is known to be at rest, ``v = 0`` with
+        1σ ``sigma_m_s`` per axis, a plain Kalman update of the velocity states, (2)-(6) with
+        ``H`` selecting them; after :meth:`update` or :meth:`coast` at the same time (the
+        covariance is not propagated here). Used by the live vehicle's alignment at rest."""
+        y = -np.array(self.nav.v)
+        Rm = np.eye(3) * float(sigma_m_s) ** 2
+        PHt = self.P[:, 3:6]
+        S = self.P[3:6, 3:6] + Rm
+        K = np.linalg.solve(S, PHt.T).T
+        IKH = np.eye(N_STATES)
+        IKH[:, 3:6] -= K
+        self.P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
+        self.P = 0.5 * (self.P + self.P.T)
+        self._inject(K @ y)
+
     # ------------------------------------------------------------ strategy "fault_state"
 
     def _fault_verdict(self, z: list[float], zhat: list[float], r: list[float]) -> Verdict:

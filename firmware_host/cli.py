@@ -120,6 +120,8 @@ DEMO_COMMANDS: dict[str, tuple[str, str]] = {
         "GPS fault isolation on a generated 10-minute rover run",
     ),
     "rov": ("firmware_host.commands.demo_rov", "ROV compass drift 30 deg with and without FT"),
+    "insgnss": ("firmware_host.commands.demo_insgnss",
+                "live INS/GNSS against a simulated autopilot, compared with sim insgnss"),
 }
 
 # One example per command, shown at the end of its --help (issue 17).
@@ -127,6 +129,7 @@ EXAMPLES: dict[str, str] = {
     "demo": "fdi-bridge demo --duration 120 --out demo-out",
     "demo rover": "fdi-bridge demo rover --duration 120 --out demo-out",
     "demo rov": "fdi-bridge demo rov --drift 20 --out rov-demo",
+    "demo insgnss": "fdi-bridge demo insgnss --scenario paper-random --seed 3 --out ins-demo",
     "replay": "fdi-bridge replay --config rover run/rover.nmea --out replayed",
     "record": "fdi-bridge record /dev/ttyUSB0 --baud 115200 --duration 600 --out gps.cap",
     "run": "fdi-bridge run --config rover --out run-out --record rec",

@@ -41,6 +41,8 @@ from firmware_host.runtime.config import BridgeConfig, load_config
 # replay, loaded only then (as the CLI loads a command): the rover's replay stays light.
 ROV_TICK, ROV_LINK_RX, ROV_REPLAY = "rov tick", "rov link rx", "firmware_host.rov.replay"
 ARDUSUB_TICK = "ardusub tick"  # firmware_host.rov.ardusub's TICK: the ArduSub ROV's replay
+# A live INS/GNSS recording (both inputs of firmware_host.insgnss.vehicle) likewise.
+INS_RX, INS_REPLAY = ("gps rx", "imu rx"), "firmware_host.insgnss.replay"
 _TIME_RE = re.compile(rb"^\$..(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
 
 
@@ -332,6 +334,11 @@ def run(args: argparse.Namespace) -> int:
         names = {c.name for c in CaptureReader(args.capture).channels}
         if {ROV_TICK, ROV_LINK_RX} <= names or ARDUSUB_TICK in names:
             return _print_rov(args, importlib.import_module(ROV_REPLAY).run(args))
+        if set(INS_RX) <= names:
+            ins = importlib.import_module(INS_REPLAY)
+            s = ins.run(args)
+            print(json.dumps(s) if args.json else ins.result_text(s, args.out))
+            return 0
         if ROV_LINK_RX in names:
             raise FdiBridgeError(f"{args.capture}: an ROV recording without step ticks (made "
                                  "before they were recorded): it cannot be replayed step by "

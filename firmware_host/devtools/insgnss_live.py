@@ -7,7 +7,9 @@ mrad/s integers) with a ``SYSTEM_TIME`` every second, encoded by :mod:`drivers.m
 and the GNSS as NMEA (GGA + RMC, 1 Hz, ``gnss_latency_s`` after the epoch) on another link.
 Each link is a byte writer (a :class:`~drivers.ptypair.PtyPair`'s master side in the tests).
 
-The autopilot clock starts ``BOOT_S`` before the trajectory; UTC is :data:`UTC0` + t.
+The autopilot clock starts ``BOOT_S`` before the data (the lead-in's start when
+``[insgnss.sim] rest_s`` gives one: then the data begin at rest, t < 0); UTC is
+:data:`UTC0` + t.
 :class:`LinkImpairment` makes the IMU link a telemetry link: packets dropped at random,
 duplicated, and held back in bursts (every ``burst_every_s`` the packets of ``burst_s`` wait and
 go out together). ``speed`` plays the events that many times faster than real time (the
@@ -19,6 +21,7 @@ from __future__ import annotations
 import calendar
 import json
 import math
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -30,15 +33,26 @@ import numpy as np
 import numpy.typing as npt
 
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
+from drivers.mavlink.framer import MavFramer
 from drivers.mavlink.imu import MG_TO_M_S2, MRAD_TO_RAD
 from drivers.mavlink.io import MavPacker
 from drivers.ptypair import PtyPair
 from fdi.geodesy import LocalFrame
 from fdi.insgnss import InsGnssFilter, InsGnssParams, InsGnssStrategy
-from firmware_host.devtools.insgnss_sim import NavData
-from firmware_host.insgnss.vehicle import InsGnssVehicle
+from firmware_host.devtools.insgnss_sim import (
+    MethodRun,
+    NavData,
+    Scenario,
+    generate,
+    run_method,
+    summarize,
+)
+from firmware_host.insgnss import align
+from firmware_host.insgnss.vehicle import ROUTER, InsGnssVehicle
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.config_insgnss import InsGnssSetup
+from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
 from firmware_host.runtime.runner import Runner
 
 UTC0 = calendar.timegm((2026, 6, 1, 12, 0, 0))  # trajectory t = 0
@@ -79,9 +93,12 @@ def nmea_epoch(t_s: float, lla: tuple[float, float, float], v_enu: tuple[float, 
 
 def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGHRES_IMU",
                  decimate: int = 1, impair: LinkImpairment | None = None, seed: int = 0,
-                 gnss_latency_s: float = 0.05) -> list[tuple[float, int, bytes]]:
+                 gnss_latency_s: float = 0.05, attitude_error_deg: float | None = None,
+                 ) -> list[tuple[float, int, bytes]]:
     """Every packet with its send time (s of trajectory time) and link (0 IMU, 1 GNSS), in
-    send order."""
+    send order. ``attitude_error_deg``: also ATTITUDE at 10 Hz on the IMU link, the
+    autopilot's own estimate, modelled as the attitude with a constant heading error of that
+    many degrees (a compass error)."""
     imp = impair or LinkImpairment()
     rng = np.random.default_rng(seed)
     packer = MavPacker(source_system=1, source_component=1)
@@ -95,9 +112,10 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
         n_seq += 1
 
     end = float(t[-1])
-    for s in range(int(end) + 1):
+    boot = BOOT_S + data.lead  # autopilot uptime at t = 0
+    for s in range(-data.lead, int(end) + 1):
         add(float(s), 0, packer.send_system_time(round((UTC0 + s) * 1e6),
-                                                 round((BOOT_S + s) * 1e3)))
+                                                 round((boot + s) * 1e3)))
     gyro, accel = data.gyro, data.accel
     for k in range(1, len(t), decimate):
         if decimate > 1:  # the mean over the longer interval (what an integrating IMU reports)
@@ -106,7 +124,7 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
         else:
             g, a = gyro[k], accel[k]
         tk = float(t[k])
-        usec = round((BOOT_S + tk) * 1e6)
+        usec = round((boot + tk) * 1e6)
         if imu_message == "RAW_IMU":
             ai = (round(a[0] / MG_TO_M_S2), round(a[1] / MG_TO_M_S2), round(a[2] / MG_TO_M_S2))
             gi = (round(g[0] / MRAD_TO_RAD), round(g[1] / MRAD_TO_RAD), round(g[2] / MRAD_TO_RAD))
@@ -118,7 +136,7 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
             continue
         when = tk
         if imp.burst_every_s > 0:
-            phase = tk % imp.burst_every_s
+            phase = (tk + data.lead) % imp.burst_every_s
             if phase < imp.burst_s:
                 when = tk - phase + imp.burst_s  # held, then out together
                 if imp.shuffle_bursts:
@@ -126,6 +144,13 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
         add(when, 0, raw)
         if imp.duplicate and rng.random() < imp.duplicate:
             add(when, 0, raw)
+    if attitude_error_deg is not None:
+        rpy = data.traj.rpy
+        for k in range(0, len(t), 10):
+            tk = float(t[k])
+            add(tk, 0, packer.send_attitude(round((boot + tk) * 1e3), float(rpy[k, 0]),
+                                            float(rpy[k, 1]),
+                                            float(rpy[k, 2]) + math.radians(attitude_error_deg)))
     frame = frame_of(latitude_deg)
     for j in range(len(data.gnss_t)):
         p = data.gnss_p[j]
@@ -139,12 +164,17 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
 
 def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer], *,
          speed: float = 10.0, stop: threading.Event | None = None,
-         chunk_s: float = 0.01) -> int:
-    """Write the events to the two links, ``speed`` times faster than real time; returns how
-    many were written (fewer when ``stop`` is set)."""
+         chunk_s: float = 0.01, gnss_after_s: float = 0.3) -> int:
+    """Write the events to the two links, ``speed`` times faster than real time from the
+    first event; returns how many were written (fewer when ``stop`` is set). The receiver's
+    bytes wait until the IMU has streamed ``gnss_after_s`` of wall clock (an autopilot is up
+    before the receiver's first fix), so that which link the vehicle reads first does not
+    depend on the scheduler."""
     t0 = time.monotonic()
+    t_first = events[0][0] if events else 0.0
     i = 0
     n = len(events)
+    held = bytearray()
     while i < n:
         if stop is not None and stop.is_set():
             break
@@ -153,13 +183,16 @@ def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer],
         while i < n and events[i][0] < base + chunk_s:
             bufs[events[i][1]] += events[i][2]
             i += 1
-        due = t0 + base / speed
+        due = t0 + (base - t_first) / speed
         wait = due - time.monotonic()
         if wait > 0:
             time.sleep(wait)
-        for link in (0, 1):
-            if bufs[link]:
-                writers[link](bytes(bufs[link]))
+        if bufs[0]:
+            writers[0](bytes(bufs[0]))
+        held += bufs[1]
+        if held and (time.monotonic() - t0 >= gnss_after_s or i >= n):
+            writers[1](bytes(held))
+            held.clear()
     return i
 
 
@@ -181,30 +214,53 @@ class LiveRun:
 def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              imu_message: str = "HIGHRES_IMU", decimate: int = 1,
              impair: LinkImpairment | None = None, seed: int = 0,
-             speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "") -> LiveRun:
+             speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "",
+             record_dir: Path | None = None, via_router: bool = False,
+             attitude_error_deg: float | None = None) -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
     ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
-    the vehicle's GPS_INPUT and corrected NMEA outputs."""
+    the vehicle's GPS_INPUT and corrected NMEA outputs; ``record_dir``: a flight recorder there
+    (both inputs, for ``fdi-bridge replay``); ``via_router``: the IMU over UDP on 127.0.0.1 to
+    the autopilot link of a ``[mavlink]`` router, ``imu_url = "router"``, one datagram a
+    packet (GPS_INPUT then goes out through the router too)."""
     lat = setup.filter.latitude_deg
     events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
-                          impair=impair, seed=seed)
+                          impair=impair, seed=seed, attitude_error_deg=attitude_error_deg)
     base = BridgeConfig()
     rc = base.rover
     rover = replace(rc, port=replace(rc.port, timeout_s=0.02),
                     output=replace(rc.output, nmea_url=nmea_url, mavlink_url=mavlink_url))
-    with PtyPair() as gps, PtyPair() as imu:
+    mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+                        gcs=(EndpointConfig("udpin:127.0.0.1:0"),)) if via_router else None
+    with PtyPair() as gps, PtyPair() as imu, socket.socket(socket.AF_INET,
+                                                           socket.SOCK_DGRAM) as udp:
         cfg = replace(base, rover=replace(rover, port=replace(rover.port, url=gps.url)))
-        live = replace(setup, live=replace(setup.live, imu_url=imu.url,
+        live = replace(setup, live=replace(setup.live, imu_url=ROUTER if via_router else imu.url,
                                            imu_message=imu_message))  # type: ignore[arg-type]
         vehicle = InsGnssVehicle(cfg, live)
+        recorder = None if record_dir is None else FlightRecorder(
+            record_dir, RecorderConfig(dir=str(record_dir)))
+        runner = Runner(vehicle, out_dir=out_dir, recorder=recorder, mavlink=mav,
+                        handle_signals=False)
+        imu_write: Writer = imu.write
+        if via_router:
+            runner.start()  # the router's autopilot port, before the autopilot sends
+            assert runner.router is not None
+            addr = runner.router.endpoints[0].link.local_address
+            assert addr is not None
+            ap = ("127.0.0.1", int(addr[1]))
+
+            def imu_write(data: bytes) -> None:  # one datagram per packet, as an autopilot
+                for frame in MavFramer().feed(data):
+                    udp.sendto(frame.raw, ap)
         done = threading.Event()
         stop = threading.Event()
 
         def feed() -> None:
             time.sleep(0.2)  # the runner opens the ports first
             try:
-                play(events, (imu.write, gps.write), speed=speed, stop=stop)
+                play(events, (imu_write, gps.write), speed=speed, stop=stop)
             finally:
                 done.set()
 
@@ -221,7 +277,7 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
         t0 = time.monotonic()
         thread.start()
         try:
-            summary = Runner(vehicle, out_dir=out_dir, handle_signals=False).run(until=until)
+            summary = runner.run(until=until)
         finally:
             stop.set()
             thread.join(5.0)
@@ -235,7 +291,7 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
 def live_errors(records: list[dict[str, Any]], data: NavData, latitude_deg: float,
                 rate_hz: int) -> tuple[npt.NDArray[np.int_], npt.NDArray[np.float64]]:
     """Position error (E, N, U, m, against the truth in the simulator's frame) of every epoch
-    the INS produced."""
+    the INS produced after the lead-in (the paper's epochs 1..; ``epochs``: their numbers)."""
     frame = frame_of(latitude_deg)
     t_day0 = (UTC0 % 86400.0)
     js: list[int] = []
@@ -244,30 +300,33 @@ def live_errors(records: list[dict[str, Any]], data: NavData, latitude_deg: floa
         ins = r.get("ins")
         if r.get("mode") != "ins" or not isinstance(ins, dict) or "lla" not in ins:
             continue
-        j = round(float(r["t"]) - t_day0)
+        j = round((float(r["t"]) - t_day0 + 43200.0) % 86400.0 - 43200.0)
+        if j < 1:
+            continue  # the lead-in
         e, n, u = frame.to_enu(*ins["lla"])
-        p = data.traj.p[j * rate_hz]
+        p = data.traj.p[(j + data.lead) * rate_hz]
         js.append(j)
         errs.append((e - float(p[0]), n - float(p[1]), u - float(p[2])))
     return np.array(js, dtype=int), np.array(errs, dtype=float).reshape(-1, 3)
 
 
 def offline_aligned(data: NavData, params: InsGnssParams, j0: int,
-                    strategy: InsGnssStrategy | None = None) -> npt.NDArray[np.float64]:
-    """The offline filter on the same data, aligned as the live vehicle aligns (at GNSS epoch
-    ``j0``: the fix's position, the horizontal GNSS velocity along its course, level from the
-    mean specific force over the last second, heading from the course), position updates only;
-    its position errors at epochs ``j0 + 1 ..``."""
+                    strategy: InsGnssStrategy | None = None,
+                    course_sigma_deg: float = 1.0) -> npt.NDArray[np.float64]:
+    """The offline filter on the same data, aligned in motion as the live vehicle aligns (at
+    GNSS epoch ``j0``: the fix's position, the horizontal GNSS velocity along its course,
+    level from the mean specific force over the last second, heading from the course, the
+    initial covariance of :func:`firmware_host.insgnss.align.in_motion`), position updates
+    only; its position errors at epochs ``j0 + 1 ..`` (data without a lead-in)."""
     prm = replace(params, use_velocity=False, strategy=strategy or params.strategy)
     rate = round(1.0 / float(data.traj.t[1] - data.traj.t[0]))
     k0 = j0 * rate
     f = data.accel[k0 - rate + 1:k0 + 1].mean(axis=0)
-    roll = math.atan2(-f[1], -f[2])
-    pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
     v = data.gnss_v[j0]
-    yaw = math.atan2(float(v[0]), float(v[1]))
-    kf = InsGnssFilter(prm, float(data.gnss_t[j0]), data.gnss_p[j0],
-                       (float(v[0]), float(v[1]), 0.0), (roll, pitch, yaw))
+    a = align.in_motion(prm, f, 1.0, math.hypot(float(v[0]), float(v[1])),
+                        math.atan2(float(v[0]), float(v[1])), course_sigma_deg)
+    kf = InsGnssFilter(a.params(prm), float(data.gnss_t[j0]), data.gnss_p[j0],
+                       (float(v[0]), float(v[1]), 0.0), (a.roll, a.pitch, a.yaw))
     t = data.traj.t.tolist()
     gyro, accel = data.gyro.tolist(), data.accel.tolist()
     out = []
@@ -282,3 +341,60 @@ def offline_aligned(data: NavData, params: InsGnssParams, j0: int,
 def rms(err: npt.NDArray[np.float64]) -> float:
     """The 3D position RMS (m)."""
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
+
+
+@dataclass
+class Comparison:
+    """The live vehicle against ``sim insgnss`` (the offline filter, started from the truth
+    plus its initial sigmas) on the same scenario and seed: 3-D position RMS (m) over the
+    paper's epochs each produced."""
+
+    scenario: str
+    seed: int
+    live_rms_m: float
+    offline_rms_m: float
+    none_rms_m: float  # the offline filter without robust treatment
+    live_epochs: int
+    offline_epochs: int
+    run: LiveRun
+
+    @property
+    def ratio(self) -> float:
+        """live / offline."""
+        return self.live_rms_m / self.offline_rms_m
+
+    @property
+    def factor_live(self) -> float:
+        """How far below "none" the live vehicle is (none / live)."""
+        return self.none_rms_m / self.live_rms_m
+
+    @property
+    def factor_offline(self) -> float:
+        return self.none_rms_m / self.offline_rms_m
+
+    def row(self) -> list[Any]:
+        return [self.scenario, self.seed, self.live_epochs, round(self.live_rms_m, 3),
+                round(self.offline_rms_m, 3), round(self.ratio, 3), round(self.none_rms_m, 2),
+                round(self.factor_live, 1), round(self.factor_offline, 1)]
+
+
+COMPARISON_HEADER = ["scenario", "seed", "live epochs", "live RMS m", "sim insgnss RMS m",
+                     "live / sim", "none RMS m", "none / live", "none / sim"]
+
+
+def compare(setup: InsGnssSetup, scenario: Scenario, seed: int, out_dir: Path, *,
+            speed: float = 50.0, imu_message: str = "HIGHRES_IMU",
+            impair: LinkImpairment | None = None, mavlink_url: str = "") -> Comparison:
+    """Generate the scenario, run ``sim insgnss``'s filter (the preset's strategy) and "none"
+    offline, play the same data to the live vehicle over ptys; see :class:`Comparison`."""
+    data = generate(setup, scenario, seed)
+    strategy = setup.filter.strategy
+    runs: dict[str, MethodRun] = {s: run_method(data, setup.filter, s)
+                                  for s in (strategy, "none")}
+    summary = summarize(data, runs, scenario, seed, setup)
+    lr = run_live(setup, data, out_dir, imu_message=imu_message, impair=impair, seed=seed,
+                  speed=speed, mavlink_url=mavlink_url)
+    return Comparison(scenario, seed, rms(lr.pos_err),
+                      summary["methods"][strategy]["position_rms_3d_m"],
+                      summary["methods"]["none"]["position_rms_3d_m"], len(lr.pos_err),
+                      len(runs[strategy].pos_err), lr)

@@ -10,6 +10,11 @@ GNSS data with errors, and injected GNSS faults. This module does the same:
   white noise, from ``[sim.imu]``;
 - GNSS at 1 Hz: true position plus white noise (σ = ``gnss_sigma_h_m`` east/north,
   ``gnss_sigma_v_m`` up) and velocity plus white noise;
+- optionally a lead-in before the paper's t = 0 (``[sim] rest_s``, ``takeoff_s``; none by
+  default): at rest, then a straight take-off roll up to the paper's speed, without faults, so
+  that a vehicle can align itself as a real one does (the live INS/GNSS of
+  docs/insgnss-live.md); the offline filter runs through it too (a zero-velocity update at
+  each rest epoch, as the live vehicle does), and the results are those of the paper's epochs;
 - scenarios (faults added to the GNSS position, epochs are whole seconds 1..500):
   ``paper-random`` 100 distinct random epochs, +100 m east and north, +20 m up;
   ``paper-single`` every 10 s, +100/+100/+20 m; ``paper-continuous`` every epoch 10..200 s,
@@ -120,8 +125,12 @@ class Trajectory:
 
 
 def make_trajectory(duration_s: float, rate_hz: int, speed_m_s: float,
-                    earth: EarthModel) -> Trajectory:
-    """The aircraft of the experiment, sampled at ``rate_hz``; position by (M3)."""
+                    earth: EarthModel, rest_s: int = 0, takeoff_s: int = 0) -> Trajectory:
+    """The aircraft of the experiment, sampled at ``rate_hz`` from t = 0 to ``duration_s``;
+    position by (M3). With ``rest_s > 0`` a lead-in comes first (t < 0): ``rest_s`` at rest,
+    level, heading 30°, then a straight take-off roll of ``takeoff_s`` from 0 to
+    ``speed_m_s`` (speed by the quintic smooth step: acceleration zero at both ends), so the
+    paper's flight starts at t = 0 as without it."""
     n = round(duration_s * rate_hz) + 1
     dt = 1.0 / rate_hz
     t = np.arange(n) * dt
@@ -136,6 +145,15 @@ def make_trajectory(duration_s: float, rate_hz: int, speed_m_s: float,
     cumtrapz = np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * dt)])
     speed = speed_m_s + cumtrapz
     yaw = 30.0 * DEG + np.concatenate([[0.0], np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * dt)])
+    if rest_s > 0:
+        n_lead = (rest_s + takeoff_s) * rate_hz
+        t_lead = (np.arange(n_lead) - n_lead) * dt
+        tau = np.clip((t_lead + takeoff_s) / takeoff_s, 0.0, 1.0)
+        t = np.concatenate([t_lead, t])
+        speed = np.concatenate([speed_m_s * tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2), speed])
+        yaw = np.concatenate([np.full(n_lead, 30.0 * DEG), yaw])
+        yaw_rate = np.concatenate([np.zeros(n_lead), yaw_rate])
+        gamma = np.concatenate([np.zeros(n_lead), gamma])
     roll = np.arctan(speed * yaw_rate / earth.g0)
     pitch = gamma
     v = np.stack(
@@ -165,10 +183,10 @@ def ideal_imu(traj: Trajectory, earth: EarthModel) -> tuple[FloatArray, FloatArr
 
 
 @lru_cache(maxsize=4)
-def _truth(epochs: int, rate: int, speed_m_s: float,
-           earth: EarthModel) -> tuple[Trajectory, FloatArray, FloatArray]:
+def _truth(epochs: int, rate: int, speed_m_s: float, earth: EarthModel, rest_s: int = 0,
+           takeoff_s: int = 0) -> tuple[Trajectory, FloatArray, FloatArray]:
     """Trajectory and error-free IMU, shared by every seed and scenario (read-only arrays)."""
-    traj = make_trajectory(epochs - 1, rate, speed_m_s, earth)
+    traj = make_trajectory(epochs - 1, rate, speed_m_s, earth, rest_s, takeoff_s)
     gyro, accel = ideal_imu(traj, earth)
     for a in (traj.t, traj.p, traj.v, traj.q, traj.rpy, gyro, accel):
         a.flags.writeable = False
@@ -190,6 +208,14 @@ class NavData:
     init_v: FloatArray
     init_rpy: FloatArray
     imu_bias: dict[str, list[float]]
+    lead: int = 0  # GNSS epochs of lead-in (``[sim] rest_s``) before the paper's t = 0
+    rest: int = 0  # of which the first this many (after epoch 0) are at rest
+    zupt_sigma_m_s: float = 0.01  # at rest: the zero-velocity update's 1σ ([insgnss.live])
+
+    @property
+    def flight(self) -> slice:
+        """The GNSS epochs the results are taken at: the paper's 1..N-1 (after the lead-in)."""
+        return slice(self.lead + 1, None)
 
 
 def fault_table(scenario: Scenario, sim: InsGnssSimParams,
@@ -226,7 +252,9 @@ def generate(setup: InsGnssSetup, scenario: Scenario, seed: int) -> NavData:
     ss = np.random.SeedSequence(seed)
     rng_imu, rng_gnss, rng_fault, rng_init = (np.random.default_rng(s) for s in ss.spawn(4))
     rate = sim.imu_rate_hz
-    traj, gyro, accel = _truth(sim.epochs, rate, sim.speed_m_s, earth)
+    lead = sim.lead_s
+    traj, gyro, accel = _truth(sim.epochs, rate, sim.speed_m_s, earth,
+                               sim.rest_s if lead else 0, sim.takeoff_s if lead else 0)
     n = len(traj.t)
     dt = 1.0 / rate
     e = sim.imu
@@ -234,11 +262,13 @@ def generate(setup: InsGnssSetup, scenario: Scenario, seed: int) -> NavData:
     b_a = rng_imu.normal(0.0, e.accel_bias_m_s2, 3)
     gyro = gyro + b_g + rng_imu.normal(0.0, e.gyro_arw_rad_sqrt_s / math.sqrt(dt), (n, 3))
     accel = accel + b_a + rng_imu.normal(0.0, e.accel_vrw_m_s_sqrt_s / math.sqrt(dt), (n, 3))
-    idx = np.arange(sim.epochs) * rate
+    m = sim.epochs + lead
+    idx = np.arange(m) * rate
     sig = np.array([sim.gnss_sigma_h_m, sim.gnss_sigma_h_m, sim.gnss_sigma_v_m])
-    gnss_p = traj.p[idx] + rng_gnss.normal(0.0, 1.0, (sim.epochs, 3)) * sig
-    gnss_v = traj.v[idx] + rng_gnss.normal(0.0, sim.gnss_sigma_vel_m_s, (sim.epochs, 3))
-    fault = fault_table(scenario, sim, rng_fault)
+    gnss_p = traj.p[idx] + rng_gnss.normal(0.0, 1.0, (m, 3)) * sig
+    gnss_v = traj.v[idx] + rng_gnss.normal(0.0, sim.gnss_sigma_vel_m_s, (m, 3))
+    # the scenario's faults are on the paper's epochs; none in the lead-in
+    fault = np.concatenate([np.zeros((lead, 3)), fault_table(scenario, sim, rng_fault)])
     tilt, yaw = flt.init_sigma_tilt_deg * DEG, flt.init_sigma_yaw_deg * DEG
     return NavData(
         traj=traj,
@@ -252,6 +282,9 @@ def generate(setup: InsGnssSetup, scenario: Scenario, seed: int) -> NavData:
         init_v=traj.v[0] + rng_init.normal(0.0, flt.init_sigma_vel_m_s, 3),
         init_rpy=traj.rpy[0] + rng_init.normal(0.0, 1.0, 3) * np.array([tilt, tilt, yaw]),
         imu_bias={"gyro_rad_s": b_g.tolist(), "accel_m_s2": b_a.tolist()},
+        lead=lead,
+        rest=sim.rest_s if lead else 0,
+        zupt_sigma_m_s=setup.live.rest_sigma_vel_m_s,
     )
 
 
@@ -279,8 +312,29 @@ class MethodRun:
     innovation_sigma: tuple[float, float, float] = (math.nan, math.nan, math.nan)
 
 
+def _counters(kf: InsGnssFilter, strategy: InsGnssStrategy) -> dict[str, Any]:
+    """The gate's and the fault detector's counters so far (position components)."""
+    tracker = kf.position_tracker
+    mon = kf.fault_monitor
+    fs = strategy == "fault_state"
+    return {
+        "zones": {z.name.lower(): sum(g.zone_counts[z] for g in kf.gates[:3]) for z in Zone},
+        "actions": {a.value: sum(g.action_counts[a] for g in kf.gates[:3]) for a in Action},
+        "restarts": sum(g.restarts for g in kf.gates[:3]),
+        "onsets": mon.onsets if fs else tracker.fault_onsets,
+        "returns": mon.returns if fs else tracker.returns,
+        "readmissions": sum(g.readmissions for g in kf.gates[:3]),
+    }
+
+
+def _since(now: dict[str, Any], then: dict[str, Any]) -> dict[str, Any]:
+    return {k: ({kk: vv - then[k][kk] for kk, vv in v.items()} if isinstance(v, dict)
+                else v - then[k]) for k, v in now.items()}
+
+
 def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) -> MethodRun:
-    """Run the filter with ``strategy`` over ``data``."""
+    """Run the filter with ``strategy`` over ``data`` (from its first sample, the lead-in
+    included; the errors and counts are those of the paper's epochs after it)."""
     prm = replace(params, strategy=strategy)
     traj = data.traj
     kf = InsGnssFilter(prm, float(traj.t[0]), data.init_p, data.init_v, data.init_rpy)
@@ -293,30 +347,31 @@ def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) 
     s_pos: list[list[float]] = []
     t_list = traj.t.tolist()
     gyro, accel = data.gyro.tolist(), data.accel.tolist()
+    lead = data.lead
+    at_lead = _counters(kf, strategy)
     for j in range(1, m):
         for k in range((j - 1) * rate + 1, j * rate + 1):
             kf.propagate(t_list[k], gyro[k], accel[k])
         rep = kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
+        if j <= data.rest:  # the lead-in's rest: known, as the live vehicle detects it
+            kf.zero_velocity(data.zupt_sigma_m_s)
         flagged[j - 1] = any(d.zone is not Zone.NO_FAULT for d in rep.decisions[:3])
         faulted[j - 1] = kf.bias_active
-        if kf.S.shape[0] >= 3 and all(d.action is Action.ACCEPT for d in rep.decisions[:3]):
+        if j > lead and kf.S.shape[0] >= 3 and \
+                all(d.action is Action.ACCEPT for d in rep.decisions[:3]):
             s_pos.append([float(kf.S[i, i]) for i in range(3)])
         k = j * rate
         pos_err[j - 1] = kf.position - traj.p[k]
         vel_err[j - 1] = kf.velocity - traj.v[k]
-    zones = {z.name.lower(): sum(g.zone_counts[z] for g in kf.gates[:3]) for z in Zone}
-    actions = {a.value: sum(g.action_counts[a] for g in kf.gates[:3]) for a in Action}
-    tracker = kf.position_tracker
+        if j == lead:
+            at_lead = _counters(kf, strategy)
+    c = _since(_counters(kf, strategy), at_lead)
+    flagged, faulted = flagged[lead:], faulted[lead:]
     if strategy == "fault_state":
-        mon = kf.fault_monitor
-        onsets, returns = mon.onsets, mon.returns
         flagged |= faulted  # a fix taken as faulty is flagged whatever its zone
-    else:
-        onsets, returns = tracker.fault_onsets, tracker.returns
     return MethodRun(
-        data.gnss_t[1:], pos_err, vel_err, zones, actions, flagged,
-        sum(g.restarts for g in kf.gates[:3]), onsets, returns,
-        sum(g.readmissions for g in kf.gates[:3]),
+        data.gnss_t[data.flight], pos_err[lead:], vel_err[lead:], c["zones"], c["actions"],
+        flagged, c["restarts"], c["onsets"], c["returns"], c["readmissions"],
         faulted if strategy == "fault_state" else None,
         _median_sigma(s_pos),
     )
@@ -360,9 +415,11 @@ def run_coast(data: NavData, params: InsGnssParams) -> CoastRun:
             kf.coast(float(data.gnss_t[j]), data.gnss_v[j])
         else:
             kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
+        if j <= data.rest:
+            kf.zero_velocity(data.zupt_sigma_m_s)
         pos_err[j - 1] = kf.position - traj.p[j * rate]
         sigma_h[j - 1] = math.sqrt(float(kf.P[0, 0] + kf.P[1, 1]))
-    return CoastRun(pos_err, sigma_h)
+    return CoastRun(pos_err[data.lead:], sigma_h[data.lead:])
 
 
 def _stats(err: FloatArray) -> dict[str, dict[str, float]]:
@@ -380,7 +437,7 @@ def _stats(err: FloatArray) -> dict[str, dict[str, float]]:
 def summarize(data: NavData, runs: dict[str, MethodRun], scenario: str, seed: int,
               setup: InsGnssSetup) -> dict[str, Any]:
     """The ``summary.json`` document."""
-    faulty = np.any(data.fault[1:] != 0, axis=1)
+    faulty = np.any(data.fault[data.flight] != 0, axis=1)
     methods: dict[str, Any] = {}
     for name, r in runs.items():
         horiz = np.hypot(r.pos_err[:, 0], r.pos_err[:, 1])
@@ -403,7 +460,7 @@ def summarize(data: NavData, runs: dict[str, MethodRun], scenario: str, seed: in
     return {
         "scenario": scenario,
         "seed": seed,
-        "epochs": len(data.gnss_t),
+        "epochs": len(data.gnss_t) - data.lead,
         "fault_epochs": int(np.sum(faulty)),
         "imu_rate_hz": sim.imu_rate_hz,
         "gnss_sigma_m": {"h": sim.gnss_sigma_h_m, "v": sim.gnss_sigma_v_m,
@@ -412,6 +469,7 @@ def summarize(data: NavData, runs: dict[str, MethodRun], scenario: str, seed: in
         "thresholds": {"T1": setup.filter.three_zone.t1, "T2": setup.filter.three_zone.t2},
         "errors_are": "estimate minus truth at GNSS epochs 1..N-1, after the update",
         "methods": methods,
+        **({"lead_in_s": {"rest": sim.rest_s, "takeoff": sim.takeoff_s}} if data.lead else {}),
     }
 
 
@@ -456,7 +514,8 @@ def write_plots(out: Path, scenario: str, runs: dict[str, MethodRun],
     files = []
     spans: list[tuple[float, float]] = []
     if data is not None:
-        spans = fault_spans(data.gnss_t[1:], np.any(data.fault[1:] != 0, axis=1))
+        spans = fault_spans(data.gnss_t[data.flight],
+                            np.any(data.fault[data.flight] != 0, axis=1))
     for kind, unit in (("position", "m"), ("velocity", "m/s")):
         fig, axes = plt.subplots(3, 1, figsize=(9, 8.4), sharex=True)
         for i, axis in enumerate(("east", "north", "up")):

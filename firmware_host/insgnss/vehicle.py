@@ -4,8 +4,13 @@ three-zone gate, or the preset's ``fault_state``) and the rover's outputs.
 
 Ports: ``gps`` (``[rover.port]``, the receiver, through the rover's own pipeline: every fix
 also goes through the rover detector) and ``imu`` (``[insgnss.live] imu_url``, the
-autopilot's MAVLink link: a serial device, a pty, ``socket://HOST:PORT``). Both are recorded
-by the flight recorder. Paced by data.
+autopilot's MAVLink link: a serial device, a pty, ``socket://HOST:PORT``). With
+``imu_url = "router"`` (:data:`ROUTER`) and a ``[mavlink]`` table there is no ``imu`` port:
+the IMU messages, SYSTEM_TIME and ATTITUDE are taken from the router's autopilot link
+(:meth:`Router.listen <firmware_host.mavlink.router.Router.listen>`, one process), queued
+by the router's thread and read by the vehicle's step in arrival order. Both inputs are
+recorded by the flight recorder (``gps rx``, ``imu rx``; from the router the packets as the
+step takes them). Paced by data.
 
 IMU time (never arrival time): each sample carries the autopilot's ``time_usec`` /
 ``time_boot_ms``; the autopilot time is mapped to GNSS time **once**, by the first
@@ -21,12 +26,21 @@ Rate: the median interval of the first ``rate_samples`` samples is checked again
 ``min_imu_rate_hz`` (:func:`fdi.insgnss.check_imu_rate`); below it the INS is refused, said
 once in the log and in the summary, and the receiver's fixes go through the rover detector.
 
-Alignment: level from the mean specific force over ``align_s`` when the vehicle is steady
-(gyro below ``align_max_gyro_deg_s``, ``|f|`` within ``align_max_accel_dev_m_s2`` of g: at
-rest, or flying straight and level), heading from the GNSS course once the speed exceeds
-``align_min_speed_m_s`` (or the autopilot's ATTITUDE yaw, ``heading_source = "attitude"``),
-position from a fix the rover detector accepted. Until then, and after any filter error (an
-IMU gap it cannot bridge), the rover detector alone drives the outputs.
+Alignment (:mod:`firmware_host.insgnss.align`, from the vehicle's own sensors): an epoch is
+*at rest* when the GNSS speed is below ``rest_max_speed_m_s``, nothing turns faster than
+``align_max_gyro_deg_s``, ``|f|`` is within ``align_max_accel_dev_m_s2`` of g and the mean
+specific force moved less than ``rest_max_accel_m_s2`` since the previous epoch. After
+``rest_align_s`` at rest: level from the mean specific force, heading by gyrocompassing from
+the mean gyro when the configured gyro can (its heading 1σ at most
+``gyrocompass_max_sigma_deg``: navigation grade; or the autopilot's ATTITUDE yaw,
+``heading_source = "attitude"``), velocity zero, the initial covariance with the attitude error
+tied to the biases that cause it; then a zero-velocity update (ZUPT, ``rest_sigma_vel_m_s``) on
+every epoch still at rest. Otherwise (moving, or a MEMS gyro), in steady motion: level from the
+specific force over ``align_s``, heading from the GNSS course once the speed exceeds
+``align_min_speed_m_s`` (1σ at least ``course_sigma_deg``), velocity from the receiver. The
+position is a fix that agrees with the previous one and the receiver's velocity. Until aligned,
+and after any filter error (an IMU gap it cannot bridge), the rover detector alone drives the
+outputs.
 
 GNSS observation: position only. NMEA gives horizontal speed and course but no vertical
 velocity, and the filter's velocity update takes the three components together, so the live
@@ -53,7 +67,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from drivers.mavlink.framer import MavFramer
+from drivers.mavlink.framer import MavFrame, MavFramer
 from drivers.mavlink.imu import ImuSample, imu_from_message
 from drivers.mavlink.io import decode_packet
 from drivers.ratelog import RateLimitedLog
@@ -68,6 +82,7 @@ from fdi.insgnss import (
     measure_imu_rate,
 )
 from fdi.three_zone import Action
+from firmware_host.insgnss import align
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
 from firmware_host.rover.vehicle import rover_mavlink_spec
@@ -77,6 +92,7 @@ from firmware_host.runtime.failsafe import RoverFailsafe
 from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
 log = logging.getLogger("fdi_bridge.insgnss")
+ROUTER = "router"  # [insgnss.live] imu_url: the IMU from the router's autopilot link
 
 
 class _Discard:
@@ -172,6 +188,15 @@ class InsGnssVehicle:
                               tuple[float, float] | None] | None = None
         self.kf: InsGnssFilter | None = None
         self.aligned_at: float | None = None
+        self.alignment: align.Alignment | None = None
+        self._last_f: np.ndarray | None = None  # the previous epoch's mean specific force
+        self._prev_t: float | None = None  # the previous epoch's time
+        self._rest_f = np.zeros(3)  # sums over the current rest (consecutive still epochs)
+        self._rest_w = np.zeros(3)
+        self._rest_n = 0
+        self._rest_t0: float | None = None
+        self.zupts = 0
+        self._align_P: np.ndarray | None = None
         self.align_wait: Counter[str] = Counter()
         self.resets: Counter[str] = Counter()
         self.modes: Counter[str] = Counter()
@@ -180,13 +205,15 @@ class InsGnssVehicle:
         self._idle_s = 0.0
         self._prior_var = np.zeros(3)
         self.output_errors = 0
+        self._router_q: deque[bytes] = deque()  # appended by the router's thread
+        self._imu_tap: Callable[[bytes], None] | None = None
 
     # ------------------------------------------------------------------ what it needs
 
     def ports(self) -> list[PortSpec]:
         rc = self.cfg.rover
         specs = [PortSpec("gps", rc.port, rc.reconnect_max_s, opener=open_port_nonblocking)]
-        if self.live.imu_url:
+        if self.live.imu_url and self.live.imu_url != ROUTER:
             s = SerialSettings(url=self.live.imu_url, baudrate=self.live.imu_baudrate,
                                timeout_s=0.0)
             specs.append(PortSpec("imu", s, rc.reconnect_max_s, opener=open_port_nonblocking))
@@ -201,6 +228,15 @@ class InsGnssVehicle:
         self.clock = self.collect.clock = ctx.clock
         self.gps = ctx.ports["gps"]
         self.imu = ctx.ports.get("imu")
+        if self.live.imu_url == ROUTER and self.imu is None and not self.refused:
+            # (a replay hands the recorded "imu rx" as the port instead)
+            if ctx.router is None:
+                self.refused = (f'[insgnss.live] imu_url = "{ROUTER}" needs the router (a '
+                                "[mavlink] table); the rover detector alone")
+            else:
+                for kind in (self.live.imu_message, "SYSTEM_TIME", "ATTITUDE"):
+                    ctx.router.listen(kind, self._on_router_frame)
+                self._imu_tap = ctx.tap("imu rx", ROUTER, 0, "rx")
         self.write_record = ctx.epochs.write
         self.pipeline = RoverPipeline(rc, jsonl=_Discard(),  # type: ignore[arg-type]
                                       sinks=[self.collect])
@@ -229,6 +265,13 @@ class InsGnssVehicle:
             if data:
                 got = True
                 self._feed_imu(data)
+        elif self._router_q:
+            q = self._router_q
+            data = b"".join(q.popleft() for _ in range(len(q)))
+            got = True
+            if self._imu_tap is not None:
+                self._imu_tap(data)
+            self._feed_imu(data)
         data = self.gps.read_some(65536)
         if data:
             got = True
@@ -265,6 +308,10 @@ class InsGnssVehicle:
                 sink.close()
 
     # ------------------------------------------------------------------ IMU
+
+    def _on_router_frame(self, frame: MavFrame) -> None:
+        """The router's thread: keep the packet for the next step (deque appends are atomic)."""
+        self._router_q.append(frame.raw)
 
     def _feed_imu(self, data: bytes) -> None:
         want = self.live.imu_message
@@ -362,7 +409,9 @@ class InsGnssVehicle:
         while q:
             out, arrived = q[0]
             t_g = self._gnss_time(out)
-            if self.refused or t_g is None or (not self.buffer and self.kf is None and not force):
+            # "no imu": none has come yet (an empty buffer after one has is a wait below:
+            # the records must not depend on which link's bytes were read first)
+            if self.refused or t_g is None or (self.newest_us is None and not force):
                 q.popleft()
                 self._emit_rover(out, t_g, "no imu" if not self.refused else "refused")
                 n += 1
@@ -392,30 +441,80 @@ class InsGnssVehicle:
     def _epoch(self, out: EpochOutcome, t_g: float) -> None:
         if self.kf is None:
             self._try_align(out, t_g)
+            self._prev_t = t_g
             return
         kf = self.kf
+        zupt = False
         try:
-            for t, s in self._take(t_g):
+            samples = self._take(t_g)
+            for t, s in samples:
                 if t <= kf.t_s:
                     self.stats.late += 1
                     continue
                 kf.propagate(t, s.gyro_rad_s, s.accel_m_s2)
                 self.stats.integrated += 1
+            still = self._stationary(out, [s for _, s in samples])
             enu = self._fix_enu(out)
             if enu is None:
                 kf.coast(t_g)
-                self._emit_ins(out, t_g, None)
-                return
-            self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
-            rep = kf.update(t_g, enu)
+                rep = None
+            else:
+                self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
+                rep = kf.update(t_g, enu)
+            if still and not kf.bias_active:
+                kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
+                self.zupts += 1
+                zupt = True
         except EstimatorError as err:
             self.resets[str(err).split(" ")[0] or "error"] += 1
             self.ratelog.warning("ins reset", f"{err}; realigning, rover detector meanwhile")
             self.kf = None
             self.aligned_at = None
+            self._rest_reset()
             self._emit_rover(out, t_g, "reset")
             return
-        self._emit_ins(out, t_g, rep)
+        finally:
+            self._prev_t = t_g
+        self._emit_ins(out, t_g, rep, zupt)
+
+    # ------------------------------------------------------------------ alignment
+
+    def _stationary(self, out: EpochOutcome, window: list[ImuSample]) -> bool:
+        """At rest over this epoch's interval: GNSS speed at most ``rest_max_speed_m_s``, no
+        rotation above ``align_max_gyro_deg_s``, ``|f|`` within ``align_max_accel_dev_m_s2``
+        of g and the mean specific force within ``rest_max_accel_m_s2`` of the previous
+        epoch's (a start is seen by the accelerometers before the GNSS speed)."""
+        lv = self.live
+        if not window:
+            self._last_f = None
+            return False
+        f_all = np.array([s.accel_m_s2 for s in window])
+        f = f_all.mean(axis=0)
+        last, self._last_f = self._last_f, f
+        speed = out.epoch.speed_mps
+        if speed is None or speed > lv.rest_max_speed_m_s or last is None:
+            return False
+        w = np.array([s.gyro_rad_s for s in window])
+        if float(np.max(np.linalg.norm(w, axis=1))) > lv.align_max_gyro_deg_s * DEG:
+            return False
+        if abs(float(np.linalg.norm(f)) - self.params.earth.g0) > lv.align_max_accel_dev_m_s2:
+            return False
+        return float(np.linalg.norm(f - last)) <= lv.rest_max_accel_m_s2
+
+    def _rest_reset(self) -> None:
+        self._rest_f = np.zeros(3)
+        self._rest_w = np.zeros(3)
+        self._rest_n = 0
+        self._rest_t0 = None
+
+    def _rest_add(self, window: list[ImuSample], t_g: float) -> float:
+        """Adds the epoch's samples to the current rest; returns its length (s)."""
+        if self._rest_t0 is None:
+            self._rest_t0 = self._prev_t if self._prev_t is not None else t_g
+        self._rest_f += np.sum([s.accel_m_s2 for s in window], axis=0)
+        self._rest_w += np.sum([s.gyro_rad_s for s in window], axis=0)
+        self._rest_n += len(window)
+        return t_g - self._rest_t0
 
     @staticmethod
     def _fix_enu(out: EpochOutcome) -> tuple[float, float, float] | None:
@@ -430,33 +529,65 @@ class InsGnssVehicle:
         lv = self.live
         samples = self._take(t_g)
         window = [s for t, s in samples if t >= t_g - lv.align_s]
-        reason = self._align_reason(out, window)
-        if reason:
+        still = self._stationary(out, [s for _, s in samples])
+        rest_s = self._rest_add([s for _, s in samples], t_g) if still else 0.0
+        if not still:
+            self._rest_reset()
+        reason = self._fix_reason(out)
+        a: align.Alignment | None = None
+        if not reason and still:
+            a, reason = self._align_at_rest(rest_s)
+        elif not reason:
+            reason = self._motion_reason(out, window)
+            if not reason:
+                f = np.mean([s.accel_m_s2 for s in window], axis=0)
+                speed = float(out.epoch.speed_mps or 0.0)
+                course = float(out.epoch.course_deg or 0.0) * DEG
+                yaw = self.attitude_yaw if lv.heading_source == "attitude" else None
+                a = align.in_motion(self.params, f, lv.align_s, speed, course,
+                                    lv.course_sigma_deg, yaw, lv.attitude_sigma_deg)
+        if a is None:
             self.align_wait[reason] += 1
             self._emit_rover(out, t_g, f"aligning: {reason}")
             return
-        f = np.mean([s.accel_m_s2 for s in window], axis=0)
-        roll = math.atan2(-f[1], -f[2])  # FRD: at rest f = (0, 0, −g)
-        pitch = math.atan2(f[0], math.hypot(f[1], f[2]))
-        if lv.heading_source == "attitude":
-            assert self.attitude_yaw is not None
-            yaw = self.attitude_yaw
-            speed = out.epoch.speed_mps or 0.0
-            course = (out.epoch.course_deg or 0.0) * DEG
-        else:
-            speed = float(out.epoch.speed_mps or 0.0)
-            course = yaw = float(out.epoch.course_deg or 0.0) * DEG
         enu = self._fix_enu(out)
         assert enu is not None
-        vel = (speed * math.sin(course), speed * math.cos(course), 0.0)
-        self.kf = InsGnssFilter(self.params, t_g, enu, vel, (roll, pitch, yaw))
+        if a.method == "gnss course" or not still:
+            speed = float(out.epoch.speed_mps or 0.0)
+            course = float(out.epoch.course_deg or 0.0) * DEG
+            vel = (speed * math.sin(course), speed * math.cos(course), 0.0)
+        else:
+            vel = (0.0, 0.0, 0.0)
+        self.kf = InsGnssFilter(a.params(self.params), t_g, enu, vel, (a.roll, a.pitch, a.yaw))
+        if self._align_P is not None:  # at rest: the attitude error tied to the biases
+            self.kf.P = self._align_P
+            self._align_P = None
         self.aligned_at = t_g
-        log.info("INS/GNSS aligned at t = %.3f s: roll %.2f pitch %.2f yaw %.2f deg", t_g,
-                 roll / DEG, pitch / DEG, yaw / DEG)
+        self.alignment = a
+        log.info("INS/GNSS aligned at t = %.3f s by %s: roll %.3f pitch %.3f yaw %.3f deg "
+                 "(1σ tilt %.4f, yaw %.4f deg)", t_g, a.method, a.roll / DEG, a.pitch / DEG,
+                 a.yaw / DEG, a.sigma_tilt_deg, a.sigma_yaw_deg)
         self._emit_rover(out, t_g, "aligned")
 
-    def _align_reason(self, out: EpochOutcome, window: list[ImuSample]) -> str:
+    def _align_at_rest(self, rest_s: float) -> tuple[align.Alignment | None, str]:
         lv = self.live
+        if rest_s < lv.rest_align_s:
+            return None, "at rest: levelling and gyrocompassing"
+        n = max(self._rest_n, 1)
+        f, w = self._rest_f / n, self._rest_w / n
+        yaw: float | None = None
+        if lv.heading_source == "attitude":
+            if self.attitude_yaw is None:
+                return None, "no ATTITUDE yet"
+            yaw = self.attitude_yaw
+        elif align.gyrocompass_sigma(self.params, rest_s) > lv.gyrocompass_max_sigma_deg * DEG:
+            return None, "at rest, the gyro cannot gyrocompass: heading from the course"
+        a = align.at_rest(self.params, f, w, rest_s, yaw, lv.attitude_sigma_deg,
+                          lv.rest_sigma_vel_m_s)
+        self._align_P = align.rest_covariance(self.params, a, f, w, rest_s, yaw)
+        return a, ""
+
+    def _fix_reason(self, out: EpochOutcome) -> str:
         enu = self._fix_enu(out)
         if enu is None:
             return "no 3D fix"
@@ -474,6 +605,10 @@ class InsGnssVehicle:
                          enu[1] - prev[1][1] - 0.5 * (v0[1] + v1[1]) * dt)
         if res > 3.0 * math.sqrt(2.0) * self.params.gnss_sigma_h_m:
             return "fix inconsistent with the previous one"
+        return ""
+
+    def _motion_reason(self, out: EpochOutcome, window: list[ImuSample]) -> str:
+        lv = self.live
         n_need = int(lv.align_s * self.params.min_imu_rate_hz * 0.5)
         if len(window) < max(n_need, 2):
             return "too few IMU samples"
@@ -516,7 +651,8 @@ class InsGnssVehicle:
         self.write_record(record)
         self._send(out)
 
-    def _emit_ins(self, out: EpochOutcome, t_g: float, rep: Any | None) -> None:
+    def _emit_ins(self, out: EpochOutcome, t_g: float, rep: Any | None,
+                  zupt: bool = False) -> None:
         kf = self.kf
         pipeline = self.pipeline
         assert kf is not None and pipeline is not None
@@ -542,7 +678,7 @@ class InsGnssVehicle:
             "sigma_pos": [_r(x, 3) for x in sig[0:3]], "sigma_vel": [_r(x, 4) for x in sig[3:6]],
             "sigma_att_deg": [_r(x / DEG, 4) for x in sig[6:9]],
             "acc_h_m": round(acc_h, 3), "acc_v_m": round(acc_v, 3),
-            "bias_active": kf.bias_active,
+            "bias_active": kf.bias_active, "zupt": zupt,
         }
         if rep is not None:
             ins["zones"] = [int(d.zone.value) for d in rep.decisions]
@@ -589,6 +725,11 @@ class InsGnssVehicle:
             "refused": self.refused, "imu_rate_hz": None if self.rate_hz is None
             else round(self.rate_hz, 2), "time_map": self.time_map,
             "aligned_at": self.aligned_at, "epochs": dict(self.modes),
+            "alignment": None if self.alignment is None else {
+                "method": self.alignment.method,
+                "sigma_tilt_deg": round(self.alignment.sigma_tilt_deg, 5),
+                "sigma_yaw_deg": round(self.alignment.sigma_yaw_deg, 5)},
+            "zupts": self.zupts,
             "align_wait": dict(self.align_wait), "resets": dict(self.resets),
             "gate_actions": dict(self.gate_actions),
             "imu": {"received": st.received, "integrated": st.integrated,

@@ -31,6 +31,17 @@ class InsGnssSimParams:
         default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the east/north fault"})
     table2_fault_v_m: float = field(
         default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the up fault"})
+    rest_s: int = field(default=0, metadata={
+        "ge": 0, "le": 3600, "doc": "lead-in before the paper's t = 0: this long at rest "
+                                    "(a real vehicle's coarse alignment), no faults"})
+    takeoff_s: int = field(default=20, metadata={
+        "ge": 1, "le": 600, "doc": "with rest_s > 0: then a straight take-off roll from 0 to "
+                                   "speed_m_s over this long, ending at the paper's t = 0"})
+
+    @property
+    def lead_s(self) -> int:
+        """Seconds (GNSS epochs) of lead-in before the paper's t = 0 (rest, take-off roll)."""
+        return self.rest_s + self.takeoff_s if self.rest_s > 0 else 0
 
 
 @dataclass(frozen=True)
@@ -40,7 +51,8 @@ class InsGnssLiveParams:
 
     imu_url: str = field(default="", metadata={
         "doc": "the autopilot's MAVLink link carrying the IMU (a serial device, a pty, "
-               "socket://HOST:PORT); empty: no INS, the rover detector alone"})
+               "socket://HOST:PORT); \"router\": the [mavlink] router's autopilot link; "
+               "empty: no INS, the rover detector alone"})
     imu_baudrate: int = field(default=921600, metadata={"gt": 0})
     imu_message: Literal["RAW_IMU", "HIGHRES_IMU", "SCALED_IMU", "SCALED_IMU2",
                          "SCALED_IMU3"] = "RAW_IMU"
@@ -58,6 +70,24 @@ class InsGnssLiveParams:
     align_min_speed_m_s: float = field(default=3.0, metadata={
         "gt": 0.0, "doc": "GNSS speed from which its course is the heading"})
     heading_source: Literal["gnss", "attitude"] = "gnss"
+    attitude_sigma_deg: float = field(default=3.0, metadata={
+        "gt": 0.0, "doc": "heading_source = attitude: 1σ of the autopilot's yaw"})
+    course_sigma_deg: float = field(default=1.0, metadata={
+        "ge": 0.0, "doc": "heading from the GNSS course: its 1σ at least this (sideslip, "
+                          "crab)"})
+    rest_align_s: float = field(default=30.0, metadata={
+        "gt": 0.0, "doc": "at rest this long: level, gyrocompass (or ATTITUDE yaw) and start "
+                          "the INS"})
+    rest_max_speed_m_s: float = field(default=0.5, metadata={
+        "gt": 0.0, "doc": "at rest: GNSS speed at most this"})
+    rest_max_accel_m_s2: float = field(default=0.05, metadata={
+        "gt": 0.0, "doc": "at rest: the mean specific force changes by at most this from one "
+                          "epoch to the next"})
+    rest_sigma_vel_m_s: float = field(default=0.01, metadata={
+        "gt": 0.0, "doc": "at rest: 1σ of the zero-velocity update (ZUPT) of every epoch"})
+    gyrocompass_max_sigma_deg: float = field(default=1.0, metadata={
+        "gt": 0.0, "doc": "gyrocompass only when the configured gyro gives this heading 1σ "
+                          "(navigation grade); else heading from the GNSS course once moving"})
 
 
 @dataclass(frozen=True)
