@@ -26,15 +26,19 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import logging
 import math
+import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from fdi.drift import calibrate
 from fdi.geodesy import LocalFrame
+from firmware_host.commands import tables
 from firmware_host.commands.checks import output_file_arg, positive_float
+from firmware_host.commands.progress import Progress
 from firmware_host.devtools.rover_sim import ERROR_MODELS, RoverScenario, generate
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
@@ -205,14 +209,19 @@ def measure(epochs: Sequence[dict[str, Any]], truth: Sequence[dict[str, Any]], *
 
 def run_matrix(cfg: BridgeConfig, *, models: Sequence[str] = ERROR_MODELS,
                seeds: Sequence[int] = REPORT_SEEDS, rates: Sequence[float] = RATES,
-               duration_s: float = 1200.0) -> list[RunMetrics]:
-    out = []
+               duration_s: float = 1200.0, out: list[RunMetrics] | None = None,
+               step: Callable[[str], None] | None = None) -> list[RunMetrics]:
+    """Every (model, rate, seed) run measured; ``out`` is filled as the runs come (what a ^C
+    keeps) and ``step(label)`` called after each (a progress bar)."""
+    done: list[RunMetrics] = out if out is not None else []
     for model in models:
         for rate in rates:
             for seed in seeds:
                 epochs, truth = replay(cfg, scenario(model, seed, rate, duration_s))
-                out.append(measure(epochs, truth, model=model, seed=seed, rate_hz=rate))
-    return out
+                done.append(measure(epochs, truth, model=model, seed=seed, rate_hz=rate))
+                if step is not None:
+                    step(f"{model} {rate:g} Hz seed {seed}")
+    return done
 
 
 # --------------------------------------------------------------------------- the bullets
@@ -313,6 +322,30 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def console_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The same numbers as :func:`table`, aligned for a terminal (two lines a row would not
+    fit: one table of detection, one of harm)."""
+    det = tables.Table(["model", "Hz", "jumps (events, epochs, max delay)", "bursts", "ramps",
+                        "ramps in time", "frozen", "frozen passed > 1 m (offset)",
+                        "multipath"])
+    harm = tables.Table(["model", "Hz", "FA > 10 s from events", "FA worst seed (%)",
+                         "10 s after: worse than raw", "worst excess (m)",
+                         "out/raw RMS worst", "no output"])
+    for r in rows:
+        ramp = r.get("ramp") or {}
+        frz = r.get("frozen") or {}
+        det.add(r["model"], int(r["rate_hz"]), _kind(r, "jump"), _kind(r, "burst"),
+                _kind(r, "ramp"),
+                f"{ramp.get('ramps_in_time', '–')}/{ramp.get('ramps_required', '–')}",
+                _kind(r, "frozen"), f"{frz.get('good_far', '–')} ({frz.get('good_offset', '–')})",
+                _kind(r, "multipath"))
+        harm.add(r["model"], int(r["rate_hz"]), f"{r['fa_flagged']}/{r['fa_clean']}",
+                 f"{100 * r['fa_worst']:.2f}", f"{r['after_worse']}/{r['after_events']}",
+                 _f(r["after_worst_excess_m"]), _f(r["rms_ratio_worst"]),
+                 f"{r['no_output']}/{r['epochs']}")
+    return det.console() + "\n\n" + harm.console()
+
+
 def _clean(x: Any) -> Any:
     if isinstance(x, float):
         return None if math.isnan(x) else x
@@ -340,24 +373,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import logging
-
     logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)
     cfg = load_config(args.config)
+    models = [m for m in args.models.split(",") if m]
+    seeds = [int(s) for s in args.seeds.split(",") if s]
+    rates = [float(r) for r in args.rates.split(",") if r]
     t0 = time.perf_counter()
-    runs = run_matrix(cfg, models=[m for m in args.models.split(",") if m],
-                      seeds=[int(s) for s in args.seeds.split(",") if s],
-                      rates=[float(r) for r in args.rates.split(",") if r],
-                      duration_s=args.duration)
+    runs: list[RunMetrics] = []
+    partial = False
+    with Progress(len(models) * len(seeds) * len(rates), "rover harness", unit="run") as bar:
+        try:
+            run_matrix(cfg, models=models, seeds=seeds, rates=rates, duration_s=args.duration,
+                       out=runs, step=bar.step)
+        except KeyboardInterrupt:  # ^C: what was measured is reported, marked partial
+            partial = True
     rows = summarise(runs)
-    print(table(rows))
-    print(f"\n{len(runs)} runs in {time.perf_counter() - t0:.1f} s (config {cfg.name})")
+    print(console_table(rows))
+    print(f"\n{len(runs)} runs in {time.perf_counter() - t0:.1f} s (config {cfg.name})"
+          + (" -- interrupted: partial" if partial else ""))
     if args.json:
-        doc = {"config": cfg.name, "rows": rows,
+        doc = {"config": cfg.name, "partial": partial, "rows": rows,
                "runs": [{**{k: v for k, v in r.__dict__.items() if k != "events"},
                          "events": [e.__dict__ for e in r.events]} for r in runs]}
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(_clean(doc), f, indent=1)
+    if partial:
+        print(f"rover harness interrupted after {len(runs)} runs (partial)", file=sys.stderr)
+        return 130
     return 0
 
 
