@@ -504,3 +504,22 @@ def test_bench_replay_memory_prints_an_aligned_table() -> None:
     lines = text.splitlines()
     assert lines[0].startswith("replay peak RSS, 1 Hz") and "24 h log (MiB)" in lines[0]
     assert lines[1].split() == ["nmea", "56.6", "56.7", "1.002", "<=", "1.10"]
+
+
+def test_a_wide_table_wraps_to_the_width_repeating_its_key_columns() -> None:
+    t = Table(["scenario", "method", "detected / faulty", "missed", "false alarms / clean",
+               "out RMS (m)", "raw RMS (m)"], keep=2)
+    t.add("jumps", "this run", "33/33 (100.0 %)", 0, "0/2967", 0.44, 4.32)
+    t.add("jumps", "ekf3", "21/33 (63.6 %)", 12, "0/2967", 0.5, 4.32)
+    assert "\n\n" not in t.console()  # not a terminal here: never wrapped into a pipe
+    wrapped = t.console(width=60)
+    parts = wrapped.split("\n\n")
+    assert len(parts) == 3  # 18 + 43, 18 + 35, 18 + 13 columns wide
+    for part in parts:
+        lines = part.splitlines()
+        assert all(len(ln) <= 60 for ln in lines)
+        assert lines[0].split()[:2] == ["scenario", "method"]
+        assert [ln.split()[1] for ln in lines[1:]] == ["this", "ekf3"]
+    headers = " ".join(p.splitlines()[0] for p in parts)
+    for h in t.headers:
+        assert h in headers  # every column shown once wrapped

@@ -12,6 +12,8 @@ Commands print results through these helpers (machines use ``--json``):
 from __future__ import annotations
 
 import math
+import shutil
+import sys
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -138,9 +140,11 @@ class Table:
     left-aligned. Cells are preformatted text (the report's own rounding) or numbers
     (:func:`fmt`)."""
 
-    def __init__(self, headers: Sequence[str], right: Sequence[int] = ()) -> None:
+    def __init__(self, headers: Sequence[str], right: Sequence[int] = (), keep: int = 1
+                 ) -> None:
         self.headers = list(headers)
         self.right = set(right)
+        self.keep = keep  # key columns repeated when a wide table is wrapped (console)
         self.rows: list[list[Any]] = []
 
     def add(self, *cells: Any) -> None:
@@ -158,20 +162,49 @@ class Table:
                             for i in range(len(self.headers)))
         return "\n".join([line(self.headers), sep, *(line(r) for r in self.rows)])
 
-    def console(self, indent: str = "") -> str:
+    def console(self, indent: str = "", width: int | None = None) -> str:
+        """Aligned columns. A table wider than ``width`` (default: the terminal's, when
+        standard output is one; never wrapped into a pipe or file) is printed as several, each
+        repeating the first :attr:`keep` (key) columns, as pandas wraps a wide frame."""
         cells = [[plain(fmt(c)) for c in row] for row in self.rows]
         right = [bool(self.rows) and all(
             _is_number(r[i]) or r[i] is None or _looks_numeric(r[i]) for r in self.rows)
             for i in range(len(self.headers))]
         widths = [max([len(h), *(len(r[i]) for r in cells)])
                   for i, h in enumerate(self.headers)]
+        if width is None and sys.stdout.isatty():
+            width = shutil.get_terminal_size((120, 24)).columns
 
-        def line(items: Sequence[str]) -> str:
-            parts = [it.rjust(w) if right[i] else it.ljust(w)
-                     for i, (it, w) in enumerate(zip(items, widths, strict=True))]
+        def line(items: Sequence[str], cols: Sequence[int]) -> str:
+            parts = [items[i].rjust(widths[i]) if right[i] else items[i].ljust(widths[i])
+                     for i in cols]
             return (indent + "  ".join(parts)).rstrip()
 
-        return "\n".join([line(self.headers), *(line(r) for r in cells)])
+        groups = _column_groups(widths, width - len(indent) if width else None, self.keep)
+        return "\n\n".join("\n".join([line(self.headers, g), *(line(r, g) for r in cells)])
+                           for g in groups)
+
+
+def _column_groups(widths: Sequence[int], width: int | None, keep: int = 1
+                   ) -> list[list[int]]:
+    """Columns in groups that fit ``width`` (2 spaces between), each starting with the first
+    ``keep`` columns; one group when ``width`` is None or the table fits."""
+    everything = list(range(len(widths)))
+    keep = max(0, min(keep, len(widths) - 1))
+    if width is None or sum(widths) + 2 * (len(widths) - 1) <= width:
+        return [everything]
+    head = everything[:keep]
+    head_w = sum(widths[:keep]) + 2 * max(0, keep - 1)
+    groups: list[list[int]] = []
+    group, used = list(head), head_w
+    for i in everything[keep:]:
+        if len(group) > keep and used + 2 + widths[i] > width:
+            groups.append(group)
+            group, used = list(head), head_w
+        group.append(i)
+        used += 2 + widths[i] if group[:-1] else widths[i]
+    groups.append(group)
+    return groups
 
 
 def _looks_numeric(cell: Any) -> bool:

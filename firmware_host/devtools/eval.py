@@ -261,7 +261,7 @@ def rover_tab(comparisons: Sequence[RoverComparison]) -> Table:
     """One row per scenario and method: detection, false alarms, delay and accuracy."""
     tab = Table(["scenario", "method", "detected / faulty", "missed", "events",
                  "false alarms / clean", "delay ep (s)", "out RMS clean / faulty / all (m)",
-                 "out max faulty (m)", "raw RMS clean / faulty (m)"])
+                 "out max faulty (m)", "raw RMS clean / faulty (m)"], keep=2)
     for c in comparisons:
         for m in c.methods:
             s = m.score
