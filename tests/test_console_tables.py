@@ -523,3 +523,19 @@ def test_a_wide_table_wraps_to_the_width_repeating_its_key_columns() -> None:
     headers = " ".join(p.splitlines()[0] for p in parts)
     for h in t.headers:
         assert h in headers  # every column shown once wrapped
+
+
+def test_eval_on_a_100_column_terminal_wraps_its_table(run_dir: Path, tmp_path: Path) -> None:
+    argv = ["eval", str(run_dir / "rep"), "--truth", str(run_dir / "sim" / "truth.jsonl"),
+            "--no-plots"]
+    status, tty = _under_pty(argv, tmp_path)
+    assert status == 0, tty
+    lines = tty.replace("\r\n", "\n").splitlines()
+    heads = [ln for ln in lines if ln.startswith("scenario  method")]
+    assert len(heads) >= 2  # wrapped into several tables, each with its key columns
+    assert all(len(ln) <= 100 for ln in lines)
+    piped = subprocess.run([sys.executable, "-m", "firmware_host.cli", *argv], cwd=tmp_path,
+                           env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True,
+                           text=True, timeout=120, check=False)
+    assert piped.returncode == 0, piped.stderr
+    assert sum(ln.startswith("scenario  method") for ln in piped.stdout.splitlines()) == 1
