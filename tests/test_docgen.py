@@ -43,7 +43,7 @@ def complete(script: Path, *words: str) -> list[str]:
 @pytest.mark.parametrize(("words", "expected"), [
     (("re",), ["replay", "record"]),
     (("sim", ""), list(cli.SIM_COMMANDS)),
-    (("demo", "r"), list(cli.DEMO_COMMANDS)),
+    (("demo", "r"), [k for k in cli.DEMO_COMMANDS if k.startswith("r")]),  # rover, rov
     (("-v", "sim", "rov", "--pl"), ["--plant"]),
     (("sim", "rov", "--plant", ""), ["nomoto", "nonlinear"]),
     (("record", "/dev/ttyUSB0", "--parity", ""), ["N", "E", "O", "M", "S"]),
