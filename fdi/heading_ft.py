@@ -51,6 +51,11 @@ class FtConfig:
     stuck_recover_increments: bool = field(default=True, metadata={
         "doc": "no gyro: a stuck compass is taken back once its increments fit the FIR again"})
     # The gyro witness (fdi.gyro_witness), used when the controller is given a yaw rate.
+    # No gyro: after a setpoint change (the controller knows it: an input, not a guess) the
+    # FIR's prediction error is at its largest; theta is raised by this factor for a while.
+    turn_window_s: float = field(default=0.0, metadata={
+        "ge": 0.0, "doc": "after a setpoint change, theta x turn_theta_factor (0: off)"})
+    turn_theta_factor: float = field(default=1.0, metadata={"ge": 1.0})
     gyro_enabled: bool = True
     gyro_heading_tau_s: float = field(default=10.0, metadata={"gt": 0.0})
     gyro_test_tau_s: float = field(default=30.0, metadata={"gt": 0.0})
@@ -137,6 +142,14 @@ class FaultTolerantHeading:
         # gyro's and the stored FIR's increments
         self._vote = [0.0, 0.0, 0.0]
         self._nu_o: deque[float] = deque(maxlen=5)  # compass minus gyro heading, newest
+        self._turn_left_s = 0.0  # time left of the window after a setpoint change
+
+    def setpoint_changed(self) -> None:
+        """The heading setpoint was changed (a commanded turn): on the FIR path, theta is
+        raised by ``turn_theta_factor`` for ``turn_window_s`` (the FIR's prediction error is
+        largest while the command is large and changing; a turn's weight change on a noisy
+        compass otherwise passed criterion 2). The gyro witness does not need it."""
+        self._turn_left_s = self.cfg.turn_window_s
 
     def step(
         self,
@@ -167,6 +180,10 @@ class FaultTolerantHeading:
                 return self._step_gyro(u_prev, heading_meas, rate, dt)
             if self._gyro_mode:
                 self._leave_gyro()
+        turning = self._turn_left_s > 1e-9
+        self.det.theta_scale = self.cfg.turn_theta_factor if turning else 1.0
+        if turning:
+            self._turn_left_s -= dt
         return self._step_fir(u_prev, heading_meas, heading_suspect)
 
     def _step_fir(

@@ -263,6 +263,8 @@ class DualCriterionDetector:
         ts = cfg.theta_sigmas if cfg.theta_sigmas > 0 else 1.0
         self.var = RobustVariance(cfg.theta_deg2 / (ts * ts), cfg.sigma_samples, 3.0, 1e-6)
         self.short = TrimmedScale(6, 2)
+        # theta's multiplier in force (the caller raises it for a while after a commanded turn)
+        self.theta_scale = 1.0
         self._cum_e = 0.0
         self._sum_e = 0.0
         self._n_e = 0
@@ -303,7 +305,8 @@ class DualCriterionDetector:
         self._trained += 1
         self._cum_e += e_deg
         self.short.push(self._cum_e)  # its first differences are e itself
-        exceed = flagged or (e2 > self.theta and self._trained > cfg.warmup_samples)
+        exceed = flagged or (e2 > self.theta * self.theta_scale
+                             and self._trained > cfg.warmup_samples)
         if exceed and not self.suspect_open and not self.frozen:
             # Store the weights at the suspect instant (before this sample trains them); with
             # store_average_samples, their recent average: the instantaneous C_k carries the

@@ -16,6 +16,8 @@ from fdi.gyro_witness import GyroWitness, WitnessParams
 from fdi.heading_ft import FaultTolerantHeading, FtConfig
 from fdi.lms_fir import DetectorConfig
 from fdi.noise_scale import RobustVariance, TrimmedScale
+from firmware_host.rov.config import load_rov_config, project_root
+from firmware_host.rov.control import RovController
 
 DT = 0.2
 
@@ -245,3 +247,23 @@ def test_step_offset_compensation_bounds_the_dead_reckoning_drift(seed: int) -> 
     off = _step_with_bias_error(WitnessParams(comp_samples=0), seed)
     assert off > 1.4
     assert on < 1.0
+
+
+def test_setpoint_change_raises_theta_for_the_window_only() -> None:
+    """No gyro: ``setpoint_changed`` multiplies theta for ``turn_window_s``, then not; the
+    controller tells the FDI when its setpoint changes (firmware_host.rov.control)."""
+    cfg, _ = load_rov_config(project_root() / "config" / "rov.toml")
+    assert cfg.ft.turn_window_s > 0 and cfg.ft.turn_theta_factor > 1
+    paper, _ = load_rov_config(project_root() / "config" / "rov-paper.toml")
+    assert paper.ft.turn_window_s == 0.0  # the paper preset: no window
+    ctl = RovController(cfg)
+    scales = []
+    for k in range(60):
+        if k == 10:
+            ctl.setpoint_deg = (ctl.setpoint_deg + 30.0) % 360.0
+        ctl.step(150.0, 0.2)
+        scales.append(ctl.heading.det.theta_scale)
+    n = round(cfg.ft.turn_window_s / 0.2)
+    assert scales[:10] == [1.0] * 10
+    assert scales[10:10 + n] == [cfg.ft.turn_theta_factor] * n
+    assert scales[10 + n:] == [1.0] * (50 - n)

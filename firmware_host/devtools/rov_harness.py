@@ -220,6 +220,32 @@ def hold_floor(cfg: RovConfig, plant: Plant, seeds: Sequence[int], *, gyro: bool
     return w.as_dict()
 
 
+def fault_at_turn(cfg: RovConfig, plant: Plant, seeds: Sequence[int], *, gyro: bool = False,
+                  lags_s: Sequence[float] = (0.4, 2.0),
+                  mags: Sequence[float] = (10.0, 20.0, 30.0, 45.0)) -> dict[str, str]:
+    """What a fault during a commanded turn costs: a drift of +-``mag`` ``lag`` s after the
+    first setpoint change (a turn every 60 s), per (lag, magnitude) the runs confirmed within
+    5 samples with no earlier confirmation, as ``"ok/runs"``."""
+    c = plant_config(cfg, plant)
+    c = replace(c, sim=replace(c.sim, turn_every_s=60.0))
+    out: dict[str, str] = {}
+    for lag in lags_s:
+        for mag in mags:
+            ok = n = 0
+            for seed in seeds:
+                for sign in (1.0, -1.0):
+                    on = 60.0 + lag
+                    ep = run_experiment(c, [parse_fault(f"drift:{sign * mag:g}@{on:g}")],
+                                        on + 30.0, ft=True, seed=seed, gyro=gyro)
+                    conf = _confirms(ep)
+                    n += 1
+                    tc = _first_after(conf, on)
+                    early = any(t < on - 1e-9 for t in conf)
+                    ok += int(not early and tc is not None and tc - on <= 5 * c.period_s + 1e-9)
+            out[f"{lag:g} s, {mag:g} deg"] = f"{ok}/{n}"
+    return out
+
+
 def run_all(
     cfg: RovConfig, seeds: Sequence[int], long_s: float = 3600.0
 ) -> dict[str, dict[str, dict[str, Any]]]:

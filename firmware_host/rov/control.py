@@ -27,6 +27,7 @@ class RovController:
         self.heading = FaultTolerantHeading(cfg.detector, cfg.ft, enabled=ft)
         self.pid = HeadingPid(cfg.pid)
         self.setpoint_deg = cfg.setpoint_deg if setpoint_deg is None else setpoint_deg
+        self._setpoint_seen = self.setpoint_deg
         self.command = NEUTRAL
         self._last_safe = NEUTRAL
         self._since_telemetry = 0.0
@@ -47,6 +48,9 @@ class RovController:
         than the protocol's ``max_rate``); it opens a suspect at once, so this sample is not
         steered on (:meth:`fdi.heading_ft.FaultTolerantHeading.step`).
         """
+        if self.setpoint_deg != self._setpoint_seen:  # a commanded turn: the FDI is told
+            self._setpoint_seen = self.setpoint_deg
+            self.heading.setpoint_changed()
         # The FIR's input is the thrust the last command gave (the command itself unless a
         # thrust curve is configured): then its model of thrust -> heading is the linear one.
         dec = self.heading.step(self.command.yaw_pct, heading_meas, yaw_rate_dps, dt,
