@@ -222,32 +222,35 @@ class DriftTest:
         ts = self._t
         if not ts:
             return NO_TEST
-        found: list[DriftResult] = []
+        # Per horizon (statistic, horizon, index of its reference); one DriftResult at the end
+        # (this runs once an epoch).
+        found: list[tuple[float, float, int]] = []
+        horizons, sigmas, lag_sd = self.horizons, self.sigmas, self.lag_sd
+        b_e, b_n, v_e, v_n = self._be, self._bn, self._ve, self._vn
+        be0, bn0 = b
+        ve0, vn0 = v
+        hypot, sqrt = math.hypot, math.sqrt
         last_i = -1
-        for h in self.horizons:
+        for h in horizons:
             i = bisect_right(ts, t - h) - 1
             if i < 0:
                 break
             if i == last_i:
                 continue  # the same reference as a shorter horizon (a gap in references)
             last_i = i
-            be, bn, ve, vn = self._be[i], self._bn[i], self._ve[i], self._vn[i]
-            age = t - ts[i]
-            s = sigma_at(age, self.horizons, self.sigmas)
-            dv = self.lag_sd * math.hypot(v[0] - ve, v[1] - vn)
-            re, rn = b[0] - be, b[1] - bn
-            g = math.sqrt((re * re + rn * rn) / (s * s + dv * dv))
-            found.append(DriftResult(g, h, ts[i], (be, bn), (ve, vn)))
+            s = sigma_at(t - ts[i], horizons, sigmas)  # (D3)
+            dv = lag_sd * hypot(ve0 - v_e[i], vn0 - v_n[i])
+            re, rn = be0 - b_e[i], bn0 - b_n[i]  # (D2)
+            found.append((sqrt((re * re + rn * rn) / (s * s + dv * dv)), h, i))
         if not found:
             return NO_TEST
-        g_max = max(r.g for r in found)
+        g_max = max(r[0] for r in found)  # (D4)
         # The statistic is the maximum (D4); the reference reported with it is the *oldest*
         # one whose statistic is within 0.6 of it: a slow fault is seen about as strongly at
         # every horizon longer than its age, and the oldest such reference is the one most
         # likely from before it began (the isolator anchors its hold there).
-        ref = next(r for r in reversed(found) if r.g >= 0.6 * g_max)
-        return DriftResult(g_max, ref.horizon_s, ref.ref_t, ref.ref_b, ref.ref_v)
-
+        _, h, i = next(r for r in reversed(found) if r[0] >= 0.6 * g_max)
+        return DriftResult(g_max, h, ts[i], (b_e[i], b_n[i]), (v_e[i], v_n[i]))
 
 def concave_cap(horizons_s: Sequence[float], sigmas: Sequence[float]) -> tuple[float, ...]:
     """σ_H capped at σ_h·√(H/h) from each shorter horizon h (D5).

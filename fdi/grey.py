@@ -82,7 +82,57 @@ def gm11_predict_shifted(values: Sequence[float], shift: float) -> float:
         sy += xk
         szz += z * z
         szy += z * xk
+    return _gm11_step(n - 1, n, sz, sy, szz, szy, x0_1) - offset
+
+
+def gm11_predict_shifted_enu(window: Sequence[tuple[float, float, float]], shift: float
+                             ) -> tuple[float, float, float]:
+    """:func:`gm11_predict_shifted` of each axis of a window of (east, north, up) values,
+    in one pass over the window (the same operations per axis, so the same floats)."""
+    n = len(window)
+    if n < 3:
+        raise ValueError("GM(1,1) needs at least 3 values")
+    first = window[0]
+    off_e = shift - min(w[0] for w in window)
+    off_n = shift - min(w[1] for w in window)
+    off_u = shift - min(w[2] for w in window)
+    x0e, x0n, x0u = first[0] + off_e, first[1] + off_n, first[2] + off_u
+    x1e, x1n, x1u = x0e, x0n, x0u
+    sze = sye = szze = szye = 0.0
+    szn = syn = szzn = szyn = 0.0
+    szu = syu = szzu = szyu = 0.0
+    it = iter(window)
+    next(it)
+    for we, wn, wu in it:  # k = 2..n
+        xe, xn, xu = we + off_e, wn + off_n, wu + off_u
+        pe, pn, pu = x1e, x1n, x1u
+        x1e += xe  # eq. (9): 1-AGO
+        x1n += xn
+        x1u += xu
+        ze = 0.5 * (x1e + pe)  # eq. (11)
+        zn = 0.5 * (x1n + pn)
+        zu = 0.5 * (x1u + pu)
+        sze += ze
+        szn += zn
+        szu += zu
+        sye += xe
+        syn += xn
+        syu += xu
+        szze += ze * ze
+        szzn += zn * zn
+        szzu += zu * zu
+        szye += ze * xe
+        szyn += zn * xn
+        szyu += zu * xu
     m = n - 1
+    return (_gm11_step(m, n, sze, sye, szze, szye, x0e) - off_e,
+            _gm11_step(m, n, szn, syn, szzn, szyn, x0n) - off_n,
+            _gm11_step(m, n, szu, syu, szzu, szyu, x0u) - off_u)
+
+
+def _gm11_step(m: int, n: int, sz: float, sy: float, szz: float, szy: float, x0_1: float
+               ) -> float:
+    """eq. (14) (centred) and (16)-(17) from the sums of :func:`gm11_predict_shifted`."""
     zbar = sz / m
     ybar = sy / m
     var_z = szz - m * zbar * zbar
@@ -90,4 +140,4 @@ def gm11_predict_shifted(values: Sequence[float], shift: float) -> float:
     a = -cov_zy / var_z if var_z > 0.0 else 0.0  # eq. (14), centred
     b = ybar + a * zbar
     g = math.expm1(a) / a if abs(a) > 1e-12 else 1.0 + 0.5 * a
-    return (b - a * x0_1) * g * math.exp(-a * n) - offset
+    return (b - a * x0_1) * g * math.exp(-a * n)

@@ -32,13 +32,17 @@ class AxisFilter:
     P11: float = 1e6
 
     def predict(self, dt: float, q: float) -> None:
+        self.predict_with(dt, q * dt**3 / 3.0, q * dt * dt / 2.0, q * dt)
+
+    def predict_with(self, dt: float, q00: float, q01: float, q11: float) -> None:
+        """:meth:`predict` with Q's entries computed by the caller (once for three axes)."""
         # (1) x̂(k,k−1) = Φ x̂(k−1), Φ = [[1, dt], [0, 1]]
         self.p += self.v * dt
         # P(k,k−1) = Φ P Φᵀ + Q, Q = q [[dt³/3, dt²/2], [dt²/2, dt]]
         P01, P11 = self.P01, self.P11
-        p00 = self.P00 + 2.0 * dt * P01 + dt * dt * P11 + q * dt**3 / 3.0
-        p01 = P01 + dt * P11 + q * dt * dt / 2.0
-        p11 = P11 + q * dt
+        p00 = self.P00 + 2.0 * dt * P01 + dt * dt * P11 + q00
+        p01 = P01 + dt * P11 + q01
+        p11 = P11 + q11
         self.P00, self.P01, self.P11 = p00, p01, p11
 
     def innovation(self, z: float, r: float) -> tuple[float, float]:
@@ -83,14 +87,17 @@ class GpsKalman:
 
     def predict(self, dt: float) -> None:
         q = self.q
+        q00, q01, q11 = q * dt**3 / 3.0, q * dt * dt / 2.0, q * dt  # Q of (1), the same per axis
         for ax in self.axes:
-            ax.predict(dt, q)
+            ax.predict_with(dt, q00, q01, q11)
 
     def test(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> float:
         """F(k) of eq. (5) for the predicted state; also stores ``D`` and ``S``."""
-        d0, s0 = self.axes[0].innovation(z[0], r[0])
-        d1, s1 = self.axes[1].innovation(z[1], r[1])
-        d2, s2 = self.axes[2].innovation(z[2], r[2])
+        # (3) D and (4) S of each axis, as in AxisFilter.innovation (written out: once an epoch)
+        a0, a1, a2 = self.axes
+        d0, s0 = z[0] - a0.p, a0.P00 + r[0]
+        d1, s1 = z[1] - a1.p, a1.P00 + r[1]
+        d2, s2 = z[2] - a2.p, a2.P00 + r[2]
         self.D = (d0, d1, d2)
         self.S = (s0, s1, s2)
         # (5) F = Dᵀ S⁻¹ D with S diagonal

@@ -56,7 +56,7 @@ from typing import Literal
 
 from fdi.chi2 import threshold
 from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
-from fdi.grey import gm11_predict_shifted
+from fdi.grey import gm11_predict_shifted_enu
 from fdi.kalman import GpsKalman
 from fdi.level import HoldParams, LevelHold
 from fdi.three_zone import Action as ZoneAction
@@ -286,13 +286,7 @@ class RoverIsolator:
             return None
         if len(w) < 4:
             return w[-1]
-        shift = self.p.shift_m
-        east, north, up = zip(*w, strict=True)  # the window's three axes
-        return (
-            gm11_predict_shifted(east, shift),
-            gm11_predict_shifted(north, shift),
-            gm11_predict_shifted(up, shift),
-        )
+        return gm11_predict_shifted_enu(w, self.p.shift_m)  # per axis
 
     def _doppler_gate(self) -> float:
         p = self.p
