@@ -423,6 +423,19 @@ class CaptureReader:
 
     # ---------------------------------------------------------------- records
 
+    def all_notes(self) -> list[str]:
+        """The header's notes and, after an iteration, what was skipped (for a summary)."""
+        notes = list(self.notes)
+        if self.truncated:
+            notes.append("last record truncated (skipped)")
+        if self.corrupt:
+            notes.append(f"{self.skipped_bytes} damaged bytes in {self.damaged_regions} "
+                         "place(s) skipped; the records around them were replayed"
+                         if self.version >= 2 else
+                         "a record failed its CRC; the rest was not replayed (capture format "
+                         "version 1)")
+        return notes
+
     def __iter__(self) -> Iterator[Record]:
         self.truncated = self.corrupt = False
         self.skipped_bytes = self.damaged_regions = self.good_bytes = 0

@@ -116,15 +116,7 @@ def _capture_chunks(reader: CaptureReader, idx: int, inp: ReplayInput
             t0 = r.t_us
         yield (r.t_us - t0) / 1e6, r.data
     inp.truncated = reader.truncated
-    inp.notes = list(reader.notes)
-    if reader.truncated:
-        inp.notes.append("last record truncated (skipped)")
-    if reader.corrupt:
-        inp.notes.append(f"{reader.skipped_bytes} damaged bytes in {reader.damaged_regions} "
-                         "place(s) skipped; the records around them were replayed"
-                         if reader.version >= 2 else
-                         "a record failed its CRC; the rest was not replayed (capture format "
-                         "version 1)")
+    inp.notes = reader.all_notes()
 
 
 def _nmea_chunks(path: Path) -> Iterator[tuple[float, bytes]]:

@@ -112,12 +112,7 @@ def replay_with(cfg: BridgeConfig, setup: InsGnssSetup, reader: CaptureReader, o
         vehicle.finish()
     finally:
         epochs.close()
-    notes = list(reader.notes)
-    if reader.truncated:
-        notes.append("last record truncated (skipped)")
-    if reader.corrupt:
-        notes.append(f"{reader.skipped_bytes} damaged bytes in {reader.damaged_regions} "
-                     "place(s) skipped")
+    notes = reader.all_notes()
     summary = dict(vehicle.summary())
     summary["vehicle"] = "insgnss"
     summary["config"] = config_name

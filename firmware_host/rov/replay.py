@@ -193,12 +193,7 @@ def replay_rov(cfg: RovConfig, base_dir: Path, capture: Path, out_dir: Path,
         vehicle.finish()
     finally:
         epochs.close()
-    notes = list(reader.notes)
-    if reader.truncated:
-        notes.append("last record truncated (skipped)")
-    if reader.corrupt:
-        notes.append(f"{reader.skipped_bytes} damaged bytes in {reader.damaged_regions} "
-                     "place(s) skipped")
+    notes = reader.all_notes()
     summary = dict(vehicle.summary())
     summary["vehicle"] = "rov"
     summary["config"] = config_name
@@ -259,12 +254,7 @@ def replay_ardusub(cfg: RovConfig, capture: Path, out_dir: Path, *,
         vehicle.finish()
     finally:
         epochs.close()
-    notes = list(reader.notes)
-    if reader.truncated:
-        notes.append("last record truncated (skipped)")
-    if reader.corrupt:
-        notes.append(f"{reader.skipped_bytes} damaged bytes in {reader.damaged_regions} "
-                     "place(s) skipped")
+    notes = reader.all_notes()
     summary = dict(vehicle.summary())
     summary["vehicle"] = "rov-ardusub"
     summary["config"] = config_name
