@@ -5,15 +5,11 @@ goals with a verdict, progress bars on a terminal only (a real pty), ^C keeping 
 
 from __future__ import annotations
 
-import fcntl
 import json
 import os
-import select
 import signal
-import struct
 import subprocess
 import sys
-import termios
 import time
 from pathlib import Path
 from typing import Any
@@ -27,6 +23,7 @@ from firmware_host.commands.tables import fields, fmt, summary_rows, table
 from firmware_host.devtools import bench
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 from firmware_host.runtime.config import load_config
+from tests.ptyrun import cli_under_pty
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT))
@@ -271,29 +268,7 @@ def test_doctor_json(tmp_path: Path) -> None:
 
 
 def _under_pty(argv: list[str], cwd: Path, timeout: float = 120) -> tuple[int, str]:
-    """Run the CLI with stdin/stdout/stderr on a real pseudo-terminal; (status, output)."""
-    master, slave = os.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.cli", *argv], cwd=cwd,
-                            env=ENV, stdin=slave, stdout=slave,
-                            stderr=slave, close_fds=True)
-    os.close(slave)
-    chunks: list[bytes] = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([master], [], [], 0.5)
-        if ready:
-            try:
-                data = os.read(master, 65536)
-            except OSError:  # EIO: the child closed the terminal
-                break
-            if not data:
-                break
-            chunks.append(data)
-        elif proc.poll() is not None:
-            break
-    os.close(master)
-    return proc.wait(timeout=30), b"".join(chunks).decode("utf-8", "replace")
+    return cli_under_pty(argv, cwd, timeout, env=ENV)
 
 
 def test_progress_bar_on_a_terminal_not_in_a_pipe(tmp_path: Path) -> None:

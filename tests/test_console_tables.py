@@ -10,16 +10,11 @@ the console."""
 
 from __future__ import annotations
 
-import fcntl
 import json
 import os
 import re
-import select
-import struct
 import subprocess
 import sys
-import termios
-import time
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +26,7 @@ from firmware_host.devtools import eval as eval_mod
 from firmware_host.devtools import insgnss_report
 from firmware_host.devtools.bench import replay_memory_table
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from tests.ptyrun import cli_under_pty
 
 ROOT = Path(__file__).resolve().parent.parent
 CELL = re.compile(r"\S+(?: \S+)*")  # a cell: words separated by single spaces
@@ -426,29 +422,7 @@ def test_table2_interrupted_keeps_the_first_section(monkeypatch: pytest.MonkeyPa
 
 
 def _under_pty(argv: list[str], cwd: Path, timeout: float = 120) -> tuple[int, str]:
-    """The CLI with stdin/stdout/stderr on a real pseudo-terminal; (status, output)."""
-    master, slave = os.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.cli", *argv], cwd=cwd,
-                            env=env, stdin=slave, stdout=slave, stderr=slave, close_fds=True)
-    os.close(slave)
-    chunks: list[bytes] = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([master], [], [], 0.5)
-        if ready:
-            try:
-                data = os.read(master, 65536)
-            except OSError:  # EIO: the child closed the terminal
-                break
-            if not data:
-                break
-            chunks.append(data)
-        elif proc.poll() is not None:
-            break
-    os.close(master)
-    return proc.wait(timeout=30), b"".join(chunks).decode("utf-8", "replace")
+    return cli_under_pty(argv, cwd, timeout)
 
 
 def test_demo_progress_bar_on_a_terminal_only(tmp_path: Path) -> None:
