@@ -126,6 +126,9 @@ class RoverDetectorParams:
     hold_exit_s: float = field(default=1.0, metadata={"ge": 0.0})  # the short fixed lag
     hold_output_s: float = field(default=10.0, metadata={"ge": 0.0})  # then alarm, no output
     hold_max_s: float = field(default=120.0, metadata={"gt": 0.0})  # then the receiver again
+    # An abrupt step the track went on to accept (a multipath step) is remembered this long:
+    # the fixes stepping back to the level before it end it (0: off).
+    step_pair_s: float = field(default=60.0, metadata={"ge": 0.0})
     replaced_r_factor: float = field(default=100.0, metadata={"ge": 1.0})
     # Isolation and alarm.
     max_consecutive: int = field(default=5, metadata={"ge": 0})
@@ -220,6 +223,11 @@ class RoverIsolator:
         self._prev_sig: tuple[object, ...] | None = None
         self._prev_t = 0.0
         self._stale_since: float | None = None
+        # Abrupt steps seen at the start of a run of faults: (t of the reference before it,
+        # its Doppler-free value, the step), newest last; and the step back seen at the last
+        # epoch (the pending step's time and the fix's Doppler-free value).
+        self._steps: list[tuple[float, tuple[float, float], tuple[float, float]]] = []
+        self._rev: tuple[float, tuple[float, float], float] | None = None
 
     @staticmethod
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
@@ -244,10 +252,14 @@ class RoverIsolator:
         Doppler chain is intact, so the drift test's long-term levels are kept (rebased)."""
         if self._drift is not None:
             if keep_levels:
-                self._drift.rebase(self._disp[0], self._disp[1])
+                de, dn = self._disp[0], self._disp[1]
+                self._drift.rebase(de, dn)
                 self._drift.reset_short()
+                self._steps = [(t0, (b0[0] + de, b0[1] + dn), st) for t0, b0, st in self._steps]
             else:
                 self._drift.reset()
+                self._steps.clear()
+        self._rev = None
         self._acc_hist.clear()
         self._acc_hist.append((z[0], z[1], 0.0, 0.0))
         self._coast_since = None
@@ -369,6 +381,7 @@ class RoverIsolator:
                 self._raw_hist.clear()
                 if self._drift is not None:
                     self._drift.reset()
+                    self._steps.clear()
         have_doppler = v is not None and lv is not None
         self._last_v = v
         d = self._disp
@@ -470,8 +483,28 @@ class RoverIsolator:
                 and not stale_fault
                 and ((self._stepped_back and raw_consistent)
                      or self._back_at_old_level(fix.t_s, b) is not None))
+        # The end of a remembered step (a multipath step the track went on to accept): the
+        # fixes step back to the level before it. Passed on at once (flagged, as a step back);
+        # at the next epoch that stays there the receiver is right again.
+        rev = None
         if (b is not None and v is not None and drift is not None and not quality
-                and (stale_fault or (drift_fault and not abrupt)
+                and not stale_fault and p.step_pair_s > 0.0):
+            rev = self._step_back_to(fix.t_s, b)
+            if rev is not None:
+                prev = self._rev
+                if prev is not None and prev[0] == rev and self._consec > 0:
+                    s1 = sigma_at(max(fix.t_s - prev[2], 1e-3), drift.horizons, drift.sigmas)
+                    if math.hypot(b[0] - prev[1][0], b[1] - prev[1][1]) <= (
+                            p.hold_exit_sigmas * s1):
+                        self._steps = [st for st in self._steps if st[0] < rev]
+                        drift.forget_after(rev)
+                        return self._resume(fix, z, r, d, v, b, t, "step_end")
+                self._rev = (rev, b, fix.t_s)
+                back = True
+            elif self._consec == 0 and (abrupt or drift_fault):
+                self._note_step(fix.t_s, b, gate_h)
+        if (b is not None and v is not None and drift is not None and not quality
+                and rev is None and (stale_fault or (drift_fault and not abrupt)
                      or self._consec >= p.max_consecutive)
                 and self._enter_hold(
                     fix.t_s, dres if drift_fault else None, "+".join(reasons),
@@ -675,6 +708,59 @@ class RoverIsolator:
         drift.commit(fix.t_s, b, v)
         return self._accept(z, t, reason)
 
+    def _note_step(self, t_s: float, b: tuple[float, float], gate_h: float) -> None:
+        """Remember the step that starts this run of faults, if it is one: the fix against
+        the newest trusted reference by more than the grey gate or ``hold_exit_sigmas`` of
+        the drift σ at its age."""
+        drift, p = self._drift, self.p
+        assert drift is not None
+        ref = drift.at_or_before(t_s)
+        if ref is None:
+            return
+        r_t, (re_, rn), _ = ref
+        se, sn = b[0] - re_, b[1] - rn
+        size = math.hypot(se, sn)
+        if size < min(gate_h, p.hold_exit_sigmas * sigma_at(
+                t_s - r_t, drift.horizons, drift.sigmas)):
+            return
+        steps = [st for st in self._steps if t_s - st[0] <= p.step_pair_s]
+        steps.append((r_t, (re_, rn), (se, sn)))
+        self._steps = steps[-4:]
+
+    def _step_back_to(self, t_s: float, b: tuple[float, float]) -> float | None:
+        """Is the fix back at the level before a remembered step that the track accepted?
+        The time of that step's reference, if so.
+
+        The track (the newest trusted reference) left the level before the step by at least
+        half the step (the step was accepted, not replaced). Then either this epoch's step
+        from the track is the remembered step reversed, within 0.4 x its size (both steps are
+        measured over an epoch, so the slow DGPS error between them cancels out); or the track
+        is within half the step of the stepped level and the fix is at least 0.6 x the step
+        away from it and twice as close to the level before. A jump that happens to land there costs
+        that epoch the raw fix (flagged); only a second epoch that stays there ends it."""
+        drift = self._drift
+        assert drift is not None
+        ref = drift.at_or_before(t_s)
+        if ref is None:
+            return None
+        r_t, (ce, cn), _ = ref
+        je, jn = b[0] - ce, b[1] - cn  # this epoch's step from the track
+        for t0, (b0e, b0n), (se, sn) in reversed(self._steps):
+            if t_s - t0 > self.p.step_pair_s or r_t <= t0:
+                continue  # too old, or the track did not go on after it
+            size = math.hypot(se, sn)
+            if math.hypot(ce - b0e, cn - b0n) < 0.5 * size:
+                continue  # the track stayed at the level before the step (it was rejected)
+            if math.hypot(je + se, jn + sn) <= 0.4 * size:
+                return t0  # the reverse of the remembered step (slow drift cancels out)
+            if math.hypot(ce - b0e - se, cn - b0n - sn) > 0.5 * size:
+                continue  # the track is not at the stepped level
+            e_track = math.hypot(je, jn)
+            e_old = math.hypot(b[0] - b0e, b[1] - b0n)
+            if e_track >= 0.6 * size and e_old <= 0.5 * e_track:
+                return t0
+        return None
+
     def _back_at_old_level(self, t_s: float, b: tuple[float, float]) -> float | None:
         """An abrupt step back: is the fix at an older trusted level (20-300 s before the
         newest reference) that the newest reference has left? The time of that level.
@@ -748,6 +834,7 @@ class RoverIsolator:
         the gates learn from it (not while the drift test warns)."""
         self._consec = 0
         self._stepped_back = False
+        self._rev = None
         self._coast_since = None
         if learn and t.doppler_res is not None and len(self._acc_hist) == self.p.window:
             self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, self._ewma)
