@@ -33,10 +33,11 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
 * while the evidence is not yet complete but points to the new fixes (they agree with the old
   track within ``exit_sigmas``, sit at an older level as above, or come live from a receiver
   that was frozen, or stepped back towards an older level before the hold and stay consistent
-  with their own Doppler), the hold goes on but passes the *receiver's* fix on, flagged (``raw``):
-  when neither side is shown wrong, the raw fix is never worse than doing nothing, and the
-  old track may be the faulty side (a late exit costs the epochs of the lag, 3-12 m off at
-  1 Hz after a frozen stretch or a missed ramp: ``sim rover-harness``);
+  with their own Doppler, or the receiver's fix was passed on at the last epoch and it stays
+  consistent with its own Doppler), the hold goes on but passes the *receiver's* fix on,
+  flagged (``raw``): when neither side is shown wrong, the raw fix is never worse than doing
+  nothing, and the old track may be the faulty side (a late exit costs the epochs of the lag,
+  3-12 m off at 1 Hz after a frozen stretch or a missed ramp: ``sim rover-harness``);
 * a slow hold ends (``consistent``) when the receiver has been consistent with its own Doppler
   at every horizon up to CONSISTENT_S (30 s) for that long: a drift of 0.05 m/s still
   running would show there; held on, the old track only grows stale (a late-caught ramp
@@ -91,7 +92,8 @@ class HoldStep:
 class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
-    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_recent", "anchor_b", "anchor_t",
+    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_recent", "_was_raw", "anchor_b",
+                 "anchor_t",
                  "anchor_v", "matched_t", "old", "p", "prefer_raw", "slow", "stale_m", "t0")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
@@ -110,6 +112,7 @@ class LevelHold:
         self.matched_t = math.nan  # the level the new fixes were found at ("new_level")
         self.slow = slow
         self._agree_since: float | None = None
+        self._was_raw = False  # the last epoch passed the receiver's fix on
         self._agree_b = (0.0, 0.0)
         self._dev: deque[tuple[float, float]] = deque()  # (t, |b − b_a|) over 2L
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
@@ -208,8 +211,11 @@ class LevelHold:
         if t - self.t0 > (p.max_s if self.slow else p.output_s):
             return HoldStep("give_up", track, g)
         if not stale and (g <= p.exit_sigmas or not math.isnan(at_old)
-                          or (self.stale_m > 0.0 and fresh) or (self.prefer_raw and self_ok)):
+                          or (self.stale_m > 0.0 and fresh)
+                          or ((self.prefer_raw or self._was_raw) and self_ok)):
+            self._was_raw = True
             return HoldStep("raw", track, g)
+        self._was_raw = False
         if t - self.t0 <= p.output_s:
             return HoldStep("track", track, g)
         return HoldStep("alarm", track, g)

@@ -479,7 +479,9 @@ class RoverIsolator:
         # track is not shown right: the receiver's fix is passed on (flagged, as replaced),
         # while the state goes on as for a replacement, so a jump is told apart at the next
         # epoch and a step that stays goes to the hold, whose "new_level" ends it.
-        back = (abrupt and b is not None and drift is not None and not quality
+        # A drift fault that is a step from the newest reference (not a ramp) counts too.
+        back = ((abrupt or (drift_fault and b is not None and self._is_step(fix.t_s, b)))
+                and b is not None and drift is not None and not quality
                 and not stale_fault
                 and ((self._stepped_back and raw_consistent)
                      or self._back_at_old_level(fix.t_s, b) is not None))
@@ -504,7 +506,7 @@ class RoverIsolator:
             elif self._consec == 0 and (abrupt or drift_fault):
                 self._note_step(fix.t_s, b, gate_h)
         if (b is not None and v is not None and drift is not None and not quality
-                and rev is None and (stale_fault or (drift_fault and not abrupt)
+                and rev is None and (stale_fault or (drift_fault and not abrupt and not back)
                      or self._consec >= p.max_consecutive)
                 and self._enter_hold(
                     fix.t_s, dres if drift_fault else None, "+".join(reasons),
@@ -726,6 +728,18 @@ class RoverIsolator:
         steps = [st for st in self._steps if t_s - st[0] <= p.step_pair_s]
         steps.append((r_t, (re_, rn), (se, sn)))
         self._steps = steps[-4:]
+
+    def _is_step(self, t_s: float, b: tuple[float, float]) -> bool:
+        """Did the fix step from the newest trusted reference by more than
+        ``hold_exit_sigmas`` of the drift σ at its age?"""
+        drift = self._drift
+        assert drift is not None
+        ref = drift.at_or_before(t_s)
+        if ref is None:
+            return False
+        r_t, (re_, rn), _ = ref
+        return math.hypot(b[0] - re_, b[1] - rn) > self.p.hold_exit_sigmas * sigma_at(
+            t_s - r_t, drift.horizons, drift.sigmas)
 
     def _step_back_to(self, t_s: float, b: tuple[float, float]) -> float | None:
         """Is the fix back at the level before a remembered step that the track accepted?
