@@ -801,7 +801,7 @@ class RoverIsolator:
             if e_track < s_side:
                 continue  # the track has not left that level by more than its own noise
             e_new = math.hypot(b[0] - oe, b[1] - on)
-            if e_new <= e_track / 2.0 and e_new <= hp.exit_sigmas * s_age:
+            if e_new <= 0.6 * e_track and e_new <= hp.exit_sigmas * s_age:
                 return t_o
         return None
 
