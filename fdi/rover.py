@@ -223,10 +223,11 @@ class RoverIsolator:
         self._prev_sig: tuple[object, ...] | None = None
         self._prev_t = 0.0
         self._stale_since: float | None = None
-        # Abrupt steps seen at the start of a run of faults: (t of the reference before it,
-        # its Doppler-free value, the step), newest last; and the step back seen at the last
-        # epoch (the pending step's time and the fix's Doppler-free value).
-        self._steps: list[tuple[float, tuple[float, float], tuple[float, float]]] = []
+        # Abrupt steps seen at the start of a run of faults, newest last: [t of the reference
+        # before it, its Doppler-free value (e, n), the step (e, n), 1.0 once the track was
+        # seen to go on at the stepped level]; and the step back being confirmed (the
+        # step's time, the fix's Doppler-free value and time when it began).
+        self._steps: list[list[float]] = []
         self._rev: tuple[float, tuple[float, float], float] | None = None
 
     @staticmethod
@@ -255,7 +256,9 @@ class RoverIsolator:
                 de, dn = self._disp[0], self._disp[1]
                 self._drift.rebase(de, dn)
                 self._drift.reset_short()
-                self._steps = [(t0, (b0[0] + de, b0[1] + dn), st) for t0, b0, st in self._steps]
+                for st in self._steps:
+                    st[1] += de
+                    st[2] += dn
             else:
                 self._drift.reset()
                 self._steps.clear()
@@ -461,6 +464,8 @@ class RoverIsolator:
                 return self._accept(z, t, "drift_warn", fault=True)
             if b is not None and drift is not None and v is not None:
                 drift.commit(fix.t_s, b, v)
+                if self._steps:
+                    self._track_at(b)
             return self._accept(z, t, "")
         reasons = (
             (["grey"] if grey_fault else [])
@@ -496,12 +501,18 @@ class RoverIsolator:
                 prev = self._rev
                 if prev is not None and prev[0] == rev and self._consec > 0:
                     s1 = sigma_at(max(fix.t_s - prev[2], 1e-3), drift.horizons, drift.sigmas)
-                    if math.hypot(b[0] - prev[1][0], b[1] - prev[1][1]) <= (
+                    if math.hypot(b[0] - prev[1][0], b[1] - prev[1][1]) > (
                             p.hold_exit_sigmas * s1):
+                        prev = None  # not where the step back began: start again
+                    elif fix.t_s - prev[2] >= p.hold_exit_s - 1e-9:
+                        # There for the fixed lag (a burst is shorter): the receiver is right.
                         self._steps = [st for st in self._steps if st[0] < rev]
                         drift.forget_after(rev)
                         return self._resume(fix, z, r, d, v, b, t, "step_end")
-                self._rev = (rev, b, fix.t_s)
+                else:
+                    prev = None
+                if prev is None:
+                    self._rev = (rev, b, fix.t_s)
                 back = True
             elif self._consec == 0 and (abrupt or drift_fault):
                 self._note_step(fix.t_s, b, gate_h)
@@ -708,6 +719,8 @@ class RoverIsolator:
         self._stepped_back = False
         self._coast_since = None
         drift.commit(fix.t_s, b, v)
+        if self._steps:
+            self._track_at(b)
         return self._accept(z, t, reason)
 
     def _note_step(self, t_s: float, b: tuple[float, float], gate_h: float) -> None:
@@ -726,8 +739,24 @@ class RoverIsolator:
                 t_s - r_t, drift.horizons, drift.sigmas)):
             return
         steps = [st for st in self._steps if t_s - st[0] <= p.step_pair_s]
-        steps.append((r_t, (re_, rn), (se, sn)))
+        steps.append([r_t, re_, rn, se, sn, 0.0])
         self._steps = steps[-4:]
+
+    def _track_at(self, b: tuple[float, float]) -> None:
+        """A fix was accepted at ``b``: a remembered step whose stepped level it is (within
+        half the step, and half the step from the level before) was accepted; one whose level
+        before it is (within 0.3 x the step) was not and is forgotten."""
+        keep = []
+        for st in self._steps:
+            if st[5] == 0.0:
+                size = math.hypot(st[3], st[4])
+                if math.hypot(b[0] - st[1] - st[3], b[1] - st[2] - st[4]) <= 0.5 * size and (
+                        math.hypot(b[0] - st[1], b[1] - st[2]) >= 0.5 * size):
+                    st[5] = 1.0
+                elif math.hypot(b[0] - st[1], b[1] - st[2]) <= 0.3 * size:
+                    continue
+            keep.append(st)
+        self._steps = keep
 
     def _is_step(self, t_s: float, b: tuple[float, float]) -> bool:
         """Did the fix step from the newest trusted reference by more than
@@ -745,13 +774,13 @@ class RoverIsolator:
         """Is the fix back at the level before a remembered step that the track accepted?
         The time of that step's reference, if so.
 
-        The track (the newest trusted reference) left the level before the step by at least
-        half the step (the step was accepted, not replaced). Then either this epoch's step
+        The track was seen at the stepped level after it (:meth:`_track_at`: the step was
+        accepted, not replaced). Then either this epoch's step
         from the track is the remembered step reversed, within 0.4 x its size (both steps are
         measured over an epoch, so the slow DGPS error between them cancels out); or the track
         is within half the step of the stepped level and the fix is at least 0.6 x the step
         away from it and twice as close to the level before. A jump that happens to land there costs
-        that epoch the raw fix (flagged); only a second epoch that stays there ends it."""
+        that epoch the raw fix (flagged); only fixes that stay there for ``hold_exit_s`` end it."""
         drift = self._drift
         assert drift is not None
         ref = drift.at_or_before(t_s)
@@ -759,12 +788,10 @@ class RoverIsolator:
             return None
         r_t, (ce, cn), _ = ref
         je, jn = b[0] - ce, b[1] - cn  # this epoch's step from the track
-        for t0, (b0e, b0n), (se, sn) in reversed(self._steps):
-            if t_s - t0 > self.p.step_pair_s or r_t <= t0:
-                continue  # too old, or the track did not go on after it
+        for t0, b0e, b0n, se, sn, accepted in reversed(self._steps):
+            if t_s - t0 > self.p.step_pair_s or r_t <= t0 or accepted == 0.0:
+                continue  # too old, or the track was not seen at the stepped level
             size = math.hypot(se, sn)
-            if math.hypot(ce - b0e, cn - b0n) < 0.5 * size:
-                continue  # the track stayed at the level before the step (it was rejected)
             if math.hypot(je + se, jn + sn) <= 0.4 * size:
                 return t0  # the reverse of the remembered step (slow drift cancels out)
             if math.hypot(ce - b0e - se, cn - b0n - sn) > 0.5 * size:
