@@ -229,6 +229,7 @@ class RoverIsolator:
         # step's time, the fix's Doppler-free value and time when it began).
         self._steps: list[list[float]] = []
         self._rev: tuple[float, tuple[float, float], float] | None = None
+        self._prev_b: tuple[float, float, float] | None = None  # the last epoch's (t, b)
 
     @staticmethod
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
@@ -263,6 +264,7 @@ class RoverIsolator:
                 self._drift.reset()
                 self._steps.clear()
         self._rev = None
+        self._prev_b = None  # the displacement's origin moves
         self._acc_hist.clear()
         self._acc_hist.append((z[0], z[1], 0.0, 0.0))
         self._coast_since = None
@@ -407,6 +409,7 @@ class RoverIsolator:
         if drift is not None and have_doppler and v is not None:
             lag = p.drift_lag_s
             b = (z[0] - d[0] - lag * v[0], z[1] - d[1] - lag * v[1])
+        prev_b, self._prev_b = self._prev_b, None if b is None else (fix.t_s, b[0], b[1])
         if self._hold is not None:
             if b is None or v is None:  # the Doppler chain broke: no old track to hold
                 return self._raise_alarm(z, r, self._hold_reason + "+no_doppler", t)
@@ -485,7 +488,8 @@ class RoverIsolator:
         # while the state goes on as for a replacement, so a jump is told apart at the next
         # epoch and a step that stays goes to the hold, whose "new_level" ends it.
         # A drift fault that is a step from the newest reference (not a ramp) counts too.
-        back = ((abrupt or (drift_fault and b is not None and self._is_step(fix.t_s, b)))
+        back = ((abrupt or (drift_fault and b is not None
+                            and self._is_step(fix.t_s, b, prev_b)))
                 and b is not None and drift is not None and not quality
                 and not stale_fault
                 and ((self._stepped_back and raw_consistent)
@@ -758,17 +762,17 @@ class RoverIsolator:
             keep.append(st)
         self._steps = keep
 
-    def _is_step(self, t_s: float, b: tuple[float, float]) -> bool:
-        """Did the fix step from the newest trusted reference by more than
-        ``hold_exit_sigmas`` of the drift σ at its age?"""
+    def _is_step(self, t_s: float, b: tuple[float, float],
+                 prev: tuple[float, float, float] | None) -> bool:
+        """Did the fix's Doppler-free value step from the previous epoch's (``prev``: t, e, n)
+        by more than ``hold_exit_sigmas`` of the drift σ over the interval? (A ramp moves a
+        little every epoch.)"""
         drift = self._drift
         assert drift is not None
-        ref = drift.at_or_before(t_s)
-        if ref is None:
+        if prev is None:
             return False
-        r_t, (re_, rn), _ = ref
-        return math.hypot(b[0] - re_, b[1] - rn) > self.p.hold_exit_sigmas * sigma_at(
-            t_s - r_t, drift.horizons, drift.sigmas)
+        return math.hypot(b[0] - prev[1], b[1] - prev[2]) > self.p.hold_exit_sigmas * sigma_at(
+            t_s - prev[0], drift.horizons, drift.sigmas)
 
     def _step_back_to(self, t_s: float, b: tuple[float, float]) -> float | None:
         """Is the fix back at the level before a remembered step that the track accepted?
