@@ -66,6 +66,9 @@ Action = Literal["accept", "replace", "alarm", "no_fix"]
 # Epochs over which the receiver must agree with its own Doppler to be restarted on after an
 # alarm: short, so a real step is accepted again soon, long enough to expose a frozen fix.
 RAW_HORIZON = 3
+# Epochs (beyond hold_exit_s) a step back to the level before a remembered step must stay
+# before the receiver is restarted on: more than a 2-epoch burst that happens to reverse it.
+STEP_END_EPOCHS = 3
 
 
 @dataclass(frozen=True)
@@ -228,7 +231,7 @@ class RoverIsolator:
         # seen to go on at the stepped level]; and the step back being confirmed (the
         # step's time, the fix's Doppler-free value and time when it began).
         self._steps: list[list[float]] = []
-        self._rev: tuple[float, tuple[float, float], float] | None = None
+        self._rev: tuple[float, tuple[float, float], float, int] | None = None
         self._prev_b: tuple[float, float, float] | None = None  # the last epoch's (t, b)
 
     @staticmethod
@@ -460,6 +463,12 @@ class RoverIsolator:
             # Between the warning and the alarm threshold of the drift test: passed on as it
             # is but flagged, and neither a reference of the drift test nor learned from.
             warn = dres is not None and 0.0 < p.drift_warn_sigmas < dres.g
+            if self._rev is not None and b is not None and v is not None:
+                # A step back being confirmed: this fix passes the tests but is compared with
+                # the references of the stepped level; it may end the step.
+                rev = self._step_back_to(fix.t_s, b)
+                if rev is not None and self._step_end(fix.t_s, b, rev):
+                    return self._resume(fix, z, r, d, v, b, t, "step_end")
             self._accepted(fix, z, t, learn=not warn)
             self._window_append(z, d)
             self.kf.update(z, r)
@@ -502,21 +511,8 @@ class RoverIsolator:
                 and not stale_fault and p.step_pair_s > 0.0):
             rev = self._step_back_to(fix.t_s, b)
             if rev is not None:
-                prev = self._rev
-                if prev is not None and prev[0] == rev and self._consec > 0:
-                    s1 = sigma_at(max(fix.t_s - prev[2], 1e-3), drift.horizons, drift.sigmas)
-                    if math.hypot(b[0] - prev[1][0], b[1] - prev[1][1]) > (
-                            p.hold_exit_sigmas * s1):
-                        prev = None  # not where the step back began: start again
-                    elif fix.t_s - prev[2] >= p.hold_exit_s - 1e-9:
-                        # There for the fixed lag (a burst is shorter): the receiver is right.
-                        self._steps = [st for st in self._steps if st[0] < rev]
-                        drift.forget_after(rev)
-                        return self._resume(fix, z, r, d, v, b, t, "step_end")
-                else:
-                    prev = None
-                if prev is None:
-                    self._rev = (rev, b, fix.t_s)
+                if self._step_end(fix.t_s, b, rev):
+                    return self._resume(fix, z, r, d, v, b, t, "step_end")
                 back = True
             elif self._consec == 0 and (abrupt or drift_fault):
                 self._note_step(fix.t_s, b, gate_h)
@@ -762,6 +758,27 @@ class RoverIsolator:
             keep.append(st)
         self._steps = keep
 
+    def _step_end(self, t_s: float, b: tuple[float, float], rev: float) -> bool:
+        """The fix is back before the remembered step of time ``rev``: has it stayed there
+        (within ``hold_exit_sigmas`` of the drift σ of where it began) for ``hold_exit_s`` and
+        STEP_END_EPOCHS epochs (a burst is shorter)? Then the references of the stepped level
+        go and True (the caller restarts on the receiver)."""
+        drift, p = self._drift, self.p
+        assert drift is not None
+        prev = self._rev
+        if prev is not None and prev[0] == rev:
+            s1 = sigma_at(max(t_s - prev[2], 1e-3), drift.horizons, drift.sigmas)
+            if math.hypot(b[0] - prev[1][0], b[1] - prev[1][1]) <= p.hold_exit_sigmas * s1:
+                if t_s - prev[2] >= p.hold_exit_s - 1e-9 and prev[3] + 1 >= STEP_END_EPOCHS:
+                    self._steps = [st for st in self._steps if st[0] < rev]
+                    drift.forget_after(rev)
+                    self._rev = None
+                    return True
+                self._rev = (prev[0], prev[1], prev[2], prev[3] + 1)
+                return False
+        self._rev = (rev, b, t_s, 1)  # not where the step back began: start again
+        return False
+
     def _is_step(self, t_s: float, b: tuple[float, float],
                  prev: tuple[float, float, float] | None) -> bool:
         """Did the fix's Doppler-free value step from the previous epoch's (``prev``: t, e, n)
@@ -784,7 +801,8 @@ class RoverIsolator:
         measured over an epoch, so the slow DGPS error between them cancels out); or the track
         is within half the step of the stepped level and the fix is at least 0.6 x the step
         away from it and twice as close to the level before. A jump that happens to land there costs
-        that epoch the raw fix (flagged); only fixes that stay there for ``hold_exit_s`` end it."""
+        that epoch the raw fix (flagged); only fixes that stay there for ``hold_exit_s``
+        and ``STEP_END_EPOCHS`` epochs end it."""
         drift = self._drift
         assert drift is not None
         ref = drift.at_or_before(t_s)
