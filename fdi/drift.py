@@ -42,6 +42,15 @@ absolute value (robust: faults that slip into the calibration, up to a large min
 time, barely move it, and only upwards), never below ``floor_frac`` of the configured σ,
 capped by (D5) (:func:`concave_cap`), and is frozen for good.
 
+Coarse coordinates (a receiver that writes 4 decimals of minutes rounds latitude to 0.19 m)
+add the variance of the difference of two rounding errors, uniform in ±q/2, to every σ:
+
+    σ_H ← sqrt(σ_H² + q²/6)                                        (D6)
+
+with q the coordinate quantum the caller estimates from the fixes (the smallest non-zero
+change between consecutive fixes): a robust calibration does not see it, since most
+short-horizon differences are a fraction of a quantum and a few a whole one.
+
 Units: metres, seconds; shapes: 2-tuples (east, north).
 """
 
@@ -92,9 +101,9 @@ class DriftTest:
     ``horizons_s`` ascending, ``sigma_m`` the per-axis σ of (D3) at each; ``lag_sd_s`` is σ_δ.
     """
 
-    __slots__ = ("_be", "_bn", "_cal", "_cal_until", "_keep", "_lt_e", "_lt_n", "_lt_t", "_t",
-                 "_ve", "_vn", "calibrate_s", "calibrated", "floor_frac", "horizons", "lag_sd",
-                 "sigmas")
+    __slots__ = ("_base", "_be", "_bn", "_cal", "_cal_until", "_keep", "_lt_e", "_lt_n", "_lt_t",
+                 "_t", "_ve", "_vn", "calibrate_s", "calibrated", "floor_frac", "horizons",
+                 "lag_sd", "quantum", "sigmas")
 
     def __init__(self, horizons_s: Sequence[float], sigma_m: Sequence[float],
                  lag_sd_s: float, calibrate_s: float = 0.0, floor_frac: float = 0.2) -> None:
@@ -108,7 +117,11 @@ class DriftTest:
         if min(sigma_m) <= 0.0:
             raise ConfigError(where, "drift_sigma_m", "positive values", repr(list(sigma_m)))
         self.horizons = tuple(float(h) for h in horizons_s)
-        self.sigmas = tuple(float(s) for s in sigma_m)
+        # The calibrated (or configured) σ, and the σ used: with the coordinates' quantum
+        # (:meth:`set_quantum`, D6).
+        self._base = tuple(float(s) for s in sigma_m)
+        self.sigmas = self._base
+        self.quantum = 0.0
         self.lag_sd = lag_sd_s
         # References in flat float arrays (times ascending): nothing here for the cyclic
         # garbage collector to walk, which tuples in lists made a 2-8 ms pause every few
@@ -177,16 +190,27 @@ class DriftTest:
                 self._cal[j].append(abs(b[1] - self._bn[i]))
         if t >= self._cal_until:
             out = []
-            for j, configured in enumerate(self.sigmas):
+            for j, configured in enumerate(self._base):
                 xs = sorted(self._cal[j])
                 if len(xs) < 20:
                     out.append(configured)
                     continue
                 est = 1.4826 * xs[len(xs) // 2]
                 out.append(max(est, self.floor_frac * configured))
-            self.sigmas = concave_cap(self.horizons, out)
+            self._base = concave_cap(self.horizons, out)
+            self.set_quantum(self.quantum)
             self.calibrated = True
             self._cal = []
+
+    def set_quantum(self, q: float) -> None:
+        """The receiver's coordinate quantum ``q`` (m, the larger axis): each σ of (D3)
+        becomes sqrt(σ² + q²/6) (D6), the variance of the difference of two independent
+        rounding errors, uniform in ±q/2. A calibration's median absolute difference misses
+        it: with coarse coordinates most short-horizon differences are a fraction of a quantum
+        and a few are a whole one (4 decimals of minutes: 0.19 m of latitude)."""
+        self.quantum = q
+        qv = q * q / 6.0
+        self.sigmas = tuple(math.sqrt(s * s + qv) for s in self._base)
 
     def forget_after(self, t: float) -> None:
         """Drop the references newer than ``t`` (a fault may have been building since)."""

@@ -233,6 +233,10 @@ class RoverIsolator:
         self._steps: list[list[float]] = []
         self._rev: tuple[float, tuple[float, float], float, int] | None = None
         self._prev_b: tuple[float, float, float] | None = None  # the last epoch's (t, b)
+        # The coordinates' quantum per axis: the smallest non-zero change between consecutive
+        # fixes (fdi/drift.py, D6); inf until seen.
+        self._last_en: tuple[float, float] | None = None
+        self._quant = [math.inf, math.inf]
 
     @staticmethod
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
@@ -353,6 +357,8 @@ class RoverIsolator:
         v = self._velocity(fix)
         self._last_t = fix.t_s
         stale = self._stale_check(fix)
+        if self._drift is not None:
+            self._learn_quantum(z)
 
         quality = []
         if p.min_sats and fix.num_sats is not None and fix.num_sats < p.min_sats:
@@ -779,6 +785,25 @@ class RoverIsolator:
         self._rev = (rev, b, t_s, 1)  # not where the step back began: start again
         return False
 
+    def _learn_quantum(self, z: tuple[float, float, float]) -> None:
+        """The smallest non-zero change of each coordinate between consecutive fixes (above
+        0.1 mm: the local frame's curvature; below 1 m): the receiver's rounding, given to the
+        drift test once both axes have one (D6)."""
+        last, self._last_en = self._last_en, (z[0], z[1])
+        if last is None:
+            return
+        q = self._quant
+        changed = False
+        for i in (0, 1):
+            dz = abs(z[i] - last[i])
+            if 1e-4 < dz < q[i] and dz < 1.0:
+                q[i] = dz
+                changed = True
+        if changed and q[0] < math.inf and q[1] < math.inf:
+            drift = self._drift
+            assert drift is not None
+            drift.set_quantum(max(q[0], q[1]))
+
     def _is_step(self, t_s: float, b: tuple[float, float],
                  prev: tuple[float, float, float] | None) -> bool:
         """Did the fix's Doppler-free value step from the previous epoch's (``prev``: t, e, n)
@@ -986,6 +1011,8 @@ class RoverIsolator:
             self._win = deque(self._win, maxlen=params.window)
         self._ewma = 1.0 / params.gate_tau_epochs
         self._make_drift(params)
+        if self._drift is not None and max(self._quant) < math.inf:
+            self._drift.set_quantum(max(self._quant))
         self._hold = None
 
 
