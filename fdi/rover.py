@@ -200,7 +200,8 @@ class RoverIsolator:
         self._consec = 0
         self._stepped_back = False  # this run of replacements began with a step back
         # Accepted fixes (east, north) with the Doppler displacement at each, last `window`.
-        self._acc_hist: deque[tuple[float, float, float, float]] = deque(maxlen=n)
+        # ... and the Doppler velocity at each (for the lag's share, with the drift test).
+        self._acc_hist: deque[tuple[float, float, float, float, float, float]] = deque(maxlen=n)
         # The receiver's own recent fixes with the Doppler displacement at each: is it
         # consistent with itself over the window (a frozen or wandering fix is not)?
         self._raw_hist: deque[tuple[float, float, float, float]] = deque(maxlen=RAW_HORIZON)
@@ -273,7 +274,8 @@ class RoverIsolator:
         self._rev = None
         self._prev_b = None  # the displacement's origin moves
         self._acc_hist.clear()
-        self._acc_hist.append((z[0], z[1], 0.0, 0.0))
+        lv = self._last_v or (0.0, 0.0)
+        self._acc_hist.append((z[0], z[1], 0.0, 0.0, lv[0], lv[1]))
         self._coast_since = None
         self._win.clear()
         self._disp = [0.0, 0.0, 0.0]
@@ -404,7 +406,17 @@ class RoverIsolator:
         if p.doppler_test and have_doppler:
             if self._acc_hist:
                 a = self._acc_hist[0]
-                t.doppler_res = math.hypot(z[0] - a[0] - (d[0] - a[2]), z[1] - a[1] - (d[1] - a[3]))
+                re_, rn = z[0] - a[0] - (d[0] - a[2]), z[1] - a[1] - (d[1] - a[3])
+                if self._drift is not None and v is not None:
+                    # As the drift test does (D1, D3): the Doppler's lag behind the position
+                    # moved out, and its uncertainty over the change of velocity (a headland
+                    # turn at 1 Hz put 1.5 m here on a clean receiver).
+                    dve, dvn = v[0] - a[4], v[1] - a[5]
+                    re_ -= p.drift_lag_s * dve
+                    rn -= p.drift_lag_s * dvn
+                    lag_g = p.doppler_sigmas * p.drift_lag_sd_s * math.hypot(dve, dvn)
+                    t.doppler_gate = math.hypot(t.doppler_gate, lag_g)
+                t.doppler_res = math.hypot(re_, rn)
                 doppler_fault = t.doppler_res > t.doppler_gate
             if self._raw_hist:
                 q = self._raw_hist[0]
@@ -718,7 +730,7 @@ class RoverIsolator:
         self._win.clear()
         self._win.append((z[0] - d[0], z[1] - d[1], z[2] - d[2]))
         self._acc_hist.clear()
-        self._acc_hist.append((z[0], z[1], d[0], d[1]))
+        self._acc_hist.append((z[0], z[1], d[0], d[1], v[0], v[1]))
         self._raw_hist.clear()
         self.kf.reset(z, r)
         self._consec = 0
@@ -927,7 +939,8 @@ class RoverIsolator:
         if learn and t.doppler_res is not None and len(self._acc_hist) == self.p.window:
             self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, self._ewma)
         d = self._disp
-        self._acc_hist.append((z[0], z[1], d[0], d[1]))
+        lv = self._last_v or (0.0, 0.0)
+        self._acc_hist.append((z[0], z[1], d[0], d[1], lv[0], lv[1]))
         if learn and t.pred is not None:
             self._learn_spread(z, t.pred, t.res_u is not None)
 
