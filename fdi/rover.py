@@ -761,20 +761,13 @@ class RoverIsolator:
         self._steps = steps[-4:]
 
     def _track_at(self, b: tuple[float, float]) -> None:
-        """A fix was accepted at ``b``: a remembered step whose stepped level it is (within
-        half the step, and half the step from the level before) was accepted; one whose level
-        before it is (within 0.3 x the step) was not and is forgotten."""
-        keep = []
+        """A fix was accepted at ``b``: a remembered step whose stepped level it is nearer
+        than the level before it was accepted (a replaced burst leaves the track nearer the
+        level before)."""
         for st in self._steps:
-            if st[5] == 0.0:
-                size = math.hypot(st[3], st[4])
-                if math.hypot(b[0] - st[1] - st[3], b[1] - st[2] - st[4]) <= 0.5 * size and (
-                        math.hypot(b[0] - st[1], b[1] - st[2]) >= 0.5 * size):
-                    st[5] = 1.0
-                elif math.hypot(b[0] - st[1], b[1] - st[2]) <= 0.3 * size:
-                    continue
-            keep.append(st)
-        self._steps = keep
+            if st[5] == 0.0 and math.hypot(b[0] - st[1] - st[3], b[1] - st[2] - st[4]) < (
+                    math.hypot(b[0] - st[1], b[1] - st[2])):
+                st[5] = 1.0
 
     def _step_end(self, t_s: float, b: tuple[float, float], rev: float) -> bool:
         """The fix is back before the remembered step of time ``rev``: has it stayed there
