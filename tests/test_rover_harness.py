@@ -206,14 +206,20 @@ def test_never_worse_than_the_receiver_overall(rows: list[dict[str, Any]]) -> No
 
 def test_after_an_event_the_output_is_not_worse_than_the_receiver(rows: list[dict[str, Any]]
                                                                   ) -> None:
-    """The bullet "in the 10 s after every event, output RMS <= raw", asserted at its measured
-    bound (the goal is 0 events; docs/evaluation.md): seeds 1-2, 10 minutes, at most 2 events
-    a model and rate worse than the receiver, by at most 0.41 m RMS (measured 0-2, 0.41 m on
-    multipath at 1 Hz; before the step-back rule of fdi/rover.py: 1-8 events, up to 10.9 m)."""
+    """The bullet "in the 10 s after every event, output RMS <= raw": seeds 1-2, 10 minutes,
+    no event (measured 0 since the remembered-step rule of fdi/rover.py; before it 0-2 events
+    a model and rate, up to 0.41 m on multipath at 1 Hz; before the step-back rule 1-8, up to
+    10.9 m). On held-out seeds 201-205 (20 minutes) it is not met everywhere:
+    docs/evaluation.md."""
     for r in rows:
-        assert r["after_worse"] <= 2, (r["model"], r["rate_hz"], r["after_worse"])
-        assert r["after_worst_excess_m"] <= 0.41, (r["model"], r["rate_hz"],
-                                                   r["after_worst_excess_m"])
+        assert r["after_worse"] == 0, (r["model"], r["rate_hz"], r["after_worse"])
+
+
+def test_clean_epochs_are_rarely_flagged(rows: list[dict[str, Any]]) -> None:
+    """Clean epochs more than 10 s from any event, flagged: at its measured bound, 1 % a model
+    and rate (measured 0-0.87 %, coarse at 1 Hz; the goal is 0.1 %, docs/evaluation.md)."""
+    for r in rows:
+        assert r["fa_worst"] <= 0.01, (r["model"], r["rate_hz"], r["fa_worst"])
 
 
 def test_field_models_detect_most_ramps_in_time(rows: list[dict[str, Any]]) -> None:
