@@ -103,6 +103,7 @@ class WitnessParams:
     recover_samples: int = 10
     comp_samples: int = 50  # after a step's confirmation: the offset learned over this many
     comp_max_slope_dps: float = 0.25  # ... if a level (slope within this); 0 samples: off
+    fast_margin_s: float = 2.0  # a step's compass is trusted up to this before its change
 
 
 @dataclass(frozen=True)
@@ -132,6 +133,9 @@ class GyroWitness:
         self._lam = 1.0
         self._S = [0.0, 0.0, 0.0, 0.0, 0.0]  # warm-up sums: 1, t, t^2, z, t z
         self._Sp = [0.0, 0.0, 0.0, 0.0, 0.0]  # after the warm-up (delayed), with forgetting
+        self._Sf = [0.0, 0.0, 0.0, 0.0, 0.0]  # a compensated step's compass (delayed)
+        self._comp_delayed: deque[tuple[float, float]] = deque()  # (t, z) not yet fed
+        self.info = 0.0  # the bias fit's slope information, s^2 (bias sd = sigma/sqrt(info))
         self._delayed: deque[tuple[float, float, bool]] = deque()  # (t, z, trusted)
         self._dt = 0.2
         self.var = RobustVariance(p.sigma0_deg**2, p.sigma_samples, 3.0, p.sigma_min_deg**2,
@@ -160,7 +164,7 @@ class GyroWitness:
         self._corr: deque[tuple[int, float]] = deque(maxlen=600)
         # Offset compensation after a step: (t, nu_o) since the confirmation, the offset once
         # learned, whether this fault may be compensated, and the CUSUMs that watch it.
-        self._comp: list[tuple[float, float]] = []
+        self._comp: list[tuple[float, float, float]] = []  # (t, nu_o, z)
         self.offset: float | None = None
         self._comp_ok = False
         self._gc = [0.0, 0.0]
@@ -236,7 +240,7 @@ class GyroWitness:
             if not recovered and self._comp_ok:
                 self._compensate(nu_o, nu, sigma)
             elif recovered:
-                self._end_comp()
+                self._end_comp(keep_segment=True)
             return WitnessStep(self.psi, nu, 0.0, sigma, self.suspect, False, False, recovered,
                                False)
         self.g_pos = max(0.0, self.g_pos + s - p.kappa)
@@ -336,10 +340,16 @@ class GyroWitness:
         S[2] = lam * S[2] + t * t
         S[3] = lam * S[3] + z
         S[4] = lam * S[4] + t * z
-        if not update_bias:
-            return
+        if update_bias:
+            self._combine()
+
+    def _combine(self) -> None:
+        """The bias from the segments' sums, each with its own intercept (the warm-up, the
+        later healthy compass, and a compensated step's compass, whose offset changes the
+        intercept only): ``b = -sum stz / sum stt``; ``info`` = ``sum stt``, so that the bias
+        is known to ``sigma / sqrt(info)``."""
         num = info = 0.0
-        for T in (self._S, self._Sp):
+        for T in (self._S, self._Sp, self._Sf):
             if T[0] < 3.0:
                 continue
             stt = T[2] - T[1] * T[1] / T[0]  # sum (t - mean t)^2
@@ -350,6 +360,7 @@ class GyroWitness:
             info += stt
         if info > 0.0:
             self.bias = num / info
+        self.info = info
 
     def _correct(self, nu_o: float, nu: float, dt: float, n: int) -> None:
         """Bias fit and both heading loops; ``n`` > 0: the n-th sample of the warm-up."""
@@ -383,11 +394,17 @@ class GyroWitness:
               (self.gs_pos / p.slow_h, 2), (self.gs_neg / p.slow_h, 3))
         return max(gs)[1]
 
-    def _end_comp(self) -> None:
+    def _end_comp(self, keep_segment: bool = False) -> None:
+        """End the compensation; its compass segment stays in the bias fit only with
+        ``keep_segment`` (the compass came back: the samples fed were a level's)."""
         self._comp.clear()
+        self._comp_delayed.clear()
         self.offset = None
         self._comp_ok = False
         self._gc = [0.0, 0.0]
+        if not keep_segment and self._Sf[0] > 0.0:
+            self._Sf = [0.0, 0.0, 0.0, 0.0, 0.0]
+            self._combine()
 
     def _compensate(self, nu_o: float, nu: float, sigma: float) -> None:
         """A confirmed step (fast CUSUM): a compass off by a constant still carries the
@@ -405,25 +422,37 @@ class GyroWitness:
         p = self.p
         assert self.psi is not None
         if self.offset is None:
-            self._comp.append((self.t, nu_o))
+            self._comp.append((self.t, nu_o, self._y_unw - self._G))
             if len(self._comp) < p.comp_samples:
                 return
             t_first = self._comp[0][0]
             pts = self._comp
             for _ in range(2):  # the line, then again without the outliers (> 3 sigma)
                 n = len(pts)
-                mt = sum(t for t, _ in pts) / n
-                mx = sum(x for _, x in pts) / n
-                stt = sum((t - mt) ** 2 for t, _ in pts)
-                slope = sum((t - mt) * (x - mx) for t, x in pts) / stt
-                res = [x - mx - slope * (t - mt) for t, x in pts]
+                mt = sum(q[0] for q in pts) / n
+                mx = sum(q[1] for q in pts) / n
+                stt = sum((q[0] - mt) ** 2 for q in pts)
+                slope = sum((q[0] - mt) * (q[1] - mx) for q in pts) / stt
+                res = [q[1] - mx - slope * (q[0] - mt) for q in pts]
                 sd = math.sqrt(sum(e * e for e in res) / (n - 2))
                 kept = [q for q, e in zip(pts, res, strict=True) if abs(e) <= 3.0 * sigma]
                 if len(kept) < max(4, len(pts) // 2):
                     break
                 pts = kept
             if abs(slope) <= p.comp_max_slope_dps and sd <= p.spread_ratio * sigma:
-                self.offset = mx + slope * (t_first - mt)
+                # The slope is the dead reckoning's drift: the bias estimate's error, which
+                # the bias fit knows to sigma / sqrt(info). The window's compass (z = y -
+                # sum r dt, a level: its own intercept) joins the fit as a segment, and the
+                # offset is the line at the window's start with the combined slope (the
+                # window's own slope alone has 2x the intercept's error there: 0.9 deg once
+                # at 1 deg noise, seed 6 drift:20@35 of the nonlinear plant); the segment
+                # then learns on from the compensated compass (_feed_segment).
+                b_old = self.bias
+                self._Sf = [0.0, 0.0, 0.0, 0.0, 0.0]
+                for t_i, _, z_i in pts:
+                    self._fit(self._Sf, self._lam, t_i, z_i, update_bias=False)
+                self._combine()
+                self.offset = mx + (b_old - self.bias) * (t_first - mt)
             else:
                 self._comp_ok = False  # not a level: dead reckoning for this fault
             self._comp.clear()
@@ -438,9 +467,25 @@ class GyroWitness:
         if abs(x) >= p.jump_sigmas:
             return
         c = max(-p.clip * sigma, min(p.clip * sigma, nu_o - self.offset))
+        self._feed_segment(self._y_unw - (nu_o - self.offset - c) - self._G,
+                           max(self._gc) >= 0.5 * p.slow_h)
         a = self._dt / p.heading_tau_s
         self.psi += a * c
         self.psi_t += a * c
+
+    def _feed_segment(self, z: float, doubtful: bool) -> None:
+        """The compensated compass (``z = y - sum r dt``, its outliers clipped) into the bias
+        fit's step segment, ``bias_delay_s`` late as the healthy compass's (a drift that
+        begins under the compensation has that long to be seen: its slow CUSUM halfway up
+        drops the samples not yet fed, and ending the compensation drops the segment)."""
+        p = self.p
+        if doubtful:
+            self._comp_delayed.clear()
+            return
+        self._comp_delayed.append((self.t, z))
+        while self._comp_delayed and self._comp_delayed[0][0] < self.t - p.bias_delay_s - 1e-9:
+            t_old, z_old = self._comp_delayed.popleft()
+            self._fit(self._Sf, self._lam, t_old, z_old)
 
     def force_fault(self, samples_back: int) -> None:
         """A fault found by another test (a stuck compass) that began ``samples_back`` ago."""
@@ -448,18 +493,39 @@ class GyroWitness:
         self.fault = self.suspect = True
         self.var.frozen = True
         self._agree.clear()
-        self._rollback(self.k - samples_back)
+        self._rollback(self.k - samples_back, fast=True)
 
-    def _rollback(self, k0: int | None = None) -> None:
+    def _rollback(self, k0: int | None = None, fast: bool | None = None) -> None:
         """Undo the output loop's corrections since the change began (Page's estimate: the
-        last time the CUSUM that confirmed was 0): they followed the faulty compass."""
+        last time the CUSUM that confirmed was 0): they followed the faulty compass.
+        ``fast``: the change time is sharp (a step by the fast CUSUM, a stuck run; default:
+        :attr:`confirmed_fast`)."""
         if k0 is None:
             k0 = self._zero_at[self._confirming_side()]
+        if fast is None:
+            fast = self.confirmed_fast
         undo = sum(c for k, c in self._corr if k > k0)
         if self.psi is not None:
             self.psi -= undo
         self._corr.clear()
         # ... and the bias fit does not get the samples since then, nor those of the test
-        # loop's time constant before (a slow drift starts before the CUSUM sees it).
-        t0 = self.t - (self.k - k0) * self._dt - self.p.test_tau_s
-        self._delayed = deque((t, z, ok and t <= t0) for t, z, ok in self._delayed)
+        # loop's time constant before (a slow drift starts before the CUSUM sees it; a
+        # step's change time is sharp: fast_margin_s before it). The trusted samples still
+        # in the delay line go into the fit now (during the fault they would be dropped: a
+        # step 15 s after the warm-up lost them all, its bias from 20 s of data, 0.05 deg/s
+        # off), and the dead reckoning since the change is redone with the better bias.
+        t_k0 = self.t - (self.k - k0) * self._dt
+        t0 = t_k0 - (self.p.fast_margin_s if fast else self.p.test_tau_s)
+        b_old = self.bias
+        fed = False
+        for t, z, ok in self._delayed:
+            if ok and t <= t0:
+                self._fit(self._Sp, self._lam, t, z, update_bias=False)
+                fed = True
+        self._delayed.clear()
+        if fed:
+            self._combine()
+            if self.psi is not None:
+                redo = (self.bias - b_old) * (self.t - t_k0)
+                self.psi -= redo
+                self.psi_t -= redo

@@ -82,6 +82,8 @@ class FtConfig:
     gyro_comp_samples: int = field(default=50, metadata={
         "ge": 0, "doc": "after a step: learn its offset over this many samples (0: off)"})
     gyro_comp_max_slope_dps: float = field(default=0.25, metadata={"gt": 0.0})
+    gyro_fast_margin_s: float = field(default=2.0, metadata={
+        "ge": 0.0, "doc": "a step's (or stuck run's) compass trusted up to this before it"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
     gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})
