@@ -84,6 +84,12 @@ class FtConfig:
     gyro_comp_max_slope_dps: float = field(default=0.25, metadata={"gt": 0.0})
     gyro_fast_margin_s: float = field(default=2.0, metadata={
         "ge": 0.0, "doc": "a step's (or stuck run's) compass trusted up to this before it"})
+    gyro_drift_window_s: float = field(default=90.0, metadata={
+        "gt": 1.0, "doc": "the hinge test's window (compass minus integrated gyro)"})
+    gyro_drift_glr: float = field(default=30.0, metadata={
+        "ge": 0.0, "doc": "the hinge test's confirmation level (likelihood ratio; 0: off)"})
+    gyro_drift_sigma_min_deg: float = field(default=0.75, metadata={
+        "gt": 0.0, "doc": "the hinge test's noise floor (the integrated gyro noise's walk)"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
     gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})

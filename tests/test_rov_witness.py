@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from fdi.gyro_witness import GyroWitness, WitnessParams
+from fdi.gyro_witness import GyroWitness, HingeDrift, WitnessParams
 from fdi.heading_ft import FaultTolerantHeading, FtConfig
 from fdi.lms_fir import DetectorConfig
 from fdi.noise_scale import RobustVariance, TrimmedScale
@@ -267,3 +267,77 @@ def test_setpoint_change_raises_theta_for_the_window_only() -> None:
     assert scales[:10] == [1.0] * 10
     assert scales[10:10 + n] == [cfg.ft.turn_theta_factor] * n
     assert scales[10 + n:] == [1.0] * (50 - n)
+
+
+def test_hinge_drift_matches_least_squares_through_its_rebuilds() -> None:
+    """The running sums of :class:`HingeDrift` against numpy's least squares, over 1000
+    samples (three rebuilds of a 300-sample window) with a ramp in the middle."""
+    rng = np.random.default_rng(3)
+    lags = (50, 100, 150, 200)
+    h = HingeDrift(300, lags)
+    T: list[float] = []
+    Z: list[float] = []
+    for k in range(1000):
+        t = 35.0 + k * DT
+        z = 400.0 - 0.13 * t + float(rng.normal(0.0, 1.0)) + (0.1 * (t - 100.0) if t > 100 else 0)
+        T.append(t)
+        Z.append(z)
+        h.push(t, z)
+        ratios = [h.test(1.0) for _ in lags]
+        if k in (400, 500, 700, 999):
+            t_, z_ = np.array(T[-300:]), np.array(Z[-300:])
+            X = np.c_[np.ones(300), t_]
+            r1 = z_ - X @ np.linalg.lstsq(X, z_, rcond=None)[0]
+            want = []
+            for L in lags:
+                X2 = np.c_[X, np.maximum(0.0, t_ - t_[300 - L])]
+                r2 = z_ - X2 @ np.linalg.lstsq(X2, z_, rcond=None)[0]
+                want.append(float(r1 @ r1 - r2 @ r2))
+            assert ratios[-1][0] == pytest.approx(max(want), rel=1e-6, abs=1e-6)
+
+
+def test_slow_drift_found_by_the_hinge_not_by_the_cusums() -> None:
+    """0.05 deg/s from 60 s at 1 deg noise, seeds 1-10: the CUSUMs alone miss it within 120 s
+    on 6 of them (the reference mean and the bias fit follow it); the hinge test on compass
+    minus integrated gyro confirms every one, within 61.8 s (worst), 36 s on most."""
+    def delay(params: WitnessParams, seed: int) -> float | None:
+        _, ev = _run(300 + 600, "ramp", mag=0.05, seed=seed, params=params)
+        return next(((k - 300) * DT for k, e in ev if e == "confirmed"), None)
+
+    cusum = [delay(WitnessParams(drift_glr=0.0), s) for s in range(1, 11)]
+    hinge = [delay(WitnessParams(), s) for s in range(1, 11)]
+    assert sum(d is None for d in cusum) >= 5
+    assert all(d is not None and 0.0 < d <= 65.0 for d in hinge), hinge
+
+
+def _bias_error_at_step(params: WitnessParams, seed: int) -> tuple[float, float]:
+    """A 20 deg step 15 s after the warm-up: |bias error| just before its confirmation and
+    just after."""
+    rng = np.random.default_rng(seed)
+    w = GyroWitness(params)
+    psi = 40.0
+    before = 0.0
+    for k in range(250):
+        r = 2.0 * math.sin(2 * math.pi * k * DT / 40.0)
+        psi += r * DT
+        w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
+        y = psi + float(rng.normal(0.0, 1.0)) + (20.0 if k >= 175 else 0.0)
+        b = w.bias
+        if w.update(y % 360.0, DT).confirmed:
+            return abs(b - 0.15), abs(w.bias - 0.15)
+        before = b
+    raise AssertionError(f"not confirmed (bias {before})")
+
+
+def test_a_confirmation_feeds_the_delay_lines_trusted_samples_to_the_bias() -> None:
+    """At the confirmation the 15 s of trusted samples still waiting in the bias fit's delay
+    line go into the fit (before, they were dropped during the fault), on one line with the
+    warm-up's: over seeds 1-40 the RMS bias error falls from 0.018 to 0.010 deg/s; and the
+    samples are not fed with a margin that reaches past them (fast_margin_s = 30: the same
+    error as before)."""
+    errs = np.array([_bias_error_at_step(WitnessParams(), s) for s in range(1, 41)])
+    rms_before, rms_after = np.sqrt((errs**2).mean(axis=0))
+    assert rms_after < 0.7 * rms_before
+    for s in range(1, 4):
+        b, a = _bias_error_at_step(WitnessParams(fast_margin_s=30.0), s)
+        assert a == pytest.approx(b, rel=0.05)  # one regular delayed sample, fed that step
