@@ -97,6 +97,8 @@ class FtConfig:
         "ge": 0.0, "doc": "the hinge test's confirmation level (likelihood ratio; 0: off)"})
     gyro_drift_sigma_min_deg: float = field(default=0.75, metadata={
         "gt": 0.0, "doc": "the hinge test's noise floor (the integrated gyro noise's walk)"})
+    gyro_drift_max_turn_deg: float = field(default=10.0, metadata={
+        "gt": 0.0, "doc": "the hinge test only while the heading spans at most this (window)"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
     gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})

@@ -55,14 +55,16 @@ def _run(
     noise: float = 1.0,
     seed: int = 1,
     params: WitnessParams | None = None,
+    turn_dps: float = 2.0,
 ) -> tuple[GyroWitness, list[tuple[int, str]]]:
-    """A vehicle turning slowly (sinusoid), compass noise ``noise``, gyro bias 0.15 deg/s."""
+    """A vehicle turning slowly (sinusoid of ``turn_dps`` amplitude: 2 deg/s swings the heading
+    by +-12.7 deg), compass noise ``noise``, gyro bias 0.15 deg/s."""
     rng = np.random.default_rng(seed)
     w = GyroWitness(params or WitnessParams())
     psi = 40.0
     events: list[tuple[int, str]] = []
     for k in range(n):
-        r = 2.0 * math.sin(2 * math.pi * k * DT / 40.0)
+        r = turn_dps * math.sin(2 * math.pi * k * DT / 40.0)
         psi += r * DT
         w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
         y = psi + float(rng.normal(0.0, noise))
@@ -297,47 +299,49 @@ def test_hinge_drift_matches_least_squares_through_its_rebuilds() -> None:
 
 
 def test_slow_drift_found_by_the_hinge_not_by_the_cusums() -> None:
-    """0.05 deg/s from 60 s at 1 deg noise, seeds 1-10: the CUSUMs alone miss it within 120 s
-    on 6 of them (the reference mean and the bias fit follow it); the hinge test on compass
-    minus integrated gyro confirms every one, within 61.8 s (worst), 36 s on most."""
-    def delay(params: WitnessParams, seed: int) -> float | None:
-        _, ev = _run(300 + 600, "ramp", mag=0.05, seed=seed, params=params)
+    """0.05 deg/s from 60 s at 1 deg noise, the vehicle holding its heading (+-1.3 deg),
+    seeds 1-10: the CUSUMs alone confirm none within 120 s (the reference mean and the bias
+    fit follow it); the hinge test on compass minus integrated gyro confirms 9 of 10 within
+    45 s (seed 10 not within 120 s; seed 2 is taken back 2.2 s later: a drift this slow is
+    ~1.5 deg from the dead reckoning when found). While the vehicle swings +-12.7 deg the
+    hinge's window restarts (heading span over 10 deg), so it confirms nothing there, as the
+    CUSUMs."""
+    def delay(params: WitnessParams, seed: int, turn: float = 0.2) -> float | None:
+        _, ev = _run(300 + 600, "ramp", mag=0.05, seed=seed, params=params, turn_dps=turn)
         return next(((k - 300) * DT for k, e in ev if e == "confirmed"), None)
 
     cusum = [delay(WitnessParams(drift_glr=0.0), s) for s in range(1, 11)]
     hinge = [delay(WitnessParams(), s) for s in range(1, 11)]
-    assert sum(d is None for d in cusum) >= 5
-    assert all(d is not None and 0.0 < d <= 65.0 for d in hinge), hinge
+    assert all(d is None for d in cusum), cusum
+    assert sum(d is not None and 0.0 < d <= 45.0 for d in hinge) >= 9, hinge
+    swing = [delay(WitnessParams(), s, 2.0) for s in range(1, 4)]
+    assert swing == [delay(WitnessParams(drift_glr=0.0), s, 2.0) for s in range(1, 4)]
 
 
-def _bias_error_at_step(params: WitnessParams, seed: int) -> tuple[float, float]:
-    """A 20 deg step 15 s after the warm-up: |bias error| just before its confirmation and
-    just after."""
+def _fit_samples_at_step(params: WitnessParams, seed: int) -> tuple[float, float]:
+    """A 20 deg step 15 s after the warm-up: the bias fit's later segment's sample weight
+    just before its confirmation and just after."""
     rng = np.random.default_rng(seed)
     w = GyroWitness(params)
     psi = 40.0
-    before = 0.0
     for k in range(250):
         r = 2.0 * math.sin(2 * math.pi * k * DT / 40.0)
         psi += r * DT
         w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
         y = psi + float(rng.normal(0.0, 1.0)) + (20.0 if k >= 175 else 0.0)
-        b = w.bias
+        n = w._Sp[0]
         if w.update(y % 360.0, DT).confirmed:
-            return abs(b - 0.15), abs(w.bias - 0.15)
-        before = b
-    raise AssertionError(f"not confirmed (bias {before})")
+            return n, w._Sp[0]
+    raise AssertionError("not confirmed")
 
 
-def test_a_confirmation_feeds_the_delay_lines_trusted_samples_to_the_bias() -> None:
-    """At the confirmation the 15 s of trusted samples still waiting in the bias fit's delay
-    line go into the fit (before, they were dropped during the fault), on one line with the
-    warm-up's: over seeds 1-40 the RMS bias error falls from 0.018 to 0.010 deg/s; and the
-    samples are not fed with a margin that reaches past them (fast_margin_s = 30: the same
-    error as before)."""
-    errs = np.array([_bias_error_at_step(WitnessParams(), s) for s in range(1, 41)])
-    rms_before, rms_after = np.sqrt((errs**2).mean(axis=0))
-    assert rms_after < 0.7 * rms_before
-    for s in range(1, 4):
-        b, a = _bias_error_at_step(WitnessParams(fast_margin_s=30.0), s)
-        assert a == pytest.approx(b, abs=0.0015)  # one regular delayed sample, fed that step
+@pytest.mark.parametrize("seed", range(1, 4))
+def test_a_confirmation_feeds_the_delay_lines_trusted_samples_to_the_bias(seed: int) -> None:
+    """At the confirmation the trusted samples still waiting in the bias fit's delay line
+    (15 s) go into the fit, up to fast_margin_s (2 s) before the step's change time; before,
+    they were dropped during the fault (a step 15 s after the warm-up had its bias from the
+    warm-up alone). With a margin of 30 s none qualifies."""
+    before, after = _fit_samples_at_step(WitnessParams(), seed)
+    assert after - before >= 55.0  # ~ (15 - 2) s at 5 Hz, less the suspect's samples
+    before, after = _fit_samples_at_step(WitnessParams(fast_margin_s=30.0), seed)
+    assert after - before <= 1.0
