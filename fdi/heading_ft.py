@@ -56,6 +56,13 @@ class FtConfig:
     turn_window_s: float = field(default=0.0, metadata={
         "ge": 0.0, "doc": "after a setpoint change, theta x turn_theta_factor (0: off)"})
     turn_theta_factor: float = field(default=1.0, metadata={"ge": 1.0})
+    level_sigmas: float = field(default=5.0, metadata={
+        "ge": 0.0, "doc": "no gyro: also confirm when the reading stays this * sigma_e off the "
+                          "substitution heading for the detector's persist samples (0: off)"})
+    level_min_deg: float = field(default=5.0, metadata={
+        "ge": 0.0, "doc": "... and at least this far (the smallest drift step of interest)"})
+    level_burst_ratio: float = field(default=2.5, metadata={
+        "gt": 0.0, "doc": "... unless the short scale of e > this * sigma_e (a noise burst)"})
     gyro_enabled: bool = True
     gyro_heading_tau_s: float = field(default=10.0, metadata={"gt": 0.0})
     gyro_test_tau_s: float = field(default=30.0, metadata={"gt": 0.0})
@@ -82,6 +89,16 @@ class FtConfig:
     gyro_comp_samples: int = field(default=50, metadata={
         "ge": 0, "doc": "after a step: learn its offset over this many samples (0: off)"})
     gyro_comp_max_slope_dps: float = field(default=0.25, metadata={"gt": 0.0})
+    gyro_fast_margin_s: float = field(default=2.0, metadata={
+        "ge": 0.0, "doc": "a step's (or stuck run's) compass trusted up to this before it"})
+    gyro_drift_window_s: float = field(default=90.0, metadata={
+        "gt": 1.0, "doc": "the hinge test's window (compass minus integrated gyro)"})
+    gyro_drift_glr: float = field(default=30.0, metadata={
+        "ge": 0.0, "doc": "the hinge test's confirmation level (likelihood ratio; 0: off)"})
+    gyro_drift_sigma_min_deg: float = field(default=0.75, metadata={
+        "gt": 0.0, "doc": "the hinge test's noise floor (the integrated gyro noise's walk)"})
+    gyro_drift_max_turn_deg: float = field(default=10.0, metadata={
+        "gt": 0.0, "doc": "the hinge test only while the heading spans at most this (window)"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
     gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})
@@ -143,6 +160,8 @@ class FaultTolerantHeading:
         self._vote = [0.0, 0.0, 0.0]
         self._nu_o: deque[float] = deque(maxlen=5)  # compass minus gyro heading, newest
         self._turn_left_s = 0.0  # time left of the window after a setpoint change
+        self._level_run = 0  # suspect samples in a row the reading is level_sigmas off
+        self._level_pos = False  # ... on the positive side
 
     def setpoint_changed(self) -> None:
         """The heading setpoint was changed (a commanded turn): on the FIR path, theta is
@@ -237,11 +256,15 @@ class FaultTolerantHeading:
                 self.state = "suspect"
                 self._psi = pred
                 event = "suspect"
+                self._level_run = 0
+                self._level_held()
             else:
                 self._hf = pred + self.cfg.smooth_gain * (self._y - pred)
         elif self.state == "suspect":
             self._psi += r.d_deg if det.stored is None else self._stored_pred_deg()
-            if r.confirmed:
+            if r.confirmed or self._level_held():
+                if not r.confirmed:
+                    det.close_suspect()
                 self._confirm("sensor")
                 event = "confirmed"
             elif r.dismissed:
@@ -421,6 +444,27 @@ class FaultTolerantHeading:
         )
 
     # ------------------------------------------------------------------ FIR only
+
+    def _level_held(self) -> bool:
+        """No gyro, criterion 2's other way (``level_sigmas``): the reading has stayed
+        ``level_sigmas`` sigma_e off the substitution heading (the FIR's dead reckoning from
+        the smoothed heading at the suspect), on one side, for the detector's ``persist``
+        samples, with no noise burst and no commanded turn in progress. A step leaves a
+        level; a spike of fewer samples comes back. R(k) of a 20 deg step at 2 deg compass
+        noise once stayed above n0 for 3 samples, not 4 (nonlinear plant, seed 8, after 1 h
+        with turns): missed."""
+        cfg, det = self.cfg, self.det
+        if cfg.level_sigmas <= 0.0:
+            return False
+        resid = self._y - self._psi
+        if abs(resid) >= max(cfg.level_sigmas * det.var.sigma, cfg.level_min_deg):
+            same = self._level_run == 0 or (resid > 0.0) == self._level_pos
+            self._level_run = self._level_run + 1 if same else 1
+            self._level_pos = resid > 0.0
+        else:
+            self._level_run = 0
+        return (self._level_run >= det.cfg.persist and det.theta_scale <= 1.0
+                and not det.burst(cfg.level_burst_ratio))
 
     def _stored_pred_deg(self) -> float:
         assert self.det.stored is not None

@@ -359,6 +359,15 @@ class DualCriterionDetector:
         self._suspect_age = -1
         self._over = 0
 
+    def close_suspect(self) -> None:
+        """Close an open suspect as confirmed by the caller's own test (no restore)."""
+        self._suspect_age = -1
+        self._over = 0
+
+    def burst(self, ratio: float) -> bool:
+        """The short scale of e (its largest 2 of 6 trimmed) above ``ratio`` sigma_e."""
+        return self.short.full and self.short.sigma > ratio * self.var.sigma
+
     def force_store(self, C: list[float]) -> None:
         """Set the stored weights from outside (the stuck-reading detector's snapshot)."""
         self.stored = list(C)
