@@ -92,9 +92,9 @@ class HoldStep:
 class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
-    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_recent", "_was_raw", "anchor_b",
-                 "anchor_t",
-                 "anchor_v", "matched_t", "old", "p", "prefer_raw", "slow", "stale_m", "t0")
+    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_recent", "anchor_b", "anchor_t",
+                 "anchor_v", "matched_t", "old", "p", "prefer_raw", "slow", "stale_m", "t0",
+                 "was_raw")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
                  anchor_b: tuple[float, float], anchor_v: tuple[float, float],
@@ -112,7 +112,7 @@ class LevelHold:
         self.matched_t = math.nan  # the level the new fixes were found at ("new_level")
         self.slow = slow
         self._agree_since: float | None = None
-        self._was_raw = False  # the last epoch passed the receiver's fix on
+        self.was_raw = False  # the last epoch passed the receiver's fix on
         self._agree_b = (0.0, 0.0)
         self._dev: deque[tuple[float, float]] = deque()  # (t, |b − b_a|) over 2L
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
@@ -212,10 +212,10 @@ class LevelHold:
             return HoldStep("give_up", track, g)
         if not stale and (g <= p.exit_sigmas or not math.isnan(at_old)
                           or (self.stale_m > 0.0 and fresh)
-                          or ((self.prefer_raw or self._was_raw) and self_ok)):
-            self._was_raw = True
+                          or ((self.prefer_raw or self.was_raw) and self_ok)):
+            self.was_raw = True
             return HoldStep("raw", track, g)
-        self._was_raw = False
+        self.was_raw = False
         if t - self.t0 <= p.output_s:
             return HoldStep("track", track, g)
         return HoldStep("alarm", track, g)

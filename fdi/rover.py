@@ -707,6 +707,12 @@ class RoverIsolator:
                 drift.reset_short()
             return self._resume(fix, z, r, d, v, b, t, "hold_" + hs.action)
         if hs.action == "give_up":
+            if not hold.slow and hold.was_raw:
+                # An abrupt step neither side was shown wrong about, whose fixes the hold has
+                # been passing on (consistent with their own Doppler): the receiver's level
+                # is kept without an alarm (that would only withhold right fixes).
+                drift.reset_short()
+                return self._resume(fix, z, r, d, v, b, t, "hold_kept")
             return self._raise_alarm(z, r, reason + "+hold_timeout", t, keep_levels=True)
         out = (hs.track[0], hs.track[1], self._hold_up)
         t.pred = out
