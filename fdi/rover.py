@@ -233,10 +233,11 @@ class RoverIsolator:
         # step's time, the fix's Doppler-free value and time when it began).
         self._steps: list[list[float]] = []
         self._rev: tuple[float, tuple[float, float], float, int] | None = None
-        self._prev_b: tuple[float, float, float] | None = None  # the last epoch's (t, b)
+        self._prev_b: tuple[float, float] | None = None  # the last epoch's b ...
+        self._prev_bt = 0.0  # ... and its time
         # The coordinates' quantum per axis: the smallest non-zero change between consecutive
         # fixes (fdi/drift.py, D6); inf until seen.
-        self._last_en: tuple[float, float] | None = None
+        self._last_e = self._last_n = math.nan
         self._quant = [math.inf, math.inf]
 
     @staticmethod
@@ -360,7 +361,11 @@ class RoverIsolator:
         self._last_t = fix.t_s
         stale = self._stale_check(fix)
         if self._drift is not None:
-            self._learn_quantum(z)
+            de, dn = abs(z[0] - self._last_e), abs(z[1] - self._last_n)
+            self._last_e, self._last_n = z[0], z[1]
+            quant = self._quant
+            if 1e-4 < de < quant[0] or 1e-4 < dn < quant[1]:  # rare: NaN compares false
+                self._learn_quantum(de, dn)
 
         quality = []
         if p.min_sats and fix.num_sats is not None and fix.num_sats < p.min_sats:
@@ -430,7 +435,8 @@ class RoverIsolator:
         if drift is not None and have_doppler and v is not None:
             lag = p.drift_lag_s
             b = (z[0] - d[0] - lag * v[0], z[1] - d[1] - lag * v[1])
-        prev_b, self._prev_b = self._prev_b, None if b is None else (fix.t_s, b[0], b[1])
+        prev_b, prev_bt = self._prev_b, self._prev_bt
+        self._prev_b, self._prev_bt = b, fix.t_s
         if self._hold is not None:
             if b is None or v is None:  # the Doppler chain broke: no old track to hold
                 return self._raise_alarm(z, r, self._hold_reason + "+no_doppler", t)
@@ -516,7 +522,7 @@ class RoverIsolator:
         # epoch and a step that stays goes to the hold, whose "new_level" ends it.
         # A drift fault that is a step from the newest reference (not a ramp) counts too.
         back = ((abrupt or (drift_fault and b is not None
-                            and self._is_step(fix.t_s, b, prev_b)))
+                            and self._is_step(fix.t_s, b, prev_b, prev_bt)))
                 and b is not None and drift is not None and not quality
                 and not stale_fault
                 and ((self._stepped_back and raw_consistent)
@@ -796,17 +802,13 @@ class RoverIsolator:
         self._rev = (rev, b, t_s, 1)  # not where the step back began: start again
         return False
 
-    def _learn_quantum(self, z: tuple[float, float, float]) -> None:
-        """The smallest non-zero change of each coordinate between consecutive fixes (above
-        0.1 mm: the local frame's curvature; below 1 m): the receiver's rounding, given to the
-        drift test once both axes have one (D6)."""
-        last, self._last_en = self._last_en, (z[0], z[1])
-        if last is None:
-            return
+    def _learn_quantum(self, de: float, dn: float) -> None:
+        """A smaller non-zero change of a coordinate between consecutive fixes (``de``, ``dn``;
+        above 0.1 mm: the local frame's curvature; below 1 m): the receiver's rounding is the
+        smallest, given to the drift test once both axes have one (D6)."""
         q = self._quant
         changed = False
-        for i in (0, 1):
-            dz = abs(z[i] - last[i])
+        for i, dz in ((0, de), (1, dn)):
             if 1e-4 < dz < q[i] and dz < 1.0:
                 q[i] = dz
                 changed = True
@@ -816,16 +818,16 @@ class RoverIsolator:
             drift.set_quantum(max(q[0], q[1]))
 
     def _is_step(self, t_s: float, b: tuple[float, float],
-                 prev: tuple[float, float, float] | None) -> bool:
-        """Did the fix's Doppler-free value step from the previous epoch's (``prev``: t, e, n)
-        by more than ``hold_exit_sigmas`` of the drift σ over the interval? (A ramp moves a
-        little every epoch.)"""
+                 prev: tuple[float, float] | None, prev_t: float) -> bool:
+        """Did the fix's Doppler-free value step from the previous epoch's (``prev`` at
+        ``prev_t``) by more than ``hold_exit_sigmas`` of the drift σ over the interval? (A ramp
+        moves a little every epoch.)"""
         drift = self._drift
         assert drift is not None
         if prev is None:
             return False
-        return math.hypot(b[0] - prev[1], b[1] - prev[2]) > self.p.hold_exit_sigmas * sigma_at(
-            t_s - prev[0], drift.horizons, drift.sigmas)
+        return math.hypot(b[0] - prev[0], b[1] - prev[1]) > self.p.hold_exit_sigmas * sigma_at(
+            t_s - prev_t, drift.horizons, drift.sigmas)
 
     def _step_back_to(self, t_s: float, b: tuple[float, float]) -> float | None:
         """Is the fix back at the level before a remembered step that the track accepted?
