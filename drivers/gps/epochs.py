@@ -29,6 +29,7 @@ from typing import NamedTuple
 from drivers.gps.nmea import Gga, Gll, Gsa, Gst, Hdt, NmeaMessage, Rmc, Ths, Vtg, Zda
 
 TIME_EPS_S = 1e-3
+_new = tuple.__new__
 
 
 class GpsEpoch(NamedTuple):
@@ -127,8 +128,9 @@ class _Pending:
         if gsa is not None and gsa.hdop is not None and hdop is None:
             hdop = gsa.hdop
         gst = self.gst
-        # Positional, in GpsEpoch's field order (this runs once an epoch).
-        return GpsEpoch(
+        # The tuple of the fields, in GpsEpoch's order (this runs once an epoch: the
+        # NamedTuple's own __new__ would bind 20 arguments in Python first).
+        return _new(GpsEpoch, (
             self.utc_s,
             date,
             valid,
@@ -149,7 +151,7 @@ class _Pending:
             talker,
             tuple(self.types),  # sentences
             None if self.heading_refused else self.heading_deg,  # heading_deg
-        )
+        ))
 
 
 _TIMED = (Gga, Rmc, Gll, Gst, Zda)

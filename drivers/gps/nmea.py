@@ -288,23 +288,25 @@ def checksum(body: bytes | str) -> int:
     return value
 
 
-_M8, _M16, _M32, _M64 = 0xFF, 0xFFFF, (1 << 32) - 1, (1 << 64) - 1
-_M128, _M256, _M512 = (1 << 128) - 1, (1 << 256) - 1, (1 << 512) - 1
-
-
 def _xor128(data: bytes) -> int:
-    """The XOR of up to 128 bytes: the bytes read as one integer, folded in halves (byte
-    ``i`` of the high half onto byte ``i`` of the low half) down to one byte. The same value
-    as a loop over the bytes, in seven integer operations instead of one step a byte (a
-    replay checks three sentences an epoch; tested against the loop on every length)."""
+    """The XOR of up to 128 bytes: the bytes read as one integer and folded onto themselves
+    (``x ^= x >> 8k``: byte ``i`` now also holds byte ``i + k``), halving the span each time
+    down to the lowest byte. The same value as a loop over the bytes in a few integer
+    operations (a replay checks three sentences an epoch; tested against the loop on every
+    length)."""
     x = int.from_bytes(data, "little")
-    x = (x >> 512) ^ (x & _M512)
-    x = (x >> 256) ^ (x & _M256)
-    x = (x >> 128) ^ (x & _M128)
-    x = (x >> 64) ^ (x & _M64)
-    x = (x >> 32) ^ (x & _M32)
-    x = (x >> 16) ^ (x & _M16)
-    return (x >> 8) ^ (x & _M8)
+    n = len(data)
+    if n > 64:
+        x ^= x >> 512
+    if n > 32:
+        x ^= x >> 256
+    if n > 16:
+        x ^= x >> 128
+    x ^= x >> 64
+    x ^= x >> 32
+    x ^= x >> 16
+    x ^= x >> 8
+    return x & 0xFF
 
 
 def _float(text: str, name: str) -> float | None:
@@ -497,6 +499,9 @@ def _split_pynmea2(line: bytes, text: str, star: int) -> list[str]:
 
 
 _INF = math.inf
+# A message built from the tuple of its fields, in field order: what the NamedTuple's own
+# ``__new__`` does after binding its arguments in Python (the fast paths build three a fix).
+_new = tuple.__new__
 
 
 def _gga(talker: str, d: list[str], n: int) -> Gga:
@@ -517,9 +522,9 @@ def _gga(talker: str, d: list[str], n: int) -> Gga:
                     and (alt is None or -_INF < alt < _INF)
                     and (sep is None or -_INF < sep < _INF)
                     and (dage is None or 0.0 <= dage < _INF)):
-                return Gga(talker, _time(d[0]), _latlon(d[1], d[2], True),
-                           _latlon(d[3], d[4], False), quality, sats, hdop, alt, sep, dage,
-                           d[13] or None)
+                return _new(Gga, (talker, _time(d[0]), _latlon(d[1], d[2], True),
+                                  _latlon(d[3], d[4], False), quality, sats, hdop, alt, sep,
+                                  dage, d[13] or None))
         except (ValueError, DecodeError):
             pass
     return _gga_checked(talker, d, n)
@@ -562,7 +567,7 @@ def _rmc(talker: str, d: list[str], n: int) -> Rmc:
             course = float(co) if co else None
             if ((speed_kn is None or 0.0 <= speed_kn < _INF)
                     and (course is None or 0.0 <= course <= 360.0)):
-                return Rmc(
+                return _new(Rmc, (
                     talker,
                     _time(d[0]),
                     mode != "N",  # valid
@@ -572,7 +577,7 @@ def _rmc(talker: str, d: list[str], n: int) -> Rmc:
                     course,
                     _date(d[8]) if mode != "N" else _safe_date(d[8]),
                     mode,
-                )
+                ))
         except (ValueError, DecodeError):
             pass
     return _rmc_checked(talker, d, n)
@@ -628,7 +633,7 @@ def _vtg(talker: str, d: list[str], n: int) -> Vtg:
             speed_kn = float(kn) if kn else None  # read and checked, not used
             if ((course is None or 0.0 <= course <= 360.0) and 0.0 <= speed_kmh < _INF
                     and (speed_kn is None or 0.0 <= speed_kn < _INF)):
-                return Vtg(talker, course, speed_kmh * KMH_MPS, mode)
+                return _new(Vtg, (talker, course, speed_kmh * KMH_MPS, mode))
     except ValueError:
         pass
     return _vtg_checked(talker, d, n)

@@ -60,6 +60,9 @@ class EpochOutcome(NamedTuple):
     heading_deg: float | None = None
 
 
+_new = tuple.__new__
+
+
 def _r(x: float | None, nd: int = 4) -> float | None:
     return None if x is None else round(x, nd)
 
@@ -179,7 +182,8 @@ class RoverPipeline:
                 alt = gh - (epoch.geoid_sep_m or 0.0) if alt_msl is not None else None
         jsonl = self.jsonl
         record = self._record(epoch, d, enu, lat, lon, alt) if jsonl is not None else {}
-        outcome = EpochOutcome(epoch, d, lat, lon, alt, t_s, record, epoch.heading_deg)
+        # The tuple of EpochOutcome's fields, in order (its __new__ without the Python call).
+        outcome = _new(EpochOutcome, (epoch, d, lat, lon, alt, t_s, record, epoch.heading_deg))
         self.last_outcome = outcome
         # Counters.
         self.epochs += 1
@@ -258,6 +262,7 @@ class RoverPipeline:
             self._gates_out = (_r(gates[0]), _r(gates[1]), _r(gates[2]), _r(gates[3]))
         gh, gu, dg, ct = self._gates_out
         speed, drift, zones = e.speed_mps, d.drift, d.zones
+        rh, ru, dr, chi2 = d.grey_res_h, d.grey_res_u, d.doppler_res, d.chi2
         return {
             "utc": e.utc_s,
             "date": self._date_text,
@@ -283,14 +288,14 @@ class RoverPipeline:
             "pred_e": pe,
             "pred_n": pn,
             "pred_u": pu,
-            "grey_res_h": _r(d.grey_res_h),
-            "grey_res_u": _r(d.grey_res_u),
+            "grey_res_h": None if rh is None else round(rh, 4),
+            "grey_res_u": None if ru is None else round(ru, 4),
             "grey_gate_h": gh,
             "grey_gate_u": gu,
-            "doppler_res": _r(d.doppler_res),
+            "doppler_res": None if dr is None else round(dr, 4),
             "doppler_gate": dg,
             "drift": None if drift is None else round(drift, 2),
-            "chi2": _r(d.chi2),
+            "chi2": None if chi2 is None else round(chi2, 4),
             "chi2_threshold": ct,
             "consecutive": d.consecutive,
             "zones": None if zones is None else list(zones),
