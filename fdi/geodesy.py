@@ -59,7 +59,13 @@ class LocalFrame:
         object.__setattr__(self, "_ecef0", lla_to_ecef(self.lat0_deg, self.lon0_deg, self.h0_m))
 
     def to_enu(self, lat_deg: float, lon_deg: float, h_m: float) -> tuple[float, float, float]:
-        x, y, z = lla_to_ecef(lat_deg, lon_deg, h_m)
+        # lla_to_ecef, written out (once an epoch): the same operations
+        lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+        s, c = math.sin(lat), math.cos(lat)
+        nh = WGS84_A / math.sqrt(1.0 - WGS84_E2 * s * s)
+        x = (nh + h_m) * c * math.cos(lon)
+        y = (nh + h_m) * c * math.sin(lon)
+        z = (nh * (1 - WGS84_E2) + h_m) * s
         x0, y0, z0 = self._ecef0  # type: ignore[attr-defined]
         dx, dy, dz = x - x0, y - y0, z - z0
         sl, cl, so, co = self._sl, self._cl, self._so, self._co  # type: ignore[attr-defined]

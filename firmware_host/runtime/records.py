@@ -9,6 +9,7 @@ never asks whether there is an output.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -76,6 +77,30 @@ def encode_line(record: dict[str, Any]) -> str:
             if _flat_same_in_orjson(record):
                 return _orjson.dumps(record, option=_orjson.OPT_APPEND_NEWLINE).decode()
         except TypeError:  # a non-string key, an integer beyond 64 bits
+            pass
+    return encode_line_stdlib(record)
+
+
+def numbers_spelled_alike(values: Iterable[float | int | None]) -> bool:
+    """Does orjson write each of these numbers (or None) as :func:`json.dumps` does? The
+    number part of :func:`_same_in_orjson` for a caller that knows its values are numbers:
+    0, or finite with ``1e-4 <= |x| < 1e16`` (an integer that large falls back too)."""
+    for v in values:
+        if v is not None and not (1e-4 <= v < 1e16 or -1e16 < v <= -1e-4 or v == 0.0):
+            return False
+    return True
+
+
+def encode_plain_line(record: dict[str, Any]) -> str:
+    """:func:`encode_line` for a record whose maker has checked what :func:`_same_in_orjson`
+    checks (the rover's records, :meth:`RoverPipeline._record
+    <firmware_host.rover.pipeline.RoverPipeline._record>`): flat, its keys and strings
+    printable ASCII, its numbers passed by :func:`numbers_spelled_alike`, the rest None,
+    booleans and integers. orjson when installed, else the standard library: the same bytes."""
+    if _orjson is not None:
+        try:
+            return _orjson.dumps(record, option=_orjson.OPT_APPEND_NEWLINE).decode()
+        except TypeError:  # an integer beyond 64 bits
             pass
     return encode_line_stdlib(record)
 
