@@ -9,6 +9,8 @@ from __future__ import annotations
 import io
 import json
 import math
+import random
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -179,3 +181,41 @@ def test_a_fix_near_longitude_zero_is_not_plain(tmp_path: Path) -> None:
     assert got and text == "".join(encode_line_stdlib(r) for r, _ in got)
     assert all(r["raw_lon"] == 0.0003 / 60.0 and not plain for r, plain in got)
     assert '"raw_lon":4.9999999999999996e-06,' in text  # json's spelling
+
+
+def _bits(x: Any) -> Any:
+    return (type(x), struct.pack("<d", x)) if isinstance(x, float) else (type(x), x)
+
+
+def test_round4_and_round2_are_round_bit_for_bit() -> None:
+    """The records' rounding (records.round4/round2) gives round()'s float, sign of zero
+    and NaN included: on ties and near-ties at every scale, random doubles of every
+    exponent, small values of both signs, and integers."""
+    rng = random.Random(19)
+    cases: list[Any] = [0.0, -0.0, math.nan, math.inf, -math.inf, 5e-324, -5e-324, 1e300, 5, -3,
+                        0, True, 214748.3647, 214748.36475, -214748.36475, 21474836.47,
+                        21474836.475, 0.00005, -0.00005, 0.005, -0.005, 1.00005, 18.81245]
+    for _ in range(400_000):
+        k = rng.random()
+        if k < 0.25:
+            x = rng.uniform(-200.0, 200.0)
+        elif k < 0.45:  # ties and near-ties of 4 and 2 decimals
+            x = (rng.randrange(-10**9, 10**9) + rng.choice([0.5, -0.5, 0.4999, 0.50001])
+                 ) / rng.choice([10000.0, 100.0])
+        elif k < 0.65:
+            x = struct.unpack("<d", rng.randbytes(8))[0]
+        elif k < 0.8:
+            x = rng.uniform(-1e-3, 1e-3)
+        else:
+            x = rng.uniform(-3e7, 3e7)
+        cases.append(x)
+    for x in cases:
+        assert _bits(records.round4(x)) == _bits(round(x, 4)), repr(x)
+        assert _bits(records.round2(x)) == _bits(round(x, 2)), repr(x)
+
+
+@settings(max_examples=5000, deadline=None)
+@given(st.floats(allow_nan=True, allow_infinity=True) | st.floats(-1e5, 1e5))
+def test_round4_and_round2_on_any_float(x: float) -> None:
+    assert _bits(records.round4(x)) == _bits(round(x, 4))
+    assert _bits(records.round2(x)) == _bits(round(x, 2))

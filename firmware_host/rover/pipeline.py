@@ -31,7 +31,13 @@ from fdi.geodesy import LocalFrame
 from fdi.rover import Decision, FixInput, RoverIsolator
 from firmware_host.runtime.config import RoverConfig
 from firmware_host.runtime.loop import EpochTimer, percentile
-from firmware_host.runtime.records import encode_line, encode_plain_line, numbers_spelled_alike
+from firmware_host.runtime.records import (
+    encode_line,
+    encode_plain_line,
+    numbers_spelled_alike,
+    round2,
+    round4,
+)
 
 log = logging.getLogger("fdi_bridge.rover")
 
@@ -251,12 +257,12 @@ class RoverPipeline:
         e_ = n_ = u_ = pe = pn = pu = ke = kn = ku = None
         if enu:
             e_, n_, u = enu
-            e_, n_ = round(e_, 4), round(n_, 4)
-            u_ = None if math.isnan(u) else round(u, 4)
+            e_, n_ = round4(e_), round4(n_)
+            u_ = None if math.isnan(u) else round4(u)
         if pred:
-            pe, pn, pu = round(pred[0], 4), round(pred[1], 4), round(pred[2], 4)
+            pe, pn, pu = round4(pred[0]), round4(pred[1]), round4(pred[2])
         if kf:
-            ke, kn, ku = round(kf[0], 4), round(kf[1], 4), round(kf[2], 4)
+            ke, kn, ku = round4(kf[0]), round4(kf[1]), round4(kf[2])
         date = e.date
         if date != self._date_key:  # the same date (and gates) epoch after epoch: kept
             self._date_key = date
@@ -268,12 +274,12 @@ class RoverPipeline:
         gh, gu, dg, ct = self._gates_out
         speed, drift, zones = e.speed_mps, d.drift, d.zones
         rh, ru, dr, chi2 = d.grey_res_h, d.grey_res_u, d.doppler_res, d.chi2
-        speed = None if speed is None else round(speed, 4)
-        rh = None if rh is None else round(rh, 4)
-        ru = None if ru is None else round(ru, 4)
-        dr = None if dr is None else round(dr, 4)
-        drift = None if drift is None else round(drift, 2)
-        chi2 = None if chi2 is None else round(chi2, 4)
+        speed = None if speed is None else round4(speed)
+        rh = None if rh is None else round4(rh)
+        ru = None if ru is None else round4(ru)
+        dr = None if dr is None else round4(dr)
+        drift = None if drift is None else round2(drift)
+        chi2 = None if chi2 is None else round4(chi2)
         utc, raw_lat, raw_lon, raw_alt, hdop, course = (
             e.utc_s, e.lat_deg, e.lon_deg, e.alt_msl_m, e.hdop, e.course_deg)
         action, reason = d.action, d.reason

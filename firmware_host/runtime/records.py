@@ -9,6 +9,7 @@ never asks whether there is an output.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
@@ -18,6 +19,7 @@ try:  # the ``fast`` extra: a compiled encoder (no wheel on every platform, so o
 except ImportError:  # pragma: no cover - exercised by the tests with the encoder disabled
     _orjson = None  # type: ignore[assignment]
 
+_floor = math.floor
 EPOCHS = "epochs.jsonl"
 SUMMARY = "summary.json"
 
@@ -79,6 +81,34 @@ def encode_line(record: dict[str, Any]) -> str:
         except TypeError:  # a non-string key, an integer beyond 64 bits
             pass
     return encode_line_stdlib(record)
+
+
+def round4(x: float) -> float:
+    """``round(x, 4)``, the same float (sign of zero included), in half its time.
+
+    For ``|y| < 2**31`` with ``y = x * 1e4`` (the product carries an error of at most
+    ``2**-22``), ``floor(y + 0.5)`` is the integer nearest to the exact ``x * 10**4`` unless
+    ``y`` lies within ``2**-22`` of a half-integer, which the ``0.4999`` guard sends to
+    :func:`round`; that integer over ``1e4`` is correctly rounded by the division, as
+    :func:`round`'s decimal string is by its conversion back. Zero (its sign), NaN, infinities,
+    large values and anything but a float (an int stays an int) go to :func:`round`. Tested against :func:`round` on millions of values
+    (tests/test_json_encoding.py). The rover's records round about fifteen values an epoch."""
+    y = x * 10000.0
+    if -2147483648.0 < y < 2147483648.0 and type(x) is float:  # (round keeps an int an int)
+        r = _floor(y + 0.5)
+        if r and -0.4999 < y - r < 0.4999:
+            return r / 10000.0
+    return round(x, 4)
+
+
+def round2(x: float) -> float:
+    """``round(x, 2)``, the same float: :func:`round4` with 100 for 10 000."""
+    y = x * 100.0
+    if -2147483648.0 < y < 2147483648.0 and type(x) is float:
+        r = _floor(y + 0.5)
+        if r and -0.4999 < y - r < 0.4999:
+            return r / 100.0
+    return round(x, 2)
 
 
 def numbers_spelled_alike(values: Iterable[float | int | None]) -> bool:
