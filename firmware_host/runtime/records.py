@@ -90,8 +90,9 @@ def round4(x: float) -> float:
     ``2**-22``), ``floor(y + 0.5)`` is the integer nearest to the exact ``x * 10**4`` unless
     ``y`` lies within ``2**-22`` of a half-integer, which the ``0.4999`` guard sends to
     :func:`round`; that integer over ``1e4`` is correctly rounded by the division, as
-    :func:`round`'s decimal string is by its conversion back. Zero (its sign), NaN, infinities,
-    large values and anything but a float (an int stays an int) go to :func:`round`. Tested against :func:`round` on millions of values
+    :func:`round`'s decimal string is by its conversion back. Zero (its sign), NaN,
+    infinities, large values and anything but a float (an int stays an int) go to
+    :func:`round`. Tested against :func:`round` on millions of values
     (tests/test_json_encoding.py). The rover's records round about fifteen values an epoch."""
     y = x * 10000.0
     if -2147483648.0 < y < 2147483648.0 and type(x) is float:  # (round keeps an int an int)
