@@ -372,8 +372,7 @@ def _date(ddmmyy: str) -> tuple[int, int, int] | None:
     return (1900 + y if y >= 80 else 2000 + y, m, d)
 
 
-@lru_cache(maxsize=32)
-def _latlon(value: str, hemi: str, is_lat: bool) -> float | None:
+def _latlon_of(value: str, hemi: str, is_lat: bool) -> float | None:
     """ddmm.mmmm / dddmm.mmmm with hemisphere -> signed degrees, strictly range-checked."""
     if value == "" and hemi == "":
         return None
@@ -399,6 +398,16 @@ def _latlon(value: str, hemi: str, is_lat: bool) -> float | None:
     if hemi not in valid_hemi:
         raise DecodeError("bad_field", f"{name} hemisphere={hemi!r}")
     return -result if hemi in ("S", "W") else result
+
+
+_latlon = lru_cache(maxsize=32)(_latlon_of)
+
+
+@lru_cache(maxsize=32)
+def _position(lat: str, ns: str, lon: str, ew: str) -> tuple[float | None, float | None]:
+    """``(_latlon(lat, ns, True), _latlon(lon, ew, False))`` with one cache look-up (the fast
+    paths: GGA and RMC of an epoch carry the same four fields); DecodeError as _latlon."""
+    return _latlon_of(lat, ns, True), _latlon_of(lon, ew, False)
 
 
 _HEX = frozenset("0123456789ABCDEFabcdef")  # pynmea2's checksum pattern, [A-F0-9] ignoring case
@@ -522,8 +531,8 @@ def _gga(talker: str, d: list[str], n: int) -> Gga:
                     and (alt is None or -_INF < alt < _INF)
                     and (sep is None or -_INF < sep < _INF)
                     and (dage is None or 0.0 <= dage < _INF)):
-                return _new(Gga, (talker, _time(d[0]), _latlon(d[1], d[2], True),
-                                  _latlon(d[3], d[4], False), quality, sats, hdop, alt, sep,
+                lat, lon = _position(d[1], d[2], d[3], d[4])
+                return _new(Gga, (talker, _time(d[0]), lat, lon, quality, sats, hdop, alt, sep,
                                   dage, d[13] or None))
         except (ValueError, DecodeError):
             pass
@@ -567,12 +576,13 @@ def _rmc(talker: str, d: list[str], n: int) -> Rmc:
             course = float(co) if co else None
             if ((speed_kn is None or 0.0 <= speed_kn < _INF)
                     and (course is None or 0.0 <= course <= 360.0)):
+                lat, lon = _position(d[2], d[3], d[4], d[5])
                 return _new(Rmc, (
                     talker,
                     _time(d[0]),
                     mode != "N",  # valid
-                    _latlon(d[2], d[3], True),
-                    _latlon(d[4], d[5], False),
+                    lat,
+                    lon,
                     None if speed_kn is None else speed_kn * KNOT_MPS,
                     course,
                     _date(d[8]) if mode != "N" else _safe_date(d[8]),
