@@ -125,3 +125,34 @@ def test_decoders_read_no_field_beyond_need() -> None:
         d = (body.split(",")[1:] + nmea._PAD)[:need]
         decoder = nmea._DECODERS[kind]
         assert decoder("GP", list(d), len(d)) == decoder("GP", d + nmea._PAD, len(d)), kind
+
+
+def _pos_outcome(fn: Callable[..., Any], *args: str) -> Any:
+    try:
+        return fn(*args)
+    except DecodeError as err:
+        return ("DecodeError", err.reason, err.detail)
+
+
+def _slow_position(lat: str, ns: str, lon: str, ew: str) -> Any:
+    return nmea._latlon_of(lat, ns, True), nmea._latlon_of(lon, ew, False)
+
+
+POSITION_TEXTS = ["3201.23598917", "9000.0000", "9000.0001", "8959.9999999", "0000.0000",
+                  "9100.0000", "3260.0000", "3259.99999999", "32a1.2359", "3201", "320.123",
+                  "3201.2e-1", "3201.2_3", "3201.nan", "3201.", "-201.2359", "+201.2359",
+                  "11851.47998684", "18000.0000", "18000.0001", "17959.999999", "00000.0003",
+                  "19000.0000", "11860.0000", "1185.147998", "11851", "1185a.4799", "", " 3201.5"]
+
+
+def test_position_fast_path_is_the_checked_conversion() -> None:
+    """:func:`nmea._position` (GGA and RMC's fast paths) gives what two _latlon give, value
+    or rejection, on every pair of the texts above and every hemisphere letter."""
+    hemis = ["N", "S", "E", "W", "", "n", "X"]
+    for lat in POSITION_TEXTS:
+        for lon in POSITION_TEXTS:
+            for ns in hemis:
+                for ew in ("E", "W", "N", ""):
+                    args = (lat, ns, lon, ew)
+                    fast = _pos_outcome(nmea._position.__wrapped__, *args)
+                    assert fast == _pos_outcome(_slow_position, *args), args

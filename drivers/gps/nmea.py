@@ -406,8 +406,25 @@ _latlon = lru_cache(maxsize=32)(_latlon_of)
 @lru_cache(maxsize=32)
 def _position(lat: str, ns: str, lon: str, ew: str) -> tuple[float | None, float | None]:
     """``(_latlon(lat, ns, True), _latlon(lon, ew, False))`` with one cache look-up (the fast
-    paths: GGA and RMC of an epoch carry the same four fields); DecodeError as _latlon."""
+    paths: GGA and RMC of an epoch carry the same four fields); DecodeError as _latlon.
+
+    The usual ``ddmm.mmmm,N,dddmm.mmmm,E`` is converted here with the same operations as
+    :func:`_latlon_of` (tested against it); anything else goes to it."""
+    if (lat[4:5] == "." and lon[5:6] == "." and ns in _NS and ew in _EW
+            and lat[:4].isdigit() and lon[:5].isdigit()):
+        try:
+            lat_min, lon_min = float(lat[2:]), float(lon[3:])
+        except ValueError:
+            lat_min = lon_min = -1.0  # not minutes: the checked conversion says why
+        if 0.0 <= lat_min < 60.0 and 0.0 <= lon_min < 60.0:
+            la = int(lat[:2]) + lat_min / 60.0
+            lo = int(lon[:3]) + lon_min / 60.0
+            if la <= 90 and lo <= 180:
+                return -la if ns == "S" else la, -lo if ew == "W" else lo
     return _latlon_of(lat, ns, True), _latlon_of(lon, ew, False)
+
+
+_NS, _EW = ("N", "S"), ("E", "W")
 
 
 _HEX = frozenset("0123456789ABCDEFabcdef")  # pynmea2's checksum pattern, [A-F0-9] ignoring case
