@@ -84,13 +84,14 @@ def encode_line(record: dict[str, Any]) -> str:
 
 
 def round4(x: float) -> float:
-    """``round(x, 4)``, the same float (sign of zero included), in half its time.
+    """``round(x, 4)``, the same float (sign of zero included), in about half its time.
 
-    For ``|y| < 2**31`` with ``y = x * 1e4`` (the product carries an error of at most
-    ``2**-22``), ``floor(y + 0.5)`` is the integer nearest to the exact ``x * 10**4`` unless
-    ``y`` lies within ``2**-22`` of a half-integer, which the ``0.4999`` guard sends to
-    :func:`round`; that integer over ``1e4`` is correctly rounded by the division, as
-    :func:`round`'s decimal string is by its conversion back. Zero (its sign), NaN,
+    For ``|y| < 2**31`` with ``y = x * 1e4`` the product is within ``2**-22`` of the exact
+    ``x * 10**4``; when the guard accepts ``r = floor(y + 0.5)`` (``|y - r| < 0.4999``, exact
+    subtraction), the exact value is within ``0.4999 + 2**-22 < 1/2`` of ``r``, so ``r`` is the
+    integer :func:`round` rounds it to (near-ties go to :func:`round` itself); ``r / 1e4`` is
+    correctly rounded by the division, as :func:`round`'s decimal string is by its
+    conversion back. Zero (its sign), NaN,
     infinities, large values and anything but a float (an int stays an int) go to
     :func:`round`. Tested against :func:`round` on millions of values
     (tests/test_json_encoding.py). The rover's records round about fifteen values an epoch."""
