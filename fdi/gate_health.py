@@ -132,7 +132,8 @@ class GateHealth:
         if grey_gate is not None and math.isfinite(grey_gate):
             self._grey_gate = grey_gate
         if S is not None:
-            j_min = self._j_min = math.sqrt(t_d * max(S[0], S[1]))
+            s0, s1 = S[0], S[1]
+            j_min = self._j_min = math.sqrt(t_d * (s1 if s1 > s0 else s0))  # max(s0, s1)
             self._inert += j_min > self.min_jump_m
             self._tested += 1
         window = self.window

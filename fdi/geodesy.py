@@ -52,20 +52,30 @@ class LocalFrame:
 
     def __post_init__(self) -> None:
         lat, lon = math.radians(self.lat0_deg), math.radians(self.lon0_deg)
-        object.__setattr__(self, "_sl", math.sin(lat))
-        object.__setattr__(self, "_cl", math.cos(lat))
-        object.__setattr__(self, "_so", math.sin(lon))
-        object.__setattr__(self, "_co", math.cos(lon))
-        object.__setattr__(self, "_ecef0", lla_to_ecef(self.lat0_deg, self.lon0_deg, self.h0_m))
+        sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+        x0, y0, z0 = ecef0 = lla_to_ecef(self.lat0_deg, self.lon0_deg, self.h0_m)
+        for name, value in (("_sl", sl), ("_cl", cl), ("_so", so), ("_co", co),
+                            ("_ecef0", ecef0)):
+            object.__setattr__(self, name, value)
+        # to_enu's constants: the origin and the rotation's products that do not change
+        # (the same products to_enu formed each call, so the same floats)
+        k = (x0, y0, z0, -so, co, -sl * co, sl * so, cl, cl * co, cl * so, sl)
+        object.__setattr__(self, "_enu_k", k)
 
     def to_enu(self, lat_deg: float, lon_deg: float, h_m: float) -> tuple[float, float, float]:
-        x, y, z = lla_to_ecef(lat_deg, lon_deg, h_m)
-        x0, y0, z0 = self._ecef0  # type: ignore[attr-defined]
+        # lla_to_ecef, written out (once an epoch): the same operations
+        lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+        s, c = math.sin(lat), math.cos(lat)
+        nh = WGS84_A / math.sqrt(1.0 - WGS84_E2 * s * s)
+        x = (nh + h_m) * c * math.cos(lon)
+        y = (nh + h_m) * c * math.sin(lon)
+        z = (nh * (1 - WGS84_E2) + h_m) * s
+        k: tuple[float, ...] = self._enu_k  # type: ignore[attr-defined]
+        x0, y0, z0, m_so, co, m_sl_co, sl_so, cl, cl_co, cl_so, sl = k
         dx, dy, dz = x - x0, y - y0, z - z0
-        sl, cl, so, co = self._sl, self._cl, self._so, self._co  # type: ignore[attr-defined]
-        e = -so * dx + co * dy
-        n = -sl * co * dx - sl * so * dy + cl * dz
-        u = cl * co * dx + cl * so * dy + sl * dz
+        e = m_so * dx + co * dy  # -so * dx + co * dy
+        n = m_sl_co * dx - sl_so * dy + cl * dz  # -sl * co * dx - sl * so * dy + cl * dz
+        u = cl_co * dx + cl_so * dy + sl * dz  # cl * co * dx + cl * so * dy + sl * dz
         return e, n, u
 
     def to_lla(self, e: float, n: float, u: float) -> tuple[float, float, float]:

@@ -93,9 +93,10 @@ def gm11_predict_shifted_enu(window: Sequence[tuple[float, float, float]], shift
     if n < 3:
         raise ValueError("GM(1,1) needs at least 3 values")
     first = window[0]
-    off_e = shift - min(w[0] for w in window)
-    off_n = shift - min(w[1] for w in window)
-    off_u = shift - min(w[2] for w in window)
+    es, ns, us = zip(*window, strict=True)
+    off_e = shift - min(es)
+    off_n = shift - min(ns)
+    off_u = shift - min(us)
     x0e, x0n, x0u = first[0] + off_e, first[1] + off_n, first[2] + off_u
     x1e, x1n, x1u = x0e, x0n, x0u
     sze = sye = szze = szye = 0.0

@@ -88,8 +88,13 @@ class GpsKalman:
     def predict(self, dt: float) -> None:
         q = self.q
         q00, q01, q11 = q * dt**3 / 3.0, q * dt * dt / 2.0, q * dt  # Q of (1), the same per axis
-        for ax in self.axes:
-            ax.predict_with(dt, q00, q01, q11)
+        dt2 = dt * dt
+        for ax in self.axes:  # AxisFilter.predict_with, written out (once an epoch)
+            P01, P11 = ax.P01, ax.P11
+            ax.p += ax.v * dt  # (1)
+            ax.P00 = ax.P00 + 2.0 * dt * P01 + dt2 * P11 + q00
+            ax.P01 = P01 + dt * P11 + q01
+            ax.P11 = P11 + q11
 
     def test(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> float:
         """F(k) of eq. (5) for the predicted state; also stores ``D`` and ``S``."""
@@ -106,7 +111,18 @@ class GpsKalman:
 
     def update(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
         for ax, zi, ri in zip(self.axes, z, r, strict=True):
-            ax.update(zi, ri)
+            # AxisFilter.update, written out (once an epoch): the same operations
+            P00, P01 = ax.P00, ax.P01
+            d = zi - ax.p
+            s = P00 + ri
+            k0 = P00 / s
+            k1 = P01 / s
+            ax.p += k0 * d
+            ax.v += k1 * d
+            a = 1.0 - k0
+            ax.P00 = a * a * P00 + k0 * k0 * ri
+            ax.P01 = a * (P01 - k1 * P00) + k0 * k1 * ri
+            ax.P11 = ax.P11 - 2.0 * k1 * P01 + k1 * k1 * P00 + k1 * k1 * ri
 
     @property
     def position(self) -> tuple[float, float, float]:

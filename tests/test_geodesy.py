@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import random
 
 import pytest
 from hypothesis import given, settings
@@ -117,3 +118,24 @@ def test_round_trip_near_the_poles(
     frame = LocalFrame(-lat0 if south else lat0, lon0, 0.0)
     e, n, u = frame.to_enu(*frame.to_lla(east, north, up))
     assert math.dist((e, n, u), (east, north, up)) < 1e-5
+
+
+def test_to_enu_is_the_rotation_of_the_ecef_difference_bit_for_bit() -> None:
+    """to_enu's precomputed rotation gives the floats the plain formula gives (issue 19:
+    the same floats, not just close ones)."""
+    rng = random.Random(19)
+    for _ in range(2000):
+        lat0, lon0, h0 = rng.uniform(-89, 89), rng.uniform(-180, 180), rng.uniform(-100, 3000)
+        f = LocalFrame(lat0, lon0, h0)
+        lat, lon = lat0 + rng.uniform(-0.1, 0.1), lon0 + rng.uniform(-0.1, 0.1)
+        h = h0 + rng.uniform(-50, 50)
+        x, y, z = lla_to_ecef(lat, lon, h)
+        x0, y0, z0 = lla_to_ecef(lat0, lon0, h0)
+        sl, cl = math.sin(math.radians(lat0)), math.cos(math.radians(lat0))
+        so, co = math.sin(math.radians(lon0)), math.cos(math.radians(lon0))
+        dx, dy, dz = x - x0, y - y0, z - z0
+        assert f.to_enu(lat, lon, h) == (
+            -so * dx + co * dy,
+            -sl * co * dx - sl * so * dy + cl * dz,
+            cl * co * dx + cl * so * dy + sl * dz,
+        )

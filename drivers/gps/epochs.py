@@ -23,12 +23,12 @@ heading" for its epoch, whatever an HDT of the same epoch said.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from typing import NamedTuple
 
 from drivers.gps.nmea import Gga, Gll, Gsa, Gst, Hdt, NmeaMessage, Rmc, Ths, Vtg, Zda
 
 TIME_EPS_S = 1e-3
+_new = tuple.__new__
 
 
 class GpsEpoch(NamedTuple):
@@ -59,10 +59,10 @@ class GpsEpoch(NamedTuple):
     heading_deg: float | None = None  # true heading (HDT, or THS in mode A) of this epoch
 
 
-@dataclass(slots=True)
 class _Pending:
-    utc_s: float | None = None
-    types: list[str] = field(default_factory=list)
+    """The epoch being assembled. A plain class whose absent messages are the class's None
+    (one is made an epoch: its __init__ sets the three attributes that differ, not 13)."""
+
     gga: Gga | None = None
     rmc: Rmc | None = None
     gll: Gll | None = None
@@ -72,8 +72,12 @@ class _Pending:
     zda: Zda | None = None
     heading_deg: float | None = None
     heading_refused: bool = False  # a THS of this epoch said its heading is not valid
-    heading_kinds: list[str] = field(default_factory=list)  # HDT/THS, in order
     trailing: str | None = None  # the heading type when it is the last sentence so far
+
+    def __init__(self, utc_s: float | None = None) -> None:
+        self.utc_s = utc_s
+        self.types: list[str] = []
+        self.heading_kinds: list[str] = []  # HDT/THS, in order
 
     def add_heading(self, msg: Hdt | Ths) -> None:
         if isinstance(msg, Ths) and not msg.valid:
@@ -127,8 +131,9 @@ class _Pending:
         if gsa is not None and gsa.hdop is not None and hdop is None:
             hdop = gsa.hdop
         gst = self.gst
-        # Positional, in GpsEpoch's field order (this runs once an epoch).
-        return GpsEpoch(
+        # The tuple of the fields, in GpsEpoch's order (this runs once an epoch: the
+        # NamedTuple's own __new__ would bind 20 arguments in Python first).
+        return _new(GpsEpoch, (
             self.utc_s,
             date,
             valid,
@@ -149,7 +154,7 @@ class _Pending:
             talker,
             tuple(self.types),  # sentences
             None if self.heading_refused else self.heading_deg,  # heading_deg
-        )
+        ))
 
 
 _TIMED = (Gga, Rmc, Gll, Gst, Zda)
@@ -249,7 +254,7 @@ class EpochAssembler:
                     closed = (self._close(),)
                 cur = None
         if cur is None:
-            cur = self._cur = _Pending(utc_s=msg_time)
+            cur = self._cur = _Pending(msg_time)
             if self._early_heading:
                 for heading in self._early_heading:
                     cur.add_heading(heading)

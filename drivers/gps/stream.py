@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from collections.abc import Iterator
+from typing import cast
 
 from drivers.counters import TopCounter
 from drivers.gps.epochs import EpochAssembler, GpsEpoch
@@ -48,22 +49,31 @@ class NmeaStream:
         # the alternation cost about a quarter of its time, in processor caches).
         events: list[GpsEpoch | tuple[str, bytes, str]] = []  # epochs; rejections to log
         push = self.assembler.push
+        parse = parse_sentence
+        rejected = False
+        sentences = self.sentences
         for item in self.framer.feed(data):
             if isinstance(item, Rejected):
                 self.rejected[item.reason] += 1
                 events.append((item.reason, item.data, ""))
+                rejected = True
                 continue
             try:
-                msg = parse_sentence(item)
+                msg = parse(item)
             except DecodeError as err:
                 self.rejected[err.reason] += 1
                 events.append((err.reason, item, err.detail))
+                rejected = True
                 continue
             except Ignored as ign:
                 self.ignored[ign.sentence_type] += 1
                 continue
-            self.sentences += 1
+            sentences += 1
             events += push(msg)
+        self.sentences = sentences
+        if not rejected:  # epochs only (the usual block)
+            yield from cast("list[GpsEpoch]", events)
+            return
         for event in events:
             if isinstance(event, GpsEpoch):
                 yield event

@@ -31,7 +31,13 @@ from fdi.geodesy import LocalFrame
 from fdi.rover import Decision, FixInput, RoverIsolator
 from firmware_host.runtime.config import RoverConfig
 from firmware_host.runtime.loop import EpochTimer, percentile
-from firmware_host.runtime.records import encode_line
+from firmware_host.runtime.records import (
+    encode_line,
+    encode_plain_line,
+    numbers_spelled_alike,
+    round2,
+    round4,
+)
 
 log = logging.getLogger("fdi_bridge.rover")
 
@@ -58,6 +64,9 @@ class EpochOutcome(NamedTuple):
     # The receiver's true heading in this epoch (HDT, THS mode A), carried to the outputs; it
     # takes no part in detection. None when the receiver gave none in this epoch.
     heading_deg: float | None = None
+
+
+_new = tuple.__new__
 
 
 def _r(x: float | None, nd: int = 4) -> float | None:
@@ -178,8 +187,12 @@ class RoverPipeline:
                 lat, lon = glat, glon
                 alt = gh - (epoch.geoid_sep_m or 0.0) if alt_msl is not None else None
         jsonl = self.jsonl
-        record = self._record(epoch, d, enu, lat, lon, alt) if jsonl is not None else {}
-        outcome = EpochOutcome(epoch, d, lat, lon, alt, t_s, record, epoch.heading_deg)
+        record: dict[str, Any] = {}
+        plain = False
+        if jsonl is not None:
+            record, plain = self._record(epoch, d, enu, lat, lon, alt)
+        # The tuple of EpochOutcome's fields, in order (its __new__ without the Python call).
+        outcome = _new(EpochOutcome, (epoch, d, lat, lon, alt, t_s, record, epoch.heading_deg))
         self.last_outcome = outcome
         # Counters.
         self.epochs += 1
@@ -194,7 +207,7 @@ class RoverPipeline:
         if self.epochs % 100 == 0:
             self._check_gate_health()
         if jsonl is not None:
-            jsonl.write(encode_line(record))
+            jsonl.write(encode_plain_line(record) if plain else encode_line(record))
         for sink in self.sinks:
             try:
                 sink.emit(outcome)
@@ -235,19 +248,21 @@ class RoverPipeline:
         lat: float | None,
         lon: float | None,
         alt: float | None,
-    ) -> dict[str, Any]:
-        # Written out rather than through _r: this runs once an epoch (the same values).
+    ) -> tuple[dict[str, Any], bool]:
+        """The epoch's record, and whether it holds only values orjson writes as json.dumps
+        does (then :func:`~firmware_host.runtime.records.encode_plain_line` writes it).
+        Written out rather than through _r: this runs once an epoch (the same values)."""
         pred = d.pred_enu
         kf = d.kf_enu
         e_ = n_ = u_ = pe = pn = pu = ke = kn = ku = None
         if enu:
             e_, n_, u = enu
-            e_, n_ = round(e_, 4), round(n_, 4)
-            u_ = None if math.isnan(u) else round(u, 4)
+            e_, n_ = round4(e_), round4(n_)
+            u_ = None if math.isnan(u) else round4(u)
         if pred:
-            pe, pn, pu = round(pred[0], 4), round(pred[1], 4), round(pred[2], 4)
+            pe, pn, pu = round4(pred[0]), round4(pred[1]), round4(pred[2])
         if kf:
-            ke, kn, ku = round(kf[0], 4), round(kf[1], 4), round(kf[2], 4)
+            ke, kn, ku = round4(kf[0]), round4(kf[1]), round4(kf[2])
         date = e.date
         if date != self._date_key:  # the same date (and gates) epoch after epoch: kept
             self._date_key = date
@@ -258,46 +273,63 @@ class RoverPipeline:
             self._gates_out = (_r(gates[0]), _r(gates[1]), _r(gates[2]), _r(gates[3]))
         gh, gu, dg, ct = self._gates_out
         speed, drift, zones = e.speed_mps, d.drift, d.zones
+        rh, ru, dr, chi2 = d.grey_res_h, d.grey_res_u, d.doppler_res, d.chi2
+        speed = None if speed is None else round4(speed)
+        rh = None if rh is None else round4(rh)
+        ru = None if ru is None else round4(ru)
+        dr = None if dr is None else round4(dr)
+        drift = None if drift is None else round2(drift)
+        chi2 = None if chi2 is None else round4(chi2)
+        utc, raw_lat, raw_lon, raw_alt, hdop, course = (
+            e.utc_s, e.lat_deg, e.lon_deg, e.alt_msl_m, e.hdop, e.course_deg)
+        action, reason = d.action, d.reason
+        # Does orjson write this record as json.dumps does (records.encode_line's test, done
+        # here on what only this record can hold: its numbers and two strings; the keys are
+        # the literals below, the date is digits, the rest booleans and small integers)?
+        plain = (zones is None and numbers_spelled_alike((
+            utc, raw_lat, raw_lon, raw_alt, lat, lon, alt, hdop, speed, course, e_, n_, u_, pe,
+            pn, pu, rh, ru, gh, gu, dr, dg, drift, chi2, ct, ke, kn, ku))
+            and (action + reason).isascii() and (action + reason).isprintable())
         return {
-            "utc": e.utc_s,
+            "utc": utc,
             "date": self._date_text,
-            "raw_lat": e.lat_deg,
-            "raw_lon": e.lon_deg,
-            "raw_alt": e.alt_msl_m,
+            "raw_lat": raw_lat,
+            "raw_lon": raw_lon,
+            "raw_alt": raw_alt,
             "lat": lat,
             "lon": lon,
             "alt": alt,
             "fault": d.fault,
-            "action": d.action,
-            "reason": d.reason,
+            "action": action,
+            "reason": reason,
             "alarm": d.alarm,
             "alarm_raised": d.alarm_raised,
             "quality": e.quality,
             "sats": e.num_sats,
-            "hdop": e.hdop,
-            "speed": None if speed is None else round(speed, 4),
-            "course": e.course_deg,
+            "hdop": hdop,
+            "speed": speed,
+            "course": course,
             "e": e_,
             "n": n_,
             "u": u_,
             "pred_e": pe,
             "pred_n": pn,
             "pred_u": pu,
-            "grey_res_h": _r(d.grey_res_h),
-            "grey_res_u": _r(d.grey_res_u),
+            "grey_res_h": rh,
+            "grey_res_u": ru,
             "grey_gate_h": gh,
             "grey_gate_u": gu,
-            "doppler_res": _r(d.doppler_res),
+            "doppler_res": dr,
             "doppler_gate": dg,
-            "drift": None if drift is None else round(drift, 2),
-            "chi2": _r(d.chi2),
+            "drift": drift,
+            "chi2": chi2,
             "chi2_threshold": ct,
             "consecutive": d.consecutive,
             "zones": None if zones is None else list(zones),
             "kf_e": ke,
             "kf_n": kn,
             "kf_u": ku,
-        }
+        }, plain
 
     # ------------------------------------------------------------------ summary
 

@@ -62,6 +62,9 @@ def percentile(values: Iterable[float], q: float) -> float:
     return y - diff * (1.0 - t) if t >= 0.5 else x + diff * t
 
 
+_deque_append = deque.append
+
+
 class RecentSamples(deque[float]):
     """The last ``KEEP_SAMPLES`` timing samples (bounded memory on a run of days), with the
     count and the maximum over the whole run. Percentiles are over the samples kept."""
@@ -74,7 +77,7 @@ class RecentSamples(deque[float]):
             self.append(v)
 
     def append(self, value: float) -> None:
-        super().append(value)
+        _deque_append(self, value)  # super().append, without building the super object
         self.total += 1
         if value > self.peak:
             self.peak = value

@@ -9,6 +9,8 @@ never asks whether there is an output.
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -17,6 +19,7 @@ try:  # the ``fast`` extra: a compiled encoder (no wheel on every platform, so o
 except ImportError:  # pragma: no cover - exercised by the tests with the encoder disabled
     _orjson = None  # type: ignore[assignment]
 
+_floor = math.floor
 EPOCHS = "epochs.jsonl"
 SUMMARY = "summary.json"
 
@@ -76,6 +79,60 @@ def encode_line(record: dict[str, Any]) -> str:
             if _flat_same_in_orjson(record):
                 return _orjson.dumps(record, option=_orjson.OPT_APPEND_NEWLINE).decode()
         except TypeError:  # a non-string key, an integer beyond 64 bits
+            pass
+    return encode_line_stdlib(record)
+
+
+def round4(x: float) -> float:
+    """``round(x, 4)``, the same float (sign of zero included), in about half its time.
+
+    For ``|y| < 2**31`` with ``y = x * 1e4`` the product is within ``2**-22`` of the exact
+    ``x * 10**4``; when the guard accepts ``r = floor(y + 0.5)`` (``|y - r| < 0.4999``, exact
+    subtraction), the exact value is within ``0.4999 + 2**-22 < 1/2`` of ``r``, so ``r`` is the
+    integer :func:`round` rounds it to (near-ties go to :func:`round` itself); ``r / 1e4`` is
+    correctly rounded by the division, as :func:`round`'s decimal string is by its
+    conversion back. Zero (its sign), NaN,
+    infinities, large values and anything but a float (an int stays an int) go to
+    :func:`round`. Tested against :func:`round` on millions of values
+    (tests/test_json_encoding.py). The rover's records round about fifteen values an epoch."""
+    y = x * 10000.0
+    if -2147483648.0 < y < 2147483648.0 and type(x) is float:  # (round keeps an int an int)
+        r = _floor(y + 0.5)
+        if r and -0.4999 < y - r < 0.4999:
+            return r / 10000.0
+    return round(x, 4)
+
+
+def round2(x: float) -> float:
+    """``round(x, 2)``, the same float: :func:`round4` with 100 for 10 000."""
+    y = x * 100.0
+    if -2147483648.0 < y < 2147483648.0 and type(x) is float:
+        r = _floor(y + 0.5)
+        if r and -0.4999 < y - r < 0.4999:
+            return r / 100.0
+    return round(x, 2)
+
+
+def numbers_spelled_alike(values: Iterable[float | int | None]) -> bool:
+    """Does orjson write each of these numbers (or None) as :func:`json.dumps` does? The
+    number part of :func:`_same_in_orjson` for a caller that knows its values are numbers:
+    0, or finite with ``1e-4 <= |x| < 1e16`` (an integer that large falls back too)."""
+    for v in values:
+        if v is not None and not (1e-4 <= v < 1e16 or -1e16 < v <= -1e-4 or v == 0.0):
+            return False
+    return True
+
+
+def encode_plain_line(record: dict[str, Any]) -> str:
+    """:func:`encode_line` for a record whose maker has checked what :func:`_same_in_orjson`
+    checks (the rover's records, :meth:`RoverPipeline._record
+    <firmware_host.rover.pipeline.RoverPipeline._record>`): flat, its keys and strings
+    printable ASCII, its numbers passed by :func:`numbers_spelled_alike`, the rest None,
+    booleans and integers. orjson when installed, else the standard library: the same bytes."""
+    if _orjson is not None:
+        try:
+            return _orjson.dumps(record, option=_orjson.OPT_APPEND_NEWLINE).decode()
+        except TypeError:  # an integer beyond 64 bits
             pass
     return encode_line_stdlib(record)
 
