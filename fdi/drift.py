@@ -60,14 +60,14 @@ import math
 from array import array
 from bisect import bisect_left, bisect_right
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from fdi.errors import ConfigError
 
 
-@dataclass(frozen=True, slots=True)
-class DriftResult:
-    """One epoch's test: the statistic (D4), the horizon that gave it, and its reference."""
+class DriftResult(NamedTuple):
+    """One epoch's test: the statistic (D4), the horizon that gave it, and its reference
+    (a NamedTuple: built once an epoch)."""
 
     g: float  # max over horizons of |r_H| / s_H
     horizon_s: float  # the horizon of the reference below (0: no reference yet)
@@ -76,6 +76,7 @@ class DriftResult:
     ref_v: tuple[float, float]  # its Doppler velocity
 
 
+_new = tuple.__new__
 LEVEL_EVERY_S = 10.0
 LEVEL_KEEP_S = 300.0
 NO_TEST = DriftResult(0.0, 0.0, math.nan, (math.nan, math.nan), (math.nan, math.nan))
@@ -255,6 +256,9 @@ class DriftTest:
         ve0, vn0 = v
         hypot, sqrt = math.hypot, math.sqrt
         last_i = -1
+        g_max = -1.0
+        h0, s0, h_last, s_last = horizons[0], sigmas[0], horizons[-1], sigmas[-1]
+        n_h = len(horizons)
         for h in horizons:
             i = bisect_right(ts, t - h) - 1
             if i < 0:
@@ -262,19 +266,33 @@ class DriftTest:
             if i == last_i:
                 continue  # the same reference as a shorter horizon (a gap in references)
             last_i = i
-            s = sigma_at(t - ts[i], horizons, sigmas)  # (D3)
+            # (D3): sigma_at(t - ts[i], horizons, sigmas), written out (the same operations)
+            age = t - ts[i]
+            if age <= h0:
+                s = s0
+            else:
+                for k in range(1, n_h):
+                    if age <= horizons[k]:
+                        ha, hb = horizons[k - 1], horizons[k]
+                        w = (age - ha) / (hb - ha)
+                        s = sigmas[k - 1] + w * (sigmas[k] - sigmas[k - 1])
+                        break
+                else:
+                    s = s_last * sqrt(age / h_last)
             dv = lag_sd * hypot(ve0 - v_e[i], vn0 - v_n[i])
             re, rn = be0 - b_e[i], bn0 - b_n[i]  # (D2)
-            found.append((sqrt((re * re + rn * rn) / (s * s + dv * dv)), h, i))
+            g = sqrt((re * re + rn * rn) / (s * s + dv * dv))
+            if not found or g > g_max:  # (D4): max(r[0] for r in found), the first maximum
+                g_max = g
+            found.append((g, h, i))
         if not found:
             return NO_TEST
-        g_max = max(r[0] for r in found)  # (D4)
         # The statistic is the maximum (D4); the reference reported with it is the *oldest*
         # one whose statistic is within 0.6 of it: a slow fault is seen about as strongly at
         # every horizon longer than its age, and the oldest such reference is the one most
         # likely from before it began (the isolator anchors its hold there).
         _, h, i = next(r for r in reversed(found) if r[0] >= 0.6 * g_max)
-        return DriftResult(g_max, h, ts[i], (b_e[i], b_n[i]), (v_e[i], v_n[i]))
+        return _new(DriftResult, (g_max, h, ts[i], (b_e[i], b_n[i]), (v_e[i], v_n[i])))
 
 def concave_cap(horizons_s: Sequence[float], sigmas: Sequence[float]) -> tuple[float, ...]:
     """σ_H capped at σ_h·√(H/h) from each shorter horizon h (D5).

@@ -51,8 +51,8 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field, replace
-from typing import Literal
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
 
 from fdi.chi2 import threshold
 from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
@@ -69,6 +69,7 @@ RAW_HORIZON = 3
 # Epochs (beyond hold_exit_s) a step back to the level before a remembered step must stay
 # before the receiver is restarted on: more than a 2-epoch burst that happens to reverse it.
 STEP_END_EPOCHS = 3
+_new = tuple.__new__
 
 
 @dataclass(frozen=True)
@@ -145,9 +146,11 @@ class RoverDetectorParams:
     max_gap_s: float = field(default=5.0, metadata={"gt": 0.0})
 
 
-@dataclass(frozen=True, slots=True)
-class FixInput:
-    """One receiver epoch in local metres (``None`` position: the receiver has no fix)."""
+class FixInput(NamedTuple):
+    """One receiver epoch in local metres (``None`` position: the receiver has no fix).
+
+    Immutable; a NamedTuple rather than a frozen dataclass (built once an epoch: a frozen
+    dataclass's ``__init__`` sets each field through ``object.__setattr__``)."""
 
     t_s: float  # monotonic fix time (UTC seconds, rollover-corrected)
     enu: tuple[float, float, float] | None
@@ -158,9 +161,9 @@ class FixInput:
     hdop: float | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class Decision:
-    """What the isolator did with one epoch, and the statistics that led to it."""
+class Decision(NamedTuple):
+    """What the isolator did with one epoch, and the statistics that led to it (immutable; a
+    NamedTuple, built once an epoch: see :class:`FixInput`; ``_replace`` for a changed copy)."""
 
     action: Action
     fault: bool
@@ -906,8 +909,9 @@ class RoverIsolator:
         zones: tuple[int, ...] | None = None,
     ) -> Decision:
         kf = self.kf
-        # Positional, in Decision's field order (this runs once an epoch).
-        return Decision(
+        # The tuple of Decision's fields, in order (this runs once an epoch: the NamedTuple's
+        # own __new__ would bind 19 arguments in Python first).
+        return _new(Decision, (
             action,
             fault,
             reason,
@@ -927,7 +931,7 @@ class RoverIsolator:
             kf.position if kf.initialised else None,  # kf_enu
             zones,
             t.drift,
-        )
+        ))
 
     def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests,
                   learn: bool = True) -> None:
@@ -996,7 +1000,7 @@ class RoverIsolator:
         consecutive = self._consec
         self._restart(z, r, keep_levels)
         dec = self._decision("alarm", True, reason, None, t, alarm_raised=raised)
-        return replace(dec, consecutive=consecutive) if consecutive else dec
+        return dec._replace(consecutive=consecutive) if consecutive else dec
 
     # -------------------------------------------------------------- pieces
 

@@ -698,8 +698,8 @@ class InsGnssVehicle:
         record = self._base_record(out, t_g, "ins")
         record["ins"] = ins
         self.write_record(record)
-        decision = replace(out.decision, action="accept" if used else "replace",
-                           out_enu=(float(p[0]), float(p[1]), float(p[2])))
+        decision = out.decision._replace(action="accept" if used else "replace",
+                                         out_enu=(float(p[0]), float(p[1]), float(p[2])))
         self._send(EpochOutcome(out.epoch, decision, lat, lon, alt, out.t_s,
                                 {**(out.record or {}), "ins": ins},
                                 heading_deg=out.heading_deg))

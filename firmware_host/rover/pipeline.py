@@ -165,8 +165,8 @@ class RoverPipeline:
             sd = (epoch.sd_lon_m, sd_lat, epoch.sd_alt_m or 2.0 * sd_lat)
         if t_s is None and enu is not None:
             enu = None  # a fix with no time cannot be put in order: not passed on
-        # Positional, in FixInput's field order (this runs once an epoch).
-        fix = FixInput(
+        # The tuple of FixInput's fields, in order (this runs once an epoch).
+        fix = _new(FixInput, (
             t_s if t_s is not None else 0.0,  # t_s
             enu,
             epoch.speed_mps,
@@ -174,7 +174,7 @@ class RoverPipeline:
             sd,  # sd_enu_m
             epoch.num_sats,
             epoch.hdop,
-        )
+        ))
         isolator = self.isolator
         d = isolator.step(fix)
         self.gate_health.update(d, isolator.kf.S if d.chi2 is not None else None)
