@@ -128,8 +128,7 @@ class _CvBaseline:
         return BaselineStep(False, "accept", "", self.kf.position, None, self.stat_threshold)
 
     def _update_axes(self, z: Enu, r: Enu, axes: tuple[int, ...]) -> None:
-        for i in axes:
-            self.kf.axes[i].update(z[i], r[i])
+        self.kf.update(z, r, only=axes)
 
     def _reset_axes(self, z: Enu, variance: float, axes: tuple[int, ...]) -> None:
         """Position of ``axes`` set to the fix (covariance rows/columns zeroed, velocity kept)."""
@@ -253,7 +252,7 @@ class Ekf3Style(_CvBaseline):
                 self.last_hgt_pass_t = t_s
                 r_u = S[2] * hgt_ratio - self.kf.axes[2].P00
             if hgt_pass:
-                self.kf.axes[2].update(z[2], r_u)
+                self.kf.update(z, (r[0], r[1], r_u), only=(2,))
             elif t_s - self.last_hgt_pass_t > self.hgt_retry_s:
                 self._reset_axes(z, r[2], (2,))  # ResetHeight: P = the measurement variance
                 self.last_hgt_pass_t = t_s
@@ -305,7 +304,7 @@ class Ekf2Style(_CvBaseline):
             action, reason, fault = "reject", "pos_gate", True
         if up_known:
             if ratios[2] <= 1.0:
-                self.kf.axes[2].update(z[2], r[2])
+                self.kf.update(z, r, only=(2,))
                 self.last_hgt_fuse_t = t_s
             elif t_s - self.last_hgt_fuse_t > self.reset_timeout_s:
                 self._reset_axes(z, r[2], (2,))

@@ -23,47 +23,14 @@ from dataclasses import dataclass, field
 
 @dataclass(slots=True)
 class AxisFilter:
-    """One axis: state ``[p, v]``, covariance ``[[P00, P01], [P01, P11]]``."""
+    """One axis's state ``[p, v]`` and covariance ``[[P00, P01], [P01, P11]]``; the equations
+    are :class:`GpsKalman`'s, written out over the axes once an epoch."""
 
     p: float = 0.0
     v: float = 0.0
     P00: float = 1e6
     P01: float = 0.0
     P11: float = 1e6
-
-    def predict(self, dt: float, q: float) -> None:
-        self.predict_with(dt, q * dt**3 / 3.0, q * dt * dt / 2.0, q * dt)
-
-    def predict_with(self, dt: float, q00: float, q01: float, q11: float) -> None:
-        """:meth:`predict` with Q's entries computed by the caller (once for three axes)."""
-        # (1) x̂(k,k−1) = Φ x̂(k−1), Φ = [[1, dt], [0, 1]]
-        self.p += self.v * dt
-        # P(k,k−1) = Φ P Φᵀ + Q, Q = q [[dt³/3, dt²/2], [dt²/2, dt]]
-        P01, P11 = self.P01, self.P11
-        p00 = self.P00 + 2.0 * dt * P01 + dt * dt * P11 + q00
-        p01 = P01 + dt * P11 + q01
-        p11 = P11 + q11
-        self.P00, self.P01, self.P11 = p00, p01, p11
-
-    def innovation(self, z: float, r: float) -> tuple[float, float]:
-        # (3) D = Z − H x̂(k,k−1);  (4) S = H P Hᵀ + R, H = [1, 0]
-        return z - self.p, self.P00 + r
-
-    def update(self, z: float, r: float) -> None:
-        P00, P01 = self.P00, self.P01
-        # (3) D and (4) S, as in innovation()
-        d = z - self.p
-        s = P00 + r
-        k0 = P00 / s
-        k1 = P01 / s
-        self.p += k0 * d
-        self.v += k1 * d
-        # Joseph form: P = (I − K H) P (I − K H)ᵀ + K R Kᵀ
-        a = 1.0 - k0
-        p00 = a * a * P00 + k0 * k0 * r
-        p01 = a * (P01 - k1 * P00) + k0 * k1 * r
-        p11 = self.P11 - 2.0 * k1 * P01 + k1 * k1 * P00 + k1 * k1 * r
-        self.P00, self.P01, self.P11 = p00, p01, p11
 
 
 @dataclass
@@ -87,18 +54,20 @@ class GpsKalman:
 
     def predict(self, dt: float) -> None:
         q = self.q
-        q00, q01, q11 = q * dt**3 / 3.0, q * dt * dt / 2.0, q * dt  # Q of (1), the same per axis
+        # Q = q [[dt³/3, dt²/2], [dt²/2, dt]], the same for every axis
+        q00, q01, q11 = q * dt**3 / 3.0, q * dt * dt / 2.0, q * dt
         dt2 = dt * dt
-        for ax in self.axes:  # AxisFilter.predict_with, written out (once an epoch)
+        for ax in self.axes:
             P01, P11 = ax.P01, ax.P11
-            ax.p += ax.v * dt  # (1)
+            ax.p += ax.v * dt  # (1) x̂(k,k−1) = Φ x̂(k−1), Φ = [[1, dt], [0, 1]]
+            # P(k,k−1) = Φ P Φᵀ + Q
             ax.P00 = ax.P00 + 2.0 * dt * P01 + dt2 * P11 + q00
             ax.P01 = P01 + dt * P11 + q01
             ax.P11 = P11 + q11
 
     def test(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> float:
         """F(k) of eq. (5) for the predicted state; also stores ``D`` and ``S``."""
-        # (3) D and (4) S of each axis, as in AxisFilter.innovation (written out: once an epoch)
+        # (3) D = Z − H x̂(k,k−1) and (4) S = H P Hᵀ + R of each axis, H = [1, 0]
         a0, a1, a2 = self.axes
         d0, s0 = z[0] - a0.p, a0.P00 + r[0]
         d1, s1 = z[1] - a1.p, a1.P00 + r[1]
@@ -109,16 +78,21 @@ class GpsKalman:
         self.F = d0 * d0 / s0 + d1 * d1 / s1 + d2 * d2 / s2
         return self.F
 
-    def update(self, z: tuple[float, float, float], r: tuple[float, float, float]) -> None:
-        for ax, zi, ri in zip(self.axes, z, r, strict=True):
-            # AxisFilter.update, written out (once an epoch): the same operations
+    def update(self, z: tuple[float, float, float], r: tuple[float, float, float],
+               only: tuple[int, ...] = (0, 1, 2)) -> None:
+        """The measurement update of the axes ``only`` (all by default) with fix ``z``."""
+        axes = self.axes
+        for i in only:
+            ax, zi, ri = axes[i], z[i], r[i]
             P00, P01 = ax.P00, ax.P01
+            # (3) D and (4) S, then the gain K = P Hᵀ S⁻¹
             d = zi - ax.p
             s = P00 + ri
             k0 = P00 / s
             k1 = P01 / s
             ax.p += k0 * d
             ax.v += k1 * d
+            # Joseph form: P = (I − K H) P (I − K H)ᵀ + K R Kᵀ
             a = 1.0 - k0
             ax.P00 = a * a * P00 + k0 * k0 * ri
             ax.P01 = a * (P01 - k1 * P00) + k0 * k1 * ri

@@ -230,11 +230,10 @@ class RoverIsolator:
         self._prev_sig: tuple[object, ...] | None = None
         self._prev_t = 0.0
         self._stale_since: float | None = None
-        # Abrupt steps seen at the start of a run of faults, newest last: [t of the reference
-        # before it, its Doppler-free value (e, n), the step (e, n), 1.0 once the track was
-        # seen to go on at the stepped level]; and the step back being confirmed (the
-        # step's time, the fix's Doppler-free value and time when it began).
-        self._steps: list[list[float]] = []
+        # Abrupt steps seen at the start of a run of faults, newest last; and the step back
+        # being confirmed (the step's time, the fix's Doppler-free value and time when it
+        # began, the epochs since).
+        self._steps: list[_Step] = []
         self._rev: tuple[float, tuple[float, float], float, int] | None = None
         self._prev_b: tuple[float, float] | None = None  # the last epoch's b ...
         self._prev_bt = 0.0  # ... and its time
@@ -270,8 +269,8 @@ class RoverIsolator:
                 self._drift.rebase(de, dn)
                 self._drift.reset_short()
                 for st in self._steps:
-                    st[1] += de
-                    st[2] += dn
+                    st.b0e += de
+                    st.b0n += dn
             else:
                 self._drift.reset()
                 self._steps.clear()
@@ -523,16 +522,16 @@ class RoverIsolator:
         # track is not shown right: the receiver's fix is passed on (flagged, as replaced),
         # while the state goes on as for a replacement, so a jump is told apart at the next
         # epoch and a step that stays goes to the hold, whose "new_level" ends it.
-        # A drift fault that is a step from the newest reference (not a ramp) counts too.
-        back = ((abrupt or (drift_fault and b is not None
-                            and self._is_step(fix.t_s, b, prev_b, prev_bt)))
-                and b is not None and drift is not None and not quality
+        # A drift fault that stepped since the previous epoch (not a ramp) counts too.
+        back = (b is not None and drift is not None
+                and (abrupt or (drift_fault and self._is_step(fix.t_s, b, prev_b, prev_bt)))
+                and not quality
                 and not stale_fault
                 and ((self._stepped_back and raw_consistent)
                      or self._back_at_old_level(fix.t_s, b) is not None))
         # The end of a remembered step (a multipath step the track went on to accept): the
         # fixes step back to the level before it. Passed on at once (flagged, as a step back);
-        # at the next epoch that stays there the receiver is right again.
+        # once they stay there (_step_end) the receiver is right again.
         rev = None
         if (b is not None and v is not None and drift is not None and not quality
                 and not stale_fault and p.step_pair_s > 0.0):
@@ -771,8 +770,8 @@ class RoverIsolator:
         if size < min(gate_h, p.hold_exit_sigmas * sigma_at(
                 t_s - r_t, drift.horizons, drift.sigmas)):
             return
-        steps = [st for st in self._steps if t_s - st[0] <= p.step_pair_s]
-        steps.append([r_t, re_, rn, se, sn, 0.0])
+        steps = [st for st in self._steps if t_s - st.t0 <= p.step_pair_s]
+        steps.append(_Step(r_t, re_, rn, se, sn))
         self._steps = steps[-4:]
 
     def _track_at(self, b: tuple[float, float]) -> None:
@@ -780,9 +779,9 @@ class RoverIsolator:
         than the level before it was accepted (a replaced burst leaves the track nearer the
         level before)."""
         for st in self._steps:
-            if st[5] == 0.0 and math.hypot(b[0] - st[1] - st[3], b[1] - st[2] - st[4]) < (
-                    math.hypot(b[0] - st[1], b[1] - st[2])):
-                st[5] = 1.0
+            if not st.accepted and math.hypot(b[0] - st.b0e - st.se, b[1] - st.b0n - st.sn) < (
+                    math.hypot(b[0] - st.b0e, b[1] - st.b0n)):
+                st.accepted = True
 
     def _step_end(self, t_s: float, b: tuple[float, float], rev: float) -> bool:
         """The fix is back before the remembered step of time ``rev``: has it stayed there
@@ -796,7 +795,7 @@ class RoverIsolator:
             s1 = sigma_at(max(t_s - prev[2], 1e-3), drift.horizons, drift.sigmas)
             if math.hypot(b[0] - prev[1][0], b[1] - prev[1][1]) <= p.hold_exit_sigmas * s1:
                 if t_s - prev[2] >= p.hold_exit_s - 1e-9 and prev[3] + 1 >= STEP_END_EPOCHS:
-                    self._steps = [st for st in self._steps if st[0] < rev]
+                    self._steps = [st for st in self._steps if st.t0 < rev]
                     drift.forget_after(rev)
                     self._rev = None
                     return True
@@ -837,13 +836,13 @@ class RoverIsolator:
         The time of that step's reference, if so.
 
         The track was seen at the stepped level after it (:meth:`_track_at`: the step was
-        accepted, not replaced). Then either this epoch's step
-        from the track is the remembered step reversed, within 0.4 x its size (both steps are
-        measured over an epoch, so the slow DGPS error between them cancels out); or the track
-        is within half the step of the stepped level and the fix is at least 0.6 x the step
-        away from it and twice as close to the level before. A jump that happens to land there costs
-        that epoch the raw fix (flagged); only fixes that stay there for ``hold_exit_s``
-        and ``STEP_END_EPOCHS`` epochs end it."""
+        accepted, not replaced). Then either this epoch's step from the track is the
+        remembered step reversed, within 0.4 x its size (both steps are measured over an
+        epoch, so the slow DGPS error between them cancels out); or the track is within half
+        the step of the stepped level and the fix is at least 0.6 x the step away from it and
+        twice as close to the level before. A jump that happens to land there costs that
+        epoch the raw fix (flagged); only fixes that stay there for ``hold_exit_s`` and
+        STEP_END_EPOCHS epochs end it (:meth:`_step_end`)."""
         drift = self._drift
         assert drift is not None
         ref = drift.at_or_before(t_s)
@@ -851,8 +850,9 @@ class RoverIsolator:
             return None
         r_t, (ce, cn), _ = ref
         je, jn = b[0] - ce, b[1] - cn  # this epoch's step from the track
-        for t0, b0e, b0n, se, sn, accepted in reversed(self._steps):
-            if t_s - t0 > self.p.step_pair_s or r_t <= t0 or accepted == 0.0:
+        for st in reversed(self._steps):
+            t0, b0e, b0n, se, sn = st.t0, st.b0e, st.b0n, st.se, st.sn
+            if t_s - t0 > self.p.step_pair_s or r_t <= t0 or not st.accepted:
                 continue  # too old, or the track was not seen at the stepped level
             size = math.hypot(se, sn)
             if math.hypot(je + se, jn + sn) <= 0.4 * size:
@@ -1032,6 +1032,18 @@ class RoverIsolator:
         if self._drift is not None and max(self._quant) < math.inf:
             self._drift.set_quantum(max(self._quant))
         self._hold = None
+
+
+@dataclass(slots=True)
+class _Step:
+    """An abrupt step remembered by :meth:`RoverIsolator._note_step`."""
+
+    t0: float  # time of the trusted reference before it
+    b0e: float  # that reference's Doppler-free value (east, north)
+    b0n: float
+    se: float  # the step (east, north)
+    sn: float
+    accepted: bool = False  # the track was seen nearer the stepped level (_track_at)
 
 
 @dataclass(slots=True)

@@ -11,17 +11,15 @@ from __future__ import annotations
 
 import json
 import os
-import pty
 import re
-import select
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 from drivers.ptypair import PtyPair
 from firmware_host.devtools.rover_sim import RoverScenario, generate
+from tests.ptyrun import cli_under_pty
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -77,30 +75,10 @@ def test_on_a_terminal_banner_then_a_refreshing_status_line(tmp_path: Path) -> N
     with PtyPair(link=tmp_path / "gps", baudrate=9600) as gps:
         feeder = Feeder(gps)
         feeder.start()
-        master, slave = pty.openpty()
-        proc = subprocess.Popen(_cmd(cfg), stdin=slave, stdout=slave, stderr=slave,
-                                env=_env(), cwd=tmp_path)
-        os.close(slave)
-        out = b""
-        deadline = time.monotonic() + 30.0
         try:
-            while time.monotonic() < deadline:
-                ready, _, _ = select.select([master], [], [], 0.2)
-                if ready:
-                    try:
-                        data = os.read(master, 4096)
-                    except OSError:  # EIO: the program closed the terminal
-                        break
-                    if not data:
-                        break
-                    out += data
-                elif proc.poll() is not None:
-                    break
+            rc, text = cli_under_pty(_cmd(cfg)[3:], tmp_path, timeout=30.0, env=_env())
         finally:
             feeder.halt.set()
-            rc = proc.wait(10.0)
-            os.close(master)
-    text = out.decode(errors="replace")
     assert rc == 0, text
     assert "Traceback" not in text
     banner, rest = text.split("\r\n\r", 1)  # the terminal turns \n into \r\n
