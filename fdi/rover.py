@@ -29,8 +29,11 @@ Beyond the paper, for real data (each is a parameter, and the paper preset turns
 * ``drift_test`` (issue 13, :mod:`fdi.drift`): the fix against its own Doppler displacement
   over horizons in seconds (1, 3, 10, 30 s), a GLR with σ calibrated once per receiver and
   never learned; it catches slow ramps and frozen receivers. A receiver that repeats its whole
-  fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed,
-  and sooner while its own speed says it moved ``stale_move_m`` meanwhile. Between
+  fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed;
+  sooner when its position repeats while its own speed says it moved ``stale_move_m``, or
+  when it repeats its whole fix more often in a row than its own history makes likely
+  (``stale_p``: a receiver whose fix changes every epoch is frozen at its second repeat; one
+  that repeats often, a static hold at stops, is given up to ``stale_s``). Between
   ``drift_warn_sigmas`` and ``drift_sigmas`` the fix is flagged (a warning) but passed on as it
   is, and kept out of the drift test's references and the gates' learning: a slow fault is
   reported sooner without holding the old track on weaker evidence.
@@ -123,8 +126,14 @@ class RoverDetectorParams:
     drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
     drift_lag_sd_s: float = field(default=0.15, metadata={"ge": 0.0})
     stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
-    # ... or while its own speed says it moved this far (0: off); beyond a coordinate quantum
+    # ... or its position repeated while its own speed says it moved this far (0: off);
+    # beyond a coordinate quantum
     stale_move_m: float = field(default=0.3, metadata={"ge": 0.0})
+    # ... or after n repeats in a row where this receiver's chance of them, p^n, is at most
+    # stale_p; p is learned from all its pairs of fixes: (repeats + 1) / (pairs + 2). A
+    # receiver whose fix changes every epoch is found frozen at its second repeat; one that
+    # repeats often (a static hold at stops) is given up to stale_s (0 = off).
+    stale_p: float = field(default=1e-4, metadata={"ge": 0.0, "lt": 1.0})
     hold_exit_sigmas: float = field(default=3.0, metadata={"gt": 0.0})
     hold_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
     hold_exit_s: float = field(default=1.0, metadata={"ge": 0.0})  # the short fixed lag
@@ -229,7 +238,13 @@ class RoverIsolator:
         self._run_t0 = 0.0  # time of the first replacement of the current run
         self._prev_sig: tuple[object, ...] | None = None
         self._prev_t = 0.0
-        self._stale_since: float | None = None
+        self._stale_since: float | None = None  # the position repeated since
+        self._stale_run = 0  # repeats in a row of the whole fix, this epoch's included
+        self._whole_since = 0.0  # ... since
+        # Pairs of consecutive fixes, and how many of them repeated the whole fix: this
+        # receiver's chance of a repeat (_stale_check).
+        self._pairs = 0
+        self._repeats = 0
         # Abrupt steps seen at the start of a run of faults, newest last; and the step back
         # being confirmed (the step's time, the fix's Doppler-free value and time when it
         # began, the epochs since).
@@ -361,7 +376,10 @@ class RoverIsolator:
         self._last_up = z[2]
         v = self._velocity(fix)
         self._last_t = fix.t_s
-        stale = self._stale_check(fix)
+        # Frozen (the fault), and whether the Doppler is void with it (the receiver repeats
+        # its speed and course too): what the hold must know.
+        frozen = self._stale_check(fix)
+        stale = frozen and self._stale_run > 0
         if self._drift is not None:
             de, dn = abs(z[0] - self._last_e), abs(z[1] - self._last_n)
             self._last_e, self._last_n = z[0], z[1]
@@ -483,7 +501,7 @@ class RoverIsolator:
             t.pred = (a[0] + d[0] - a[2], a[1] + d[1] - a[3], t.pred[2])
             grey_fault = False
 
-        stale_fault = stale and b is not None
+        stale_fault = frozen and b is not None
         if not (grey_fault or chi2_fault or doppler_fault or quality or drift_fault
                 or stale_fault):
             # Between the warning and the alarm threshold of the drift test: passed on as it
@@ -632,9 +650,22 @@ class RoverIsolator:
     # -------------------------------------------------------------- the hold
 
     def _stale_check(self, fix: FixInput) -> bool:
-        """Has the receiver repeated its whole fix (position, speed, course) for stale_s?"""
-        sig = (fix.enu, fix.speed_mps, fix.course_deg)
-        if sig == self._prev_sig:
+        """Is the receiver frozen? Its position repeated bit for bit while its own speed says
+        it moved stale_move_m, or its whole fix (position, speed, course) repeated for stale_s
+        or more often in a row than this receiver's own repeat rate makes likely (stale_p)."""
+        enu = fix.enu
+        sig = (enu, fix.speed_mps, fix.course_deg)
+        prev = self._prev_sig
+        if prev is not None:  # every pair of fixes, frozen or not
+            self._pairs += 1
+            if sig == prev:
+                self._repeats += 1
+                if self._stale_run == 0:
+                    self._whole_since = self._prev_t
+                self._stale_run += 1
+            else:
+                self._stale_run = 0
+        if prev is not None and enu == prev[0]:
             if self._stale_since is None:
                 self._stale_since = self._prev_t
         else:
@@ -645,11 +676,24 @@ class RoverIsolator:
         if since is None:
             return False
         held = fix.t_s - since
+        p = self.p
         # A live receiver that says it moved stale_move_m (more than a coordinate quantum:
-        # 0.19 m at 4 decimals of minutes) cannot repeat its position bit for bit.
-        move = self.p.stale_move_m
-        return held >= self.p.stale_s - 1e-9 or (
-            move > 0.0 and fix.speed_mps is not None and fix.speed_mps * held >= move)
+        # 0.19 m at 4 decimals of minutes) cannot repeat its position bit for bit. (Three
+        # quanta of 1.9 cm were not enough: at 10 Hz and 0.84 m/s a live receiver repeated
+        # one, its noise undoing the 8 cm it moved.)
+        move = p.stale_move_m
+        if move > 0.0 and fix.speed_mps is not None and fix.speed_mps * held >= move:
+            return True
+        run = self._stale_run
+        if run == 0:
+            return False
+        if fix.t_s - self._whole_since >= p.stale_s - 1e-9:
+            return True
+        # The chance that this receiver repeats its whole fix this often in a row, the chance
+        # of one repeat learned from all its fixes (Laplace's rule). Frozen stretches count:
+        # a receiver that freezes often, or pins its fix at every stop, is given longer.
+        rate = (self._repeats + 1) / (self._pairs + 2)
+        return p.stale_p > 0.0 and rate**run <= p.stale_p
 
     def _enter_hold(self, t_s: float, dres: DriftResult | None, reason: str,
                     slow: bool) -> bool:
@@ -670,8 +714,8 @@ class RoverIsolator:
         drift.forget_after(a_t)  # a fault may have been building since
         old = drift.levels_between(a_t - LEVEL_KEEP_S, a_t - 20.0)
         stale_m = 0.0
-        if self._stale_since is not None:
-            stale_m = math.hypot(*a_v) * (t_s - self._stale_since)
+        if self._stale_run > 0:  # the Doppler is void since the whole fix repeats
+            stale_m = math.hypot(*a_v) * (t_s - self._whole_since)
         # The hold's clock starts with the run of replacements that led to it (seconds).
         t0 = self._run_t0 if self._consec > 0 else t_s
         self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow,
@@ -695,7 +739,7 @@ class RoverIsolator:
         hold = self._hold
         drift = self._drift
         assert hold is not None and drift is not None
-        hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt, self._stale_since is None)
+        hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt, self._stale_run == 0)
         t.drift = hs.g
         reason = self._hold_reason
         if hs.action in ("exit", "ended", "new_level", "consistent"):

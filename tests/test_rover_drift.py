@@ -12,7 +12,7 @@ import pytest
 from fdi.drift import DriftTest, calibrate, concave_cap, sigma_at
 from fdi.errors import ConfigError
 from fdi.level import HoldParams, LevelHold
-from fdi.rover import FixInput, RoverDetectorParams, RoverIsolator
+from fdi.rover import Decision, FixInput, RoverDetectorParams, RoverIsolator
 
 H = (1.0, 3.0, 10.0, 30.0, 100.0)
 SIG = (0.07, 0.1, 0.16, 0.27, 0.35)
@@ -234,3 +234,79 @@ def test_concave_cap_bounds_long_horizons_by_the_shorter_ones() -> None:
     assert capped[3] == pytest.approx(0.27 * math.sqrt(3.0))
     assert capped[4] == pytest.approx(capped[3] * math.sqrt(100.0 / 30.0))
     assert concave_cap(H, SIG) == SIG  # a consistent calibration is unchanged
+
+
+# ------------------------------------------------------------------ frozen receivers
+
+
+def _receiver_run(freeze: tuple[float, float] | None = None, *, rate: float = 10.0,
+                  quantum: float = 0.018, static_hold: bool = False, seed: int = 7,
+                  position_only: bool = False) -> list[tuple[float, Decision]]:
+    """A receiver east at 1 m/s with stops of 20 s every 100 s (from 95 s), white noise 2 cm
+    per axis and altitude, coordinates rounded to ``quantum``, speed to 0.005 m/s, course to
+    0.1 deg. ``freeze`` = (start, end) s: the receiver repeats its whole last fix (with
+    ``position_only`` its position alone, its Doppler live). ``static_hold``: at stops it pins
+    its fix, as a receiver's static navigation does (speed 0, course and position held)."""
+    rng = np.random.default_rng(seed)
+    iso = RoverIsolator(replace(RoverDetectorParams(), drift_calibrate_s=0.0))
+    out: list[tuple[float, Decision]] = []
+    x = 0.0
+    held: FixInput | None = None
+    pinned: FixInput | None = None
+    for k in range(int(400 * rate)):
+        t = k / rate
+        stopped = (t - 95.0) % 100.0 < 20.0 and t >= 95.0
+        v = 0.0 if stopped else 1.0
+        x += v / rate
+        e, n, u = (x + rng.normal(0, 0.02), rng.normal(0, 0.02), rng.normal(0, 0.02))
+        ve, vn = v + rng.normal(0, 0.03), rng.normal(0, 0.03)
+        fix = FixInput(t, (round(e / quantum) * quantum, round(n / quantum) * quantum,
+                           round(u, 3)),
+                       round(math.hypot(ve, vn) / 0.005) * 0.005,
+                       round(math.degrees(math.atan2(ve, vn)) % 360.0, 1))
+        if static_hold and stopped:
+            pinned = pinned or fix._replace(speed_mps=0.0)
+            fix = pinned._replace(t_s=t)
+        else:
+            pinned = None
+        if freeze is not None and freeze[0] <= t < freeze[1]:
+            held = held or fix
+            fix = (held._replace(t_s=t) if not position_only
+                   else fix._replace(enu=held.enu))
+        out.append((t, iso.step(fix)))
+    return out
+
+
+def _frozen_at(run: list[tuple[float, Decision]]) -> list[float]:
+    return [t for t, d in run if "frozen" in d.reason]
+
+
+def test_a_receiver_that_never_repeats_is_frozen_at_its_second_repeat() -> None:
+    """At a stop, where its own speed cannot tell: the chance of a live repeat is learned from
+    the fixes passed on (none repeated in 3000), so two repeats in a row are a freeze."""
+    assert _frozen_at(_receiver_run()) == []
+    run = _receiver_run((300.0, 310.0))  # stopped from 295 s to 315 s
+    first = _frozen_at(run)[0]
+    assert first == pytest.approx(300.2)  # 300.0 is the live fix, 300.1 and 300.2 repeat it
+    assert all(d.action != "accept" for t, d in run if 300.2 <= t < 310.0)
+
+
+def test_a_receiver_with_a_static_hold_is_given_longer() -> None:
+    """One that pins its fix at every stop: its first stop looks like a freeze (nothing says
+    otherwise yet); from then on its repeat rate (~0.2) gives it 5 repeats (0.5 s at 10 Hz,
+    at most stale_s); a freeze while moving is found by stale_move_m all the same."""
+    run = _receiver_run(static_hold=True)
+    firsts = [min(t for t in _frozen_at(run) if stop <= t < stop + 20.0)
+              for stop in (95.0, 195.0, 295.0)]
+    assert firsts == pytest.approx([95.2, 195.5, 295.5])
+    moving = _receiver_run((150.0, 160.0), static_hold=True)
+    assert min(t for t in _frozen_at(moving) if t >= 150.0) <= 150.3 + 1e-9  # stale_move_m
+
+
+def test_a_position_that_repeats_while_the_doppler_moves_is_frozen() -> None:
+    """Its own speed (1 m/s) says it moved stale_move_m (0.3 m) by the third repeat at 10 Hz
+    (the fourth where the reported speed is under 1 m/s), whatever the coordinate quantum."""
+    for quantum in (0.018, 0.18):
+        run = _receiver_run((150.0, 160.0), position_only=True, quantum=quantum)
+        assert 150.3 - 1e-9 <= min(_frozen_at(run)) <= 150.4 + 1e-9
+        assert _frozen_at(_receiver_run(quantum=quantum)) == []

@@ -7,10 +7,13 @@ fault kind (jumps, bursts, ramps, frozen fixes; multipath steps in the ``multipa
 replays it through the pipeline and measures each done-means bullet of the issue:
 
 * per event kind: events detected (at least one epoch flagged while it lasts), faulty epochs
-  caught (those whose injected offset is at least 3σ = 1.05 m, or frozen), detection delay;
+  caught (those whose injected offset is at least 3σ = 1.05 m, or frozen: every epoch but a
+  frozen event's first, which is the live fix the receiver then repeats), detection delay;
 * ramps: detected within 10 s of their start (rate >= 0.1 m/s) or 30 s (>= 0.05 m/s);
-* frozen fixes passed on as good (``accept``) more than 1 m from the truth, and those whose
-  frozen offset alone (the fix against the live fix it replaces) is more than 1 m;
+* frozen fixes passed on as good (``accept``) more than 1 m from the truth; of them, those
+  where the live receiver (the fix the frozen one replaces) was within 1 m, the harm the
+  freeze did; and those whose frozen offset alone (the fix against the live fix) is more than
+  1 m;
 * clean epochs more than 10 s from any event: the fraction flagged;
 * the output's horizontal RMS error against the raw receiver's over the same epochs, in the
   10 s after each event's end (and over the event and those 10 s), and over all epochs
@@ -85,6 +88,7 @@ class EventResult:
     faulty: int  # epochs at or above the minimum size (frozen: all)
     caught: int
     frozen_good_far: int  # accepted while frozen, > 1 m from the truth
+    frozen_good_far_live: int  # ... of them, those where the live receiver was within 1 m
     frozen_good_offset: int  # accepted while frozen, frozen offset > 1 m
     after_out_rms_m: float  # the AFTER_S after the end, epochs with an output
     after_raw_rms_m: float  # ... the raw receiver over the same epochs
@@ -165,17 +169,21 @@ def measure(epochs: Sequence[dict[str, Any]], truth: Sequence[dict[str, Any]], *
         kind = trs[0]["fault_kind"]
         a, b = trs[0]["utc"], trs[-1]["utc"]
         detect_t = None
-        faulty = caught = far = off = 0
-        for tr in trs:
+        faulty = caught = far = live = off = 0
+        for i, tr in enumerate(trs):
             out_e, _, ep = errs[tr["utc"]]
             flagged = ep is not None and bool(ep.get("fault"))
             if flagged and detect_t is None:
                 detect_t = tr["utc"]
-            if tr["fault_offset_m"] >= MIN_OFFSET_M or kind == "frozen":
+            # A frozen receiver's first epoch is the live fix it then repeats: not frozen yet.
+            frozen = kind == "frozen" and i > 0
+            if tr["fault_offset_m"] >= MIN_OFFSET_M or frozen:
                 faulty += 1
                 caught += flagged
-            if kind == "frozen" and ep is not None and ep.get("action") == "accept":
-                far += out_e is not None and out_e > 1.0
+            if frozen and ep is not None and ep.get("action") == "accept":
+                if out_e is not None and out_e > 1.0:
+                    far += 1
+                    live += math.hypot(tr["err_e"], tr["err_n"]) <= 1.0
                 off += tr["fault_offset_m"] > 1.0
         after_o: list[float] = []
         after_r: list[float] = []
@@ -202,7 +210,7 @@ def measure(epochs: Sequence[dict[str, Any]], truth: Sequence[dict[str, Any]], *
                                                             utcs[1] - utcs[0])
                                                          if kind == "ramp" else 0.0)),
             max(tr["fault_offset_m"] for tr in trs), detect_t is not None,
-            None if detect_t is None else round(detect_t - a, 6), faulty, caught, far, off,
+            None if detect_t is None else round(detect_t - a, 6), faulty, caught, far, live, off,
             _rms(after_o), _rms(after_r), _rms(dur_o), _rms(dur_r), no_out))
     return m
 
@@ -262,6 +270,7 @@ def summarise(runs: Sequence[RunMetrics]) -> list[dict[str, Any]]:
                 d["ramps_in_time"] = sum(bool(x) for x in req)
             if kind == "frozen":
                 d["good_far"] = sum(e.frozen_good_far for e in evs)
+                d["good_far_live"] = sum(e.frozen_good_far_live for e in evs)
                 d["good_offset"] = sum(e.frozen_good_offset for e in evs)
             row[kind] = d
         evs = [e for r in rs for e in r.events if not math.isnan(e.after_raw_rms_m)]
@@ -302,7 +311,8 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
     """The harness's Markdown table (pooled over seeds; worst seed where it says so)."""
     lines = [
         "| model | Hz | jumps: events, epochs, max delay | bursts | ramps | ramps in time "
-        "| frozen | frozen passed > 1 m (offset > 1 m) | multipath | FA > 10 s from events "
+        "| frozen | frozen passed > 1 m (live ≤ 1 m, offset > 1 m) | multipath "
+        "| FA > 10 s from events "
         "(worst seed) | 10 s after: events worse than raw (worst excess m) "
         "| out/raw RMS, worst seed | no output |",
         "|" + "---|" * 13,
@@ -314,7 +324,8 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
             f"| {r['model']} | {int(r['rate_hz'])} | {_kind(r, 'jump')} | {_kind(r, 'burst')} "
             f"| {_kind(r, 'ramp')} | {ramp.get('ramps_in_time', '–')}/"
             f"{ramp.get('ramps_required', '–')} | {_kind(r, 'frozen')} "
-            f"| {frz.get('good_far', '–')} ({frz.get('good_offset', '–')}) "
+            f"| {frz.get('good_far', '–')} ({frz.get('good_far_live', '–')}, "
+            f"{frz.get('good_offset', '–')}) "
             f"| {_kind(r, 'multipath')} | {r['fa_flagged']}/{r['fa_clean']} "
             f"({100 * r['fa_worst']:.2f} %) | {r['after_worse']}/{r['after_events']} "
             f"({_f(r['after_worst_excess_m'])}) | {_f(r['rms_ratio_worst'])} "
@@ -326,7 +337,7 @@ def console_table(rows: Sequence[dict[str, Any]]) -> str:
     """The same numbers as :func:`table`, aligned for a terminal (two lines a row would not
     fit: one table of detection, one of harm)."""
     det = tables.Table(["model", "Hz", "jumps (events, epochs, max delay)", "bursts", "ramps",
-                        "ramps in time", "frozen", "frozen passed > 1 m (offset)",
+                        "ramps in time", "frozen", "frozen passed > 1 m (live ≤ 1 m, offset)",
                         "multipath"])
     harm = tables.Table(["model", "Hz", "FA > 10 s from events", "FA worst seed (%)",
                          "10 s after: worse than raw", "worst excess (m)",
@@ -337,7 +348,9 @@ def console_table(rows: Sequence[dict[str, Any]]) -> str:
         det.add(r["model"], int(r["rate_hz"]), _kind(r, "jump"), _kind(r, "burst"),
                 _kind(r, "ramp"),
                 f"{ramp.get('ramps_in_time', '–')}/{ramp.get('ramps_required', '–')}",
-                _kind(r, "frozen"), f"{frz.get('good_far', '–')} ({frz.get('good_offset', '–')})",
+                _kind(r, "frozen"),
+                f"{frz.get('good_far', '–')} ({frz.get('good_far_live', '–')}, "
+                f"{frz.get('good_offset', '–')})",
                 _kind(r, "multipath"))
         harm.add(r["model"], int(r["rate_hz"]), f"{r['fa_flagged']}/{r['fa_clean']}",
                  f"{100 * r['fa_worst']:.2f}", f"{r['after_worse']}/{r['after_events']}",
