@@ -99,6 +99,9 @@ class FtConfig:
         "gt": 0.0, "doc": "the hinge test's noise floor (the integrated gyro noise's walk)"})
     gyro_drift_max_turn_deg: float = field(default=10.0, metadata={
         "gt": 0.0, "doc": "the hinge test only while the heading spans at most this (window)"})
+    gyro_bias_hold_deg: float = field(default=10.0, metadata={
+        "ge": 0.0, "doc": "the warm-up's bias line goes on while the heading stays this near "
+        "its end's (0: the later samples their own segment)"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
     gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})

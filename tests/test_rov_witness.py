@@ -300,27 +300,31 @@ def test_hinge_drift_matches_least_squares_through_its_rebuilds() -> None:
 
 def test_slow_drift_found_by_the_hinge_not_by_the_cusums() -> None:
     """0.05 deg/s from 60 s at 1 deg noise, the vehicle holding its heading (+-1.3 deg),
-    seeds 1-10: the CUSUMs alone confirm none within 120 s (the reference mean and the bias
-    fit follow it); the hinge test on compass minus integrated gyro confirms 9 of 10 within
-    45 s (seed 10 not within 120 s; seed 2 is taken back 2.2 s later: a drift this slow is
-    ~1.5 deg from the dead reckoning when found). While the vehicle swings +-12.7 deg the
-    hinge's window restarts (heading span over 10 deg), so it confirms nothing there, as the
-    CUSUMs."""
+    seeds 1-10: the CUSUMs alone confirm 3 of 10, at 33-66 s (the reference mean and the bias
+    fit follow it; none before the warm-up's bias line went on through the hold, fifth pass);
+    the hinge test on compass minus integrated gyro confirms 8 of 10 within 45 s and all 10
+    within 62 s (before: 9 within 45 s, seed 10 never; seeds 1-40: 37 -> 36 within 45 s, 37 ->
+    38 at all). A drift this slow is ~1.5 deg from the dead reckoning when found, so it may be
+    taken back later. While the vehicle swings +-12.7 deg the hinge's window restarts (heading
+    span over 10 deg), so it confirms nothing there, as the CUSUMs."""
     def delay(params: WitnessParams, seed: int, turn: float = 0.2) -> float | None:
         _, ev = _run(300 + 600, "ramp", mag=0.05, seed=seed, params=params, turn_dps=turn)
         return next(((k - 300) * DT for k, e in ev if e == "confirmed"), None)
 
     cusum = [delay(WitnessParams(drift_glr=0.0), s) for s in range(1, 11)]
     hinge = [delay(WitnessParams(), s) for s in range(1, 11)]
-    assert all(d is None for d in cusum), cusum
-    assert sum(d is not None and 0.0 < d <= 45.0 for d in hinge) >= 9, hinge
+    assert sum(d is not None for d in cusum) <= 3, cusum
+    assert all(d is None or d > 30.0 for d in cusum), cusum
+    assert sum(d is not None and 0.0 < d <= 45.0 for d in hinge) >= 8, hinge
+    assert all(d is not None and 0.0 < d <= 65.0 for d in hinge), hinge
     swing = [delay(WitnessParams(), s, 2.0) for s in range(1, 4)]
     assert swing == [delay(WitnessParams(drift_glr=0.0), s, 2.0) for s in range(1, 4)]
 
 
 def _fit_samples_at_step(params: WitnessParams, seed: int) -> tuple[float, float]:
-    """A 20 deg step 15 s after the warm-up: the bias fit's later segment's sample weight
-    just before its confirmation and just after."""
+    """A 20 deg step 15 s after the warm-up: the bias fit's sample weight after the warm-up
+    (its line while the heading is held, and the later segment) just before its confirmation
+    and just after."""
     rng = np.random.default_rng(seed)
     w = GyroWitness(params)
     psi = 40.0
@@ -329,9 +333,9 @@ def _fit_samples_at_step(params: WitnessParams, seed: int) -> tuple[float, float
         psi += r * DT
         w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
         y = psi + float(rng.normal(0.0, 1.0)) + (20.0 if k >= 175 else 0.0)
-        n = w._Sp[0]
+        n = w._S[0] + w._Sp[0]
         if w.update(y % 360.0, DT).confirmed:
-            return n, w._Sp[0]
+            return n, w._S[0] + w._Sp[0]
     raise AssertionError("not confirmed")
 
 
@@ -345,3 +349,20 @@ def test_a_confirmation_feeds_the_delay_lines_trusted_samples_to_the_bias(seed: 
     assert after - before >= 55.0  # ~ (15 - 2) s at 5 Hz, less the suspect's samples
     before, after = _fit_samples_at_step(WitnessParams(fast_margin_s=30.0), seed)
     assert after - before <= 1.0
+
+
+def test_the_warm_ups_bias_line_goes_on_while_the_heading_is_held() -> None:
+    """Holding the heading (+-1.3 deg), the later samples join the warm-up's line: at 50 s
+    (samples up to 35 s fed), seeds 1-10, the bias's RMS error 0.0151 deg/s as a second
+    segment with its own intercept, 0.0121 on the warm-up's line. Swinging +-12.7 deg, the
+    line closes at the first sample 10 deg from the warm-up's last heading."""
+    def rms(hold: float) -> float:
+        e = [_run(250, seed=s, params=WitnessParams(bias_hold_deg=hold), turn_dps=0.2)[0].bias
+             - 0.15 for s in range(1, 11)]
+        return math.sqrt(sum(x * x for x in e) / len(e))
+
+    assert rms(10.0) < 0.013 < 0.014 < rms(0.0)
+    w, _ = _run(250, seed=1, turn_dps=0.2)
+    assert w._S[0] > 150.0 and w._Sp[0] == 0.0
+    w, _ = _run(600, seed=1, turn_dps=2.0)
+    assert w._hold_ref is None and w._Sp[0] > 300.0
