@@ -74,12 +74,13 @@ class DriftResult(NamedTuple):
     ref_t: float  # the oldest reference whose statistic is within 0.6 of the maximum
     ref_b: tuple[float, float]  # its Doppler-free value
     ref_v: tuple[float, float]  # its Doppler velocity
+    g_watch: float = 0.0  # sqrt(Λ_H) of the watched horizon alone (0: not watched, no reference)
 
 
 _new = tuple.__new__
 LEVEL_EVERY_S = 10.0
 LEVEL_KEEP_S = 300.0
-NO_TEST = DriftResult(0.0, 0.0, math.nan, (math.nan, math.nan), (math.nan, math.nan))
+NO_TEST = DriftResult(0.0, 0.0, math.nan, (math.nan, math.nan), (math.nan, math.nan), 0.0)
 
 
 def sigma_at(age_s: float, horizons: Sequence[float], sigmas: Sequence[float]) -> float:
@@ -104,10 +105,11 @@ class DriftTest:
 
     __slots__ = ("_base", "_be", "_bn", "_cal", "_cal_until", "_keep", "_lt_e", "_lt_n", "_lt_t",
                  "_t", "_ve", "_vn", "calibrate_s", "calibrated", "floor_frac", "horizons",
-                 "lag_sd", "quantum", "sigmas")
+                 "lag_sd", "quantum", "sigmas", "watch_s")
 
     def __init__(self, horizons_s: Sequence[float], sigma_m: Sequence[float],
-                 lag_sd_s: float, calibrate_s: float = 0.0, floor_frac: float = 0.2) -> None:
+                 lag_sd_s: float, calibrate_s: float = 0.0, floor_frac: float = 0.2,
+                 watch_s: float = 0.0) -> None:
         where = "[rover.detector]"
         if len(horizons_s) != len(sigma_m) or not horizons_s:
             raise ConfigError(where, "drift_sigma_m", "one value per drift_horizons_s",
@@ -118,6 +120,8 @@ class DriftTest:
         if min(sigma_m) <= 0.0:
             raise ConfigError(where, "drift_sigma_m", "positive values", repr(list(sigma_m)))
         self.horizons = tuple(float(h) for h in horizons_s)
+        # One horizon whose statistic is also reported alone (DriftResult.g_watch; 0: none).
+        self.watch_s = float(watch_s)
         # The calibrated (or configured) σ, and the σ used: with the coordinates' quantum
         # (:meth:`set_quantum`, D6).
         self._base = tuple(float(s) for s in sigma_m)
@@ -257,6 +261,8 @@ class DriftTest:
         hypot, sqrt = math.hypot, math.sqrt
         last_i = -1
         g_max = -1.0
+        g_watch = 0.0
+        watch = self.watch_s
         h0, s0, h_last, s_last = horizons[0], sigmas[0], horizons[-1], sigmas[-1]
         n_h = len(horizons)
         for h in horizons:
@@ -284,6 +290,8 @@ class DriftTest:
             g = sqrt((re * re + rn * rn) / (s * s + dv * dv))
             if not found or g > g_max:  # (D4): max(r[0] for r in found), the first maximum
                 g_max = g
+            if h == watch:
+                g_watch = g
             found.append((g, h, i))
         if not found:
             return NO_TEST
@@ -292,7 +300,8 @@ class DriftTest:
         # every horizon longer than its age, and the oldest such reference is the one most
         # likely from before it began (the isolator anchors its hold there).
         _, h, i = next(r for r in reversed(found) if r[0] >= 0.6 * g_max)
-        return _new(DriftResult, (g_max, h, ts[i], (b_e[i], b_n[i]), (v_e[i], v_n[i])))
+        return _new(DriftResult, (g_max, h, ts[i], (b_e[i], b_n[i]), (v_e[i], v_n[i]),
+                                  g_watch))
 
 def concave_cap(horizons_s: Sequence[float], sigmas: Sequence[float]) -> tuple[float, ...]:
     """σ_H capped at σ_h·√(H/h) from each shorter horizon h (D5).

@@ -123,6 +123,12 @@ class RoverDetectorParams:
     drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
     # Flag (warn) from this statistic on, the fix still passed on as it is (0: off).
     drift_warn_sigmas: float = field(default=4.5, metadata={"ge": 0.0})
+    # ... and from this statistic of the drift_watch_s horizon alone (0: off). The maximum
+    # over five horizons at 4.5 σ flags ~0 clean epochs; one horizon at 4 σ is a budget of its
+    # own for the window a ramp must be found in (10 s): tools/ramp_bound.py shows that its
+    # clean 99.9 % (0.6-1.2 m) is under the 1 m a 0.1 m/s ramp makes there.
+    drift_watch_s: float = field(default=10.0, metadata={"ge": 0.0})
+    drift_watch_sigmas: float = field(default=4.0, metadata={"ge": 0.0})
     drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
     drift_lag_sd_s: float = field(default=0.15, metadata={"ge": 0.0})
     stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
@@ -266,7 +272,7 @@ class RoverIsolator:
     def _make_drift(self, p: RoverDetectorParams) -> None:
         if p.drift_test and p.predictor == "doppler" and p.strategy == "grey":
             self._drift = DriftTest(p.drift_horizons_s, p.drift_sigma_m, p.drift_lag_sd_s,
-                                    p.drift_calibrate_s)
+                                    p.drift_calibrate_s, watch_s=p.drift_watch_s)
             self._hold_p = self._hold_params(p, p.drift_sigma_m)
         else:
             self._drift = None
@@ -506,7 +512,8 @@ class RoverIsolator:
                 or stale_fault):
             # Between the warning and the alarm threshold of the drift test: passed on as it
             # is but flagged, and neither a reference of the drift test nor learned from.
-            warn = dres is not None and 0.0 < p.drift_warn_sigmas < dres.g
+            warn = dres is not None and (0.0 < p.drift_warn_sigmas < dres.g
+                                         or 0.0 < p.drift_watch_sigmas < dres.g_watch)
             if self._rev is not None and b is not None and v is not None:
                 # A step back being confirmed: this fix passes the tests but is compared with
                 # the references of the stepped level; it may end the step.

@@ -310,3 +310,39 @@ def test_a_position_that_repeats_while_the_doppler_moves_is_frozen() -> None:
         run = _receiver_run((150.0, 160.0), position_only=True, quantum=quantum)
         assert 150.3 - 1e-9 <= min(_frozen_at(run)) <= 150.4 + 1e-9
         assert _frozen_at(_receiver_run(quantum=quantum)) == []
+
+
+# ------------------------------------------------------------------ the ramp's own horizon
+
+
+def test_the_watched_horizon_is_reported_alone() -> None:
+    """g_watch is sqrt(Λ_H) of the watched horizon (D4 before the maximum); 0 when unwatched."""
+    for watch, expected in ((10.0, 0.5 / SIG[2]), (0.0, 0.0)):
+        test = DriftTest(H, SIG, 0.0, watch_s=watch)
+        for k in range(31):
+            test.commit(float(k), (0.0, 0.0), (1.0, 0.0))
+        res = test.test(31.0, (0.5, 0.0), (1.0, 0.0))
+        assert res.g == pytest.approx(0.5 / SIG[0])  # the 1 s horizon gives the maximum
+        assert res.g_watch == pytest.approx(expected)
+
+
+def _ramp_flagged_at(watch_sigmas: float, rate_mps: float = 0.09) -> float:
+    """1 Hz, 2 m/s east, exact fixes; a ramp north from t = 200 s: when is it first flagged by
+    the drift test (the Doppler test off: on exact fixes its floor, 0.5 m, would see it)?"""
+    p = replace(RoverDetectorParams(), drift_sigma_m=(0.1, 0.15, 0.2, 0.4, 0.6),
+                drift_calibrate_s=0.0, drift_watch_sigmas=watch_sigmas, doppler_test=False)
+    iso = RoverIsolator(p)
+    for k in range(260):
+        t = float(k)
+        d = iso.step(FixInput(t, (2.0 * t, rate_mps * max(0, k - 199), 0.0), 2.0, 90.0))
+        if d.fault:
+            return t - 199.0
+    return math.inf
+
+
+def test_a_ramp_is_flagged_sooner_on_its_own_horizon() -> None:
+    """A 0.09 m/s ramp: 0.9 m in 10 s, 4.5 σ of the 10 s horizon (σ 0.2 m): the maximum over
+    the horizons at drift_warn_sigmas (4.5) flags it after 10 s, the watched horizon at 4 σ
+    (0.8 m) before."""
+    assert _ramp_flagged_at(4.0) <= 9.0
+    assert _ramp_flagged_at(0.0) > 10.0
