@@ -74,7 +74,8 @@ class DriftResult(NamedTuple):
     ref_t: float  # the oldest reference whose statistic is within 0.6 of the maximum
     ref_b: tuple[float, float]  # its Doppler-free value
     ref_v: tuple[float, float]  # its Doppler velocity
-    g_watch: float = 0.0  # sqrt(Λ_H) of the watched horizon alone (0: not watched, no reference)
+    g_watch: float = 0.0  # sqrt(Λ_H) of the watched horizon alone, its reference at most 1.25 H
+    # old (0: not watched, or no such reference)
 
 
 _new = tuple.__new__
@@ -290,7 +291,7 @@ class DriftTest:
             g = sqrt((re * re + rn * rn) / (s * s + dv * dv))
             if not found or g > g_max:  # (D4): max(r[0] for r in found), the first maximum
                 g_max = g
-            if h == watch:
+            if h == watch and age <= 1.25 * h:  # a reference about H old, not one a gap left
                 g_watch = g
             found.append((g, h, i))
         if not found:
