@@ -123,10 +123,11 @@ class RoverDetectorParams:
     drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
     # Flag (warn) from this statistic on, the fix still passed on as it is (0: off).
     drift_warn_sigmas: float = field(default=4.5, metadata={"ge": 0.0})
-    # ... and from this statistic of the drift_watch_s horizon alone (0: off). The maximum
-    # over five horizons at 4.5 σ flags ~0 clean epochs; one horizon at 4 σ is a budget of its
-    # own for the window a ramp must be found in (10 s): tools/ramp_bound.py shows that its
-    # clean 99.9 % (0.6-1.2 m) is under the 1 m a 0.1 m/s ramp makes there.
+    # Flagged (reason drift_watch, the fix otherwise as if clean) from this statistic of the
+    # drift_watch_s horizon alone (0: off). The maximum over five horizons at 4.5 σ flags ~0
+    # clean epochs; one horizon at 4 σ is a budget of its own for the window a ramp must be
+    # found in (10 s): tools/ramp_bound.py shows that its clean 99.9 % (0.6-1.2 m) is under
+    # the 1 m a 0.1 m/s ramp makes there.
     drift_watch_s: float = field(default=10.0, metadata={"ge": 0.0})
     drift_watch_sigmas: float = field(default=4.0, metadata={"ge": 0.0})
     drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
@@ -512,8 +513,13 @@ class RoverIsolator:
                 or stale_fault):
             # Between the warning and the alarm threshold of the drift test: passed on as it
             # is but flagged, and neither a reference of the drift test nor learned from.
-            warn = dres is not None and (0.0 < p.drift_warn_sigmas < dres.g
-                                         or 0.0 < p.drift_watch_sigmas < dres.g_watch)
+            warn = dres is not None and 0.0 < p.drift_warn_sigmas < dres.g
+            # The ramp's own horizon over its level, below the warning: reported (flagged)
+            # and nothing else; the fix stays a reference and is learned from as before (held
+            # out of the references, a 0.1 m/s ramp's hold took the ramp for a new level and
+            # its end for a fault: 2.58 m worse than the receiver, held-out gm 5 Hz).
+            watch = (not warn and dres is not None
+                     and 0.0 < p.drift_watch_sigmas < dres.g_watch)
             if self._rev is not None and b is not None and v is not None:
                 # A step back being confirmed: this fix passes the tests but is compared with
                 # the references of the stepped level; it may end the step.
@@ -529,6 +535,8 @@ class RoverIsolator:
                 drift.commit(fix.t_s, b, v)
                 if self._steps:
                     self._track_at(b)
+            if watch:
+                return self._accept(z, t, "drift_watch", fault=True)
             return self._accept(z, t, "")
         reasons = (
             (["grey"] if grey_fault else [])
