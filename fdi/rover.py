@@ -123,13 +123,14 @@ class RoverDetectorParams:
     drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
     # Flag (warn) from this statistic on, the fix still passed on as it is (0: off).
     drift_warn_sigmas: float = field(default=4.5, metadata={"ge": 0.0})
-    # Flagged (reason drift_watch, the fix otherwise as if clean) from this statistic of the
-    # drift_watch_s horizon alone (0: off). The maximum over five horizons at 4.5 σ flags ~0
-    # clean epochs; one horizon at 4 σ is a budget of its own for the window a ramp must be
-    # found in (10 s): tools/ramp_bound.py shows that its clean 99.9 % (0.6-1.2 m) is under
-    # the 1 m a 0.1 m/s ramp makes there.
-    drift_watch_s: float = field(default=10.0, metadata={"ge": 0.0})
-    drift_watch_sigmas: float = field(default=4.0, metadata={"ge": 0.0})
+    # Flagged (reason drift_watch, the fix otherwise as if clean) from the drift statistic of
+    # the ramp_window_s horizon alone over ramp_sigmas (0: off). The maximum over five horizons
+    # at 4.5 σ flags ~0 clean epochs; one horizon at 4 σ is a budget of its own for the window
+    # a ramp must be found in (10 s): tools/ramp_bound.py shows that its clean 99.9 %
+    # (0.6-1.2 m) is under the 1 m a 0.1 m/s ramp makes there. (MAVLink parameters
+    # FDI_RAMP_WINDOW and FDI_RAMP_SIGMAS.)
+    ramp_window_s: float = field(default=10.0, metadata={"ge": 0.0})
+    ramp_sigmas: float = field(default=4.0, metadata={"ge": 0.0})
     drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
     drift_lag_sd_s: float = field(default=0.15, metadata={"ge": 0.0})
     stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
@@ -273,7 +274,7 @@ class RoverIsolator:
     def _make_drift(self, p: RoverDetectorParams) -> None:
         if p.drift_test and p.predictor == "doppler" and p.strategy == "grey":
             self._drift = DriftTest(p.drift_horizons_s, p.drift_sigma_m, p.drift_lag_sd_s,
-                                    p.drift_calibrate_s, watch_s=p.drift_watch_s)
+                                    p.drift_calibrate_s, watch_s=p.ramp_window_s)
             self._hold_p = self._hold_params(p, p.drift_sigma_m)
         else:
             self._drift = None
@@ -519,7 +520,7 @@ class RoverIsolator:
             # out of the references, a 0.1 m/s ramp's hold took the ramp for a new level and
             # its end for a fault: 2.58 m worse than the receiver, held-out gm 5 Hz).
             watch = (not warn and dres is not None
-                     and 0.0 < p.drift_watch_sigmas < dres.g_watch)
+                     and 0.0 < p.ramp_sigmas < dres.g_watch)
             if self._rev is not None and b is not None and v is not None:
                 # A step back being confirmed: this fix passes the tests but is compared with
                 # the references of the stepped level; it may end the step.

@@ -330,7 +330,7 @@ def _ramp_flagged_at(watch_sigmas: float, rate_mps: float = 0.09) -> float:
     """1 Hz, 2 m/s east, exact fixes; a ramp north from t = 200 s: when is it first flagged by
     the drift test (the Doppler test off: on exact fixes its floor, 0.5 m, would see it)?"""
     p = replace(RoverDetectorParams(), drift_sigma_m=(0.1, 0.15, 0.2, 0.4, 0.6),
-                drift_calibrate_s=0.0, drift_watch_sigmas=watch_sigmas, doppler_test=False)
+                drift_calibrate_s=0.0, ramp_sigmas=watch_sigmas, doppler_test=False)
     iso = RoverIsolator(p)
     for k in range(260):
         t = float(k)
