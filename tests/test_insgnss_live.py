@@ -282,9 +282,9 @@ def test_the_imu_over_the_routers_autopilot_link(tmp_path: Path) -> None:
     its own); the same filter result as over its own pty, and the recording replays byte for
     byte (the router's packets are recorded as ``imu rx``). The router run is played at 10x
     (1000 IMU datagrams/s of wall clock, not 5000) and rests 60 s (not 40) before the 30 s
-    the gyrocompass needs: with 40 s at 50x the vehicle aligned by the GNSS course in 2 of
-    about 10 full-suite runs (a rest broken by late or lost datagrams, not reproduced: 8 of 8
-    alone under load aligned at rest, one with 21 of 9900 datagrams lost)."""
+    the gyrocompass needs: with 40 s at 50x the vehicle aligned by the GNSS course in 2 of the
+    4 full-suite runs of one session (a rest broken by late or lost datagrams? not reproduced: 8
+    of 8 alone under load aligned at rest, one with 21 of 9900 datagrams lost)."""
     setup = replace(_setup(), sim=replace(_setup().sim, epochs=40, rest_s=60))
     data = sim.generate(setup, "paper-single", 1)
     pty = run_live(setup, data, tmp_path / "pty", seed=1)
