@@ -672,16 +672,17 @@ class RoverIsolator:
         enu = fix.enu
         sig = (enu, fix.speed_mps, fix.course_deg)
         prev = self._prev_sig
+        same_pos = prev is not None and enu == prev[0]
         if prev is not None:  # every pair of fixes, frozen or not
             self._pairs += 1
-            if sig == prev:
-                self._repeats += 1
-                if self._stale_run == 0:
-                    self._whole_since = self._prev_t
-                self._stale_run += 1
-            else:
-                self._stale_run = 0
-        if prev is not None and enu == prev[0]:
+        if same_pos and sig == prev:
+            self._repeats += 1
+            if self._stale_run == 0:
+                self._whole_since = self._prev_t
+            self._stale_run += 1
+        else:
+            self._stale_run = 0
+        if same_pos:
             if self._stale_since is None:
                 self._stale_since = self._prev_t
         else:

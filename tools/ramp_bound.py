@@ -19,7 +19,6 @@ import bisect
 import logging
 import math
 from multiprocessing import Pool
-from typing import Any
 
 import numpy as np
 
@@ -44,16 +43,12 @@ def _run(job: tuple[str, float, int]) -> tuple[str, float, int, float, list[floa
     logging.disable(logging.CRITICAL)
     epochs, truth = H.replay(load_config("rover"), H.scenario(model, seed, rate))
     dt = 1.0 / rate
-    spans: dict[int, list[Any]] = {}
-    for tr in truth:
-        if tr["fault"]:
-            rate_mps = tr.get("fault_rate_mps") or tr["fault_offset_m"] / dt
-            sp = spans.setdefault(tr["fault_event"], [tr["utc"], tr["utc"], tr["fault_kind"],
-                                                     rate_mps])
-            sp[1] = tr["utc"]
+    # The events as the harness scores them (its rate of a ramp, its spans).
+    events = [(e.start_s, e.start_s + e.duration_s - dt, e.kind, e.rate_mps)
+              for e in H.measure(epochs, truth).events]
 
     def clean(u: float) -> bool:
-        return not any(a - H.AFTER_S <= u <= b + H.AFTER_S for a, b, _, _ in spans.values())
+        return not any(a - H.AFTER_S <= u <= b + H.AFTER_S for a, b, _, _ in events)
 
     clean_d: list[float] = []
     ramps: list[float] = []  # per ramp >= MIN_RATE_MPS: the largest statistic in its 10 s
@@ -63,7 +58,7 @@ def _run(job: tuple[str, float, int]) -> tuple[str, float, int, float, list[floa
             s = _stat(chain, ts, i)
             if s is not None and clean(t) and clean(t - HORIZON_S):
                 clean_d.append(s)
-        for a, b, kind, r in spans.values():
+        for a, b, kind, r in events:
             if kind != "ramp" or r < MIN_RATE_MPS - 1e-9:
                 continue
             lo = bisect.bisect_left(ts, a - 1e-6)

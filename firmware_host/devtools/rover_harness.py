@@ -85,7 +85,7 @@ class EventResult:
     max_offset_m: float
     detected: bool
     delay_s: float | None
-    faulty: int  # epochs at or above the minimum size (frozen: all)
+    faulty: int  # epochs at or above the minimum size (frozen: all but the first)
     caught: int
     frozen_good_far: int  # accepted while frozen, > 1 m from the truth
     frozen_good_far_live: int  # ... of them, those where the live receiver was within 1 m
