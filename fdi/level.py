@@ -25,7 +25,11 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
   ``|b_a − b_o| ≥ side_sigmas·σ(30 s)`` (not grown with the age: the DGPS error is bounded,
   and the ratio carries the decision). That is the end of a slow fault the
   drift test missed (the old track is the faulty side), told apart from a multipath step
-  (the new fixes are the faulty side: the old track is at the older level);
+  (the new fixes are the faulty side: the old track is at the older level). In a hold on a
+  slow fault the fixes must have *stepped* there (by half the old track's distance from that
+  level or more, at most ``level_lag_s`` before) or stay there, consistent with their own
+  Doppler, for ``level_lag_s``: a ramp still running passes, for a second or two, where some
+  older level of a wandering DGPS error happens to be;
 * in a hold on a slow fault, the fixes are right again when they step back towards the old
   track and stay consistent with their own Doppler for L: their distance from it falls by
   more than half within L, by more than ``exit_sigmas`` of the 1 s σ (a drift ends at once;
@@ -80,6 +84,7 @@ class HoldParams:
     exit_lag_s: float
     output_s: float
     max_s: float
+    level_lag_s: float = 0.0  # a slow hold's "new_level" lag (0: exit_lag_s, as an abrupt one)
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,15 +97,16 @@ class HoldStep:
 class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
-    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_recent", "anchor_b", "anchor_t",
-                 "anchor_v", "matched_t", "old", "p", "prefer_raw", "slow", "stale_m", "t0",
-                 "was_raw")
+    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_old_b", "_old_since", "_prev",
+                 "_recent", "_step_m", "_step_t", "anchor_b", "anchor_t", "anchor_v", "matched_t",
+                 "old", "p", "prefer_raw", "slow", "stale_m", "t0", "was_raw")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
                  anchor_b: tuple[float, float], anchor_v: tuple[float, float],
                  stale_m: float = 0.0,
                  old: list[tuple[float, tuple[float, float]]] | None = None,
-                 slow: bool = True, prefer_raw: bool = False) -> None:
+                 slow: bool = True, prefer_raw: bool = False,
+                 last_step: tuple[float, float] | None = None) -> None:
         self.p = p
         self.prefer_raw = prefer_raw  # the fixes stepped back to an older level before it
         self.t0 = t0
@@ -114,6 +120,12 @@ class LevelHold:
         self._agree_since: float | None = None
         self.was_raw = False  # the last epoch passed the receiver's fix on
         self._agree_b = (0.0, 0.0)
+        self._old_since: float | None = None  # the new fixes at an older level since, and
+        self._old_b = (0.0, 0.0)  # ... their Doppler-free value then
+        self._prev: tuple[float, float, float] | None = None  # the last epoch's (t, b_e, b_n)
+        # The last epoch the fixes stepped (beyond exit_sigmas of their noise), and by how
+        # much (m): the caller's, from before the hold, until the hold sees one.
+        self._step_t, self._step_m = last_step if last_step is not None else (-math.inf, 0.0)
         self._dev: deque[tuple[float, float]] = deque()  # (t, |b − b_a|) over 2L
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
         self._long: deque[tuple[float, float, float]] = deque()  # ... over CONSISTENT_S
@@ -135,6 +147,13 @@ class LevelHold:
         var = s * s + dv * dv + (0.5 * self.stale_m) ** 2
         re, rn = b[0] - self.anchor_b[0], b[1] - self.anchor_b[1]
         g = math.sqrt((re * re + rn * rn) / var)
+        # Did the fixes step since the previous epoch (beyond exit_sigmas of the drift σ)?
+        pv = self._prev
+        if pv is not None:
+            jump = math.hypot(b[0] - pv[1], b[1] - pv[2])
+            if jump > p.exit_sigmas * sigma_at(max(t - pv[0], 1e-3), p.horizons_s, p.sigma_m):
+                self._step_t, self._step_m = t, jump
+        self._prev = (t, b[0], b[1])
         # The receiver against its own Doppler over the fixed lag.
         rec = self._recent
         rec.append((t, b[0], b[1]))
@@ -171,16 +190,38 @@ class LevelHold:
                     and before - dev >= p.exit_sigmas * p.sigma_m[0]):
                 return HoldStep("ended", track, g)
         at_old = math.nan
+        e_old = math.nan  # the old track's distance from that level
         if self.old and not stale:
             s_side = p.side_sigmas * sigma_at(30.0, p.horizons_s, p.sigma_m)
             for t_o, (oe, on) in self.old:
                 e_new = math.hypot(b[0] - oe, b[1] - on)
                 e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)
                 if e_new <= e_track / 3.0 and e_track >= s_side:
-                    at_old = t_o
+                    at_old, e_old = t_o, e_track
                     break
+        # How long the new fixes have sat at an older level, consistent with their own Doppler
+        # since (within exit_sigmas of the drift σ of where they were then).
+        if math.isnan(at_old) or not self_ok or (self._old_since is not None and math.hypot(
+                b[0] - self._old_b[0], b[1] - self._old_b[1]) > p.exit_sigmas * sigma_at(
+                max(t - self._old_since, 1e-3), p.horizons_s, p.sigma_m)):
+            self._old_since = None
+        if self._old_since is None and not math.isnan(at_old) and self_ok:
+            self._old_since, self._old_b = t, b
+        # A slow hold whose fixes *drifted* to the older level asks for level_lag_s of it: a
+        # ramp that is still running sits, for a second or two, where some older level of a
+        # wandering DGPS error happens to be (the ramp then ran on unflagged, and the next
+        # hold anchored inside it). Fixes that *stepped* (between two epochs, by half the old
+        # track's distance from that level or more) at most level_lag_s before they arrived
+        # there are a fault's end: the short lag, as before.
+        need = 0.0
+        if (self.slow and self.stale_m == 0.0 and p.level_lag_s > 0.0
+                and self._old_since is not None
+                and (self._old_since - self._step_t > p.level_lag_s + 1e-9
+                     or not self._step_m >= 0.5 * e_old)):
+            need = p.level_lag_s
         if (not math.isnan(at_old) and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
-                and t - rec[0][0] >= p.exit_lag_s - 1e-9):
+                and t - rec[0][0] >= p.exit_lag_s - 1e-9
+                and self._old_since is not None and t - self._old_since >= need - 1e-9):
             self.matched_t = at_old
             return HoldStep("new_level", track, g)
         # A slow hold whose receiver has been consistent with its own Doppler at every

@@ -145,6 +145,9 @@ class RoverDetectorParams:
     hold_exit_sigmas: float = field(default=3.0, metadata={"gt": 0.0})
     hold_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
     hold_exit_s: float = field(default=1.0, metadata={"ge": 0.0})  # the short fixed lag
+    # A slow hold's (a drift) "new_level": the new fixes at an older level this long (0: as
+    # an abrupt one's, hold_exit_s).
+    hold_level_s: float = field(default=10.0, metadata={"ge": 0.0})
     hold_output_s: float = field(default=10.0, metadata={"ge": 0.0})  # then alarm, no output
     hold_max_s: float = field(default=120.0, metadata={"gt": 0.0})  # then the receiver again
     # An abrupt step the track went on to accept (a multipath step) is remembered this long:
@@ -260,6 +263,7 @@ class RoverIsolator:
         self._rev: tuple[float, tuple[float, float], float, int] | None = None
         self._prev_b: tuple[float, float] | None = None  # the last epoch's b ...
         self._prev_bt = 0.0  # ... and its time
+        self._last_step: tuple[float, float] | None = None  # the last step of b: (t, m)
         # The coordinates' quantum per axis: the smallest non-zero change between consecutive
         # fixes (fdi/drift.py, D6); inf until seen.
         self._last_e = self._last_n = math.nan
@@ -269,7 +273,7 @@ class RoverIsolator:
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
         return HoldParams(p.drift_horizons_s, sigma_m, p.drift_lag_s, p.drift_lag_sd_s,
                           p.hold_exit_sigmas, p.hold_side_sigmas, p.hold_exit_s,
-                          p.hold_output_s, p.hold_max_s)
+                          p.hold_output_s, p.hold_max_s, p.hold_level_s)
 
     def _make_drift(self, p: RoverDetectorParams) -> None:
         if p.drift_test and p.predictor == "doppler" and p.strategy == "grey":
@@ -299,6 +303,7 @@ class RoverIsolator:
                 self._steps.clear()
         self._rev = None
         self._prev_b = None  # the displacement's origin moves
+        self._last_step = None
         self._acc_hist.clear()
         lv = self._last_v or (0.0, 0.0)
         self._acc_hist.append((z[0], z[1], 0.0, 0.0, lv[0], lv[1]))
@@ -465,6 +470,10 @@ class RoverIsolator:
             b = (z[0] - d[0] - lag * v[0], z[1] - d[1] - lag * v[1])
         prev_b, prev_bt = self._prev_b, self._prev_bt
         self._prev_b, self._prev_bt = b, fix.t_s
+        if b is not None and prev_b is not None and self._is_step(fix.t_s, b, prev_b, prev_bt):
+            # The fixes stepped (the hold's "new_level" takes a step to an older level sooner
+            # than a drift there).
+            self._last_step = (fix.t_s, math.hypot(b[0] - prev_b[0], b[1] - prev_b[1]))
         if self._hold is not None:
             if b is None or v is None:  # the Doppler chain broke: no old track to hold
                 return self._raise_alarm(z, r, self._hold_reason + "+no_doppler", t)
@@ -582,7 +591,8 @@ class RoverIsolator:
                 and self._enter_hold(
                     fix.t_s, dres if drift_fault else None, "+".join(reasons),
                     slow=stale_fault or (drift_fault and not abrupt and dres is not None
-                                         and dres.horizon_s > 1.0))):
+                                         and dres.horizon_s > 1.0),
+                    last_step=self._last_step)):
             return self._hold_step(fix, z, r, d, v, b, stale, dt, t)
         # Isolation: replace the faulty fix by its prediction before the filter update (with
         # R inflated by replaced_r_factor: a prediction is not a measurement).
@@ -713,7 +723,7 @@ class RoverIsolator:
         return p.stale_p > 0.0 and rate**run <= p.stale_p
 
     def _enter_hold(self, t_s: float, dres: DriftResult | None, reason: str,
-                    slow: bool) -> bool:
+                    slow: bool, last_step: tuple[float, float] | None = None) -> bool:
         """Start a hold on the last trusted reference before the fault; False if none."""
         drift, hp = self._drift, self._hold_p
         assert drift is not None and hp is not None
@@ -736,7 +746,7 @@ class RoverIsolator:
         # The hold's clock starts with the run of replacements that led to it (seconds).
         t0 = self._run_t0 if self._consec > 0 else t_s
         self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow,
-                               prefer_raw=self._stepped_back)
+                               prefer_raw=self._stepped_back, last_step=last_step)
         self._hold_reason = reason
         self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
         return True

@@ -141,6 +141,35 @@ def test_hold_takes_the_new_fixes_when_they_sit_at_the_older_level() -> None:
     assert "new_level" in acts and acts.index("new_level") <= 12
 
 
+HP_LEVEL = replace(HP, level_lag_s=10.0)
+
+
+def test_a_slow_hold_does_not_take_a_running_ramp_for_an_older_level() -> None:
+    """A 0.1 m/s ramp (10 Hz) whose fixes pass the level of 60 s ago: with the short lag the
+    hold takes them for the new level within 1 s; with level_lag_s it keeps the old track."""
+    ramp = [(1.0 + 0.01 * j, 0.0) for j in range(200)]
+    short = LevelHold(HP, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
+    acts = _hold_run(short, ramp, 100.0, 0.1)
+    assert "new_level" in acts and acts.index("new_level") <= 12
+    held = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
+    assert "new_level" not in _hold_run(held, ramp, 100.0, 0.1)
+
+
+def test_a_slow_hold_takes_fixes_that_stepped_to_an_older_level_at_once() -> None:
+    """The end of a fault: the fixes step from the old track to the older level (a step the
+    caller saw before the hold counts); fixes that drifted there and stay are taken after the
+    lag."""
+    stepped = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0),
+                        old=[(40.0, (1.5, 0.0))], last_step=(100.0, 1.45))
+    acts = _hold_run(stepped, [(1.45, 0.0)] * 150, 100.0, 0.1)
+    assert "new_level" in acts and acts.index("new_level") <= 12
+    drifted = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0),
+                        old=[(40.0, (1.5, 0.0))])
+    acts = _hold_run(drifted, [(1.45, 0.0)] * 150, 100.0, 0.1)
+    assert "new_level" in acts and 99 <= acts.index("new_level") <= 102
+    assert set(acts[:99]) == {"raw"}  # meanwhile the receiver's fix is passed on, flagged
+
+
 def test_hold_keeps_the_old_track_through_a_multipath_step() -> None:
     """A 1.5 m step: the old track is at the older level, the new fixes are not."""
     hold = LevelHold(HP, 100.0, 99.0, (0.05, 0.0), (1.0, 0.0), old=[(40.0, (0.0, 0.0))],
