@@ -249,6 +249,30 @@ def test_a_step_back_after_a_missed_ramp_passes_the_receiver_on() -> None:
         assert o is None or o <= raw + 1e-6, (t, raw, o)
 
 
+def test_the_end_of_a_ramp_within_two_sigmas_is_passed_on() -> None:
+    """A missed 0.008 m/s ramp for 80 s leaves the track 0.64 m off the level before it:
+    1.6 σ(30 s). Its end, a step back to that level, is passed on at back_side_sigmas = 1;
+    at 2 (the hold's side test) the track was held 0.64 m off, worse than the receiver."""
+    def end(back_side: float) -> list[tuple[float, float | None, str]]:
+        p = replace(RoverDetectorParams(), drift_sigma_m=(0.1, 0.15, 0.25, 0.4, 0.6),
+                    drift_calibrate_s=0.0, drift_warn_sigmas=0.0, back_side_sigmas=back_side)
+        iso = RoverIsolator(p)
+        out = []
+        for k in range(291):
+            t = float(k)
+            err_n = 0.02 * math.sin(0.3 * k) + (0.008 * (k - 199) if 200 <= k < 280 else 0.0)
+            d = iso.step(FixInput(t, (2.0 * t, err_n, 0.0), 2.0, 90.0))
+            o = d.out_enu
+            out.append((abs(err_n), None if o is None else math.hypot(o[0] - 2.0 * t, o[1]),
+                        d.reason))
+        return out[280:]
+    passed = end(1.0)
+    assert "step_back" in passed[0][2]
+    assert all(o is not None and o <= raw + 1e-6 for raw, o, _ in passed)
+    held = end(2.0)
+    assert held[0][1] is not None and held[0][1] > 0.5
+
+
 def test_a_jump_is_still_replaced_by_the_prediction() -> None:
     run = _isolator_run(0.0, jump_at=150)
     d = run[150][3]
