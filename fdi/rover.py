@@ -120,6 +120,10 @@ class RoverDetectorParams:
     drift_horizons_s: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0)
     drift_sigma_m: tuple[float, ...] = (0.3, 0.4, 0.6, 0.9, 1.4)
     drift_calibrate_s: float = field(default=300.0, metadata={"ge": 0.0})  # 0: as configured
+    # A provisional calibration after drift_precal_s (0: none): the same robust estimate x
+    # drift_prefactor, never wider than drift_sigma_m, until the calibration proper.
+    drift_precal_s: float = field(default=120.0, metadata={"ge": 0.0})
+    drift_prefactor: float = field(default=2.0, metadata={"ge": 1.0})
     drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
     # Flag (warn) from this statistic on, the fix still passed on as it is (0: off).
     drift_warn_sigmas: float = field(default=4.5, metadata={"ge": 0.0})
@@ -281,7 +285,9 @@ class RoverIsolator:
     def _make_drift(self, p: RoverDetectorParams) -> None:
         if p.drift_test and p.predictor == "doppler" and p.strategy == "grey":
             self._drift = DriftTest(p.drift_horizons_s, p.drift_sigma_m, p.drift_lag_sd_s,
-                                    p.drift_calibrate_s, watch_s=p.ramp_window_s)
+                                    p.drift_calibrate_s, watch_s=p.ramp_window_s,
+                                    precal_s=p.drift_precal_s,
+                                    precal_factor=p.drift_prefactor)
             self._hold_p = self._hold_params(p, p.drift_sigma_m)
         else:
             self._drift = None

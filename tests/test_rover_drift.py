@@ -113,6 +113,41 @@ def test_calibration_once_at_start_then_frozen() -> None:
     assert test.sigmas == frozen
 
 
+def test_a_provisional_calibration_sharpens_the_watched_horizon_only() -> None:
+    """After precal_s the watched horizon's statistic uses the same robust estimate x
+    precal_factor (never wider than configured); the σ that hold or withhold fixes stay as
+    configured until the calibration proper at calibrate_s."""
+    rng = np.random.default_rng(5)
+    dt = 0.2
+    err = _walk(rng, 2000, dt, tau=60.0, sigma=0.2)
+    configured = (1.0, 1.0, 1.0, 1.0)
+    test = DriftTest(H[:4], configured, 0.0, calibrate_s=300.0, floor_frac=0.02,
+                     watch_s=10.0, precal_s=120.0, precal_factor=2.0)
+    plain = DriftTest(H[:4], configured, 0.0, calibrate_s=120.0, floor_frac=0.02)
+    off = DriftTest(H[:4], configured, 0.0, calibrate_s=300.0, floor_frac=0.02, watch_s=10.0)
+    for k in range(2000):
+        t = k * dt
+        b = (err[k, 0], err[k, 1])
+        if t in (100.0, 150.0, 250.0):  # a 0.5 m step against the references 10 s before
+            step = (b[0] + 0.5, b[1])
+            r, r_off = test.test(t, step, (0.0, 0.0)), off.test(t, step, (0.0, 0.0))
+            assert r.g == pytest.approx(r_off.g)  # the tests that hold fixes: unchanged
+            if t < 120.0:
+                assert r.g_watch == pytest.approx(r_off.g_watch)
+            else:  # 2 x the 120 s calibration's σ(10 s), itself under 0.5
+                ref = test.at_or_before(t - 10.0)
+                assert ref is not None
+                size = math.hypot(step[0] - ref[1][0], step[1] - ref[1][1])
+                assert r.g_watch == pytest.approx(size / (2.0 * plain.sigmas[2]), rel=0.01)
+                assert r.g_watch > 2.0 * r_off.g_watch
+        for d in (test, plain, off):
+            d.commit(t, b, (0.0, 0.0))
+        if t < 299.0:
+            assert test.sigmas == configured and not test.calibrated
+    assert plain.calibrated and plain.sigmas[2] < 0.5
+    assert test.calibrated and test.sigmas == off.sigmas  # the same sample, the same σ
+
+
 HP = HoldParams(H, SIG, 0.0, 0.0, exit_sigmas=3.0, side_sigmas=2.0, exit_lag_s=1.0,
                 output_s=10.0, max_s=120.0)
 
