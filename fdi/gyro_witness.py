@@ -261,6 +261,8 @@ class WitnessParams:
     bias_hold_deg: float = 10.0  # the warm-up's line goes on while the heading stays this near
     comp_drift_glr: float = 30.0  # the hinge test on the compensated compass (0: off)
     comp_drift_bias_sd_dps: float = 0.005  # ... the bias before it known to no better than this
+    drift_recover_s: float = 20.0  # after it, the compass taken back only once the slope of
+    drift_recover_max_dps: float = 0.05  # ... its innovation over this long is within this
 
 
 @dataclass(frozen=True)
@@ -319,6 +321,10 @@ class GyroWitness:
         self.fault = False
         # innovations (output, test) while the compass agrees again after a fault
         self._agree: deque[tuple[float, float]] = deque(maxlen=p.recover_samples)
+        # after a drift under a compensation: (t, nu_o clipped at the gate) of the live
+        # compass, and whether the recovery also needs it to have stopped (_not_drifting)
+        self._agree_long: deque[tuple[float, float]] = deque()
+        self._recover_still = False
         self._run: deque[tuple[int, float]] = deque(maxlen=10)  # the last innovations
         self.nu_ref = 0.0
         self._suspect_k = 0
@@ -403,9 +409,16 @@ class GyroWitness:
                 self._agree.append((nu_o, nu))
             else:
                 self._agree.clear()
+            if repeating:
+                self._agree_long.clear()
+            elif self._recover_still:
+                self._agree_long.append((self.t, max(-gate, min(gate, nu_o))))
+                while self._agree_long[0][0] < self.t - p.drift_recover_s - 1e-9:
+                    self._agree_long.popleft()
             n_ok = len(self._agree)
             mean_o = sum(a for a, _ in self._agree) / n_ok if n_ok else 0.0
-            if n_ok >= p.recover_samples and abs(mean_o) <= self._recover_mean:
+            if (n_ok >= p.recover_samples and abs(mean_o) <= self._recover_mean
+                    and self._not_drifting()):
                 self.fault = self.suspect = False
                 self.clear()
                 self._recover_mean = p.recover_gate_deg
@@ -414,6 +427,8 @@ class GyroWitness:
                 self.psi += mean_o
                 self.psi_t += sum(b for _, b in self._agree) / n_ok
                 self._agree.clear()
+                self._agree_long.clear()
+                self._recover_still = False
                 recovered = True
             if not recovered and self._comp_ok:
                 confirmed = self._compensate(nu_o, nu, sigma)
@@ -459,6 +474,7 @@ class GyroWitness:
             self.fault = True
             self.suspect = True
             self._agree.clear()
+            self._recover_still = False
             self._rollback()
             self._end_comp()
             self._comp_ok = p.comp_samples > 0 and self.confirmed_fast
@@ -470,6 +486,7 @@ class GyroWitness:
             self.confirmed_fast = False
             self.fault = self.suspect = True
             self._agree.clear()
+            self._recover_still = False
             self._rollback(self.k - drift_lag, fast=True)
             self._end_comp()
             # a slow drift is small when found (0.05 deg/s: ~1.8 deg): taken back only once
@@ -670,6 +687,24 @@ class GyroWitness:
               (self.gs_pos / p.slow_h, 2), (self.gs_neg / p.slow_h, 3))
         return max(gs)[1]
 
+    def _not_drifting(self) -> bool:
+        """After a drift confirmed under a compensation: the slope of the innovation (clipped
+        at the recovery's gate) over the last ``drift_recover_s`` is within
+        ``drift_recover_max_dps`` (a drifting compass crosses the dead reckoning: within the
+        gate for 2 s, its mean near 0, and still drifting); always True otherwise."""
+        p = self.p
+        if not self._recover_still:
+            return True
+        pts = self._agree_long  # (kept to drift_recover_s by update)
+        if not pts or pts[0][0] > self.t - p.drift_recover_s + self._dt + 1e-9:
+            return False
+        n = len(pts)
+        mt = sum(q[0] for q in pts) / n
+        mx = sum(q[1] for q in pts) / n
+        stt = sum((q[0] - mt) ** 2 for q in pts)
+        slope = sum((q[0] - mt) * (q[1] - mx) for q in pts) / stt
+        return abs(slope) <= p.drift_recover_max_dps
+
     def _end_comp(self, keep_segment: bool = False) -> None:
         """End the compensation; its compass segment stays in the bias fit only with
         ``keep_segment`` (the compass came back: the samples fed were a level's)."""
@@ -762,6 +797,8 @@ class GyroWitness:
             self._end_comp()
             self._recover_mean = min(p.recover_gate_deg,
                                      0.5 * abs(self._y_unw - off - self.psi))
+            self._recover_still = p.drift_recover_s > 0.0
+            self._agree_long.clear()
             return True
         if abs(x) >= p.jump_sigmas:
             return False
@@ -795,6 +832,7 @@ class GyroWitness:
         self.fault = self.suspect = True
         self.var.frozen = True
         self._agree.clear()
+        self._recover_still = False
         self._rollback(self.k - samples_back, fast=True)
 
     def _rollback(self, k0: int | None = None, fast: bool | None = None) -> None:
