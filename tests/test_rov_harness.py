@@ -117,8 +117,9 @@ def test_a_drift_after_a_compensated_step_is_confirmed_on_the_nonlinear_plant(
     """A 10 deg step at 40 s, then +-0.1 deg/s from 60 s (docs/rov.md, seventh pass): the
     drift is confirmed as a second fault in every run (goal 40 s; measured worst 25.0 s,
     seed 4). SHORTFALL: the heading error from the drift's start on, goal 3 deg, measured
-    3.75 (seed 3, ramp -0.1): the step's offset learned ~1 deg off, then dead reckoning on a
-    bias 0.018 deg/s off (before this pass: never confirmed, 9.26 deg)."""
+    3.09 (seed 3, ramp +0.1): the step's offset learned ~1 deg off, then dead reckoning on a
+    bias 0.018 deg/s off (before this pass: never confirmed, 9.26 deg; with the drift
+    confirmed but the drifting compass taken back as it crossed the dead reckoning: 3.75)."""
     res = step_then_drift(cfg, "nonlinear", SEEDS)
     assert res["delay_s"]["worst"] is not None and res["delay_s"]["worst"] <= 40.0
-    assert res["err_after_deg"]["worst"] <= 3.9
+    assert res["err_after_deg"]["worst"] <= 3.3
