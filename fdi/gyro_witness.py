@@ -123,11 +123,14 @@ class HingeDrift:
     the newest, subtract the one leaving), rebuilt from the buffer every ``window`` samples
     about its oldest sample, so that their rounding does not accumulate."""
 
-    def __init__(self, window: int, lags: tuple[int, ...]) -> None:
+    def __init__(self, window: int, lags: tuple[int, ...], min_baseline: int | None = None
+                 ) -> None:
         if not lags or max(lags) >= window:
             raise ValueError("HingeDrift: lags must be non-empty and shorter than the window")
         self.window = window
         self.lags = lags
+        # a lag L is tested once L + min_baseline samples are in (None: 2 L, or the window)
+        self.min_baseline = min_baseline
         self._buf: deque[tuple[float, float]] = deque()  # (t, z) about the reference
         self._ref = (0.0, 0.0)
         self._S = [0.0] * 6  # 1, t, t^2, z, t z, z^2 over the window
@@ -188,15 +191,25 @@ class HingeDrift:
         if self._pushes % self.window == 0:
             self._rebuild()
 
-    def test(self, sigma: float) -> tuple[float, int]:
-        """Evaluate the next lag; ``(ratio, lag)``, the largest of the lags' latest ratios."""
+    def test(self, sigma: float, prior: tuple[float, float] | None = None) -> tuple[float, int]:
+        """Evaluate the next lag; ``(ratio, lag)``, the largest of the lags' latest ratios.
+
+        ``prior = (beta0, info)``: the line's slope is also known from elsewhere as beta0 with
+        the information ``info`` (s^2, as ``sum (t - mean t)^2`` of samples with this noise):
+        both fits get the pseudo-observation, i.e. the window is fitted jointly with that
+        other segment (its own intercept, the slope shared)."""
         j = self._i % len(self.lags)
         self._i += 1
         L = self.lags[j]
         stat = 0.0
         n = len(self._buf)
-        if n >= min(self.window, 2 * L):
+        need = min(self.window, 2 * L if self.min_baseline is None else L + self.min_baseline)
+        if n >= need:
             N, St, Stt, Sz, Stz, Szz = self._S
+            if prior is not None:  # + info (beta - beta0)^2 in both residual sums
+                Stt += prior[1]
+                Stz += prior[1] * prior[0]
+                Szz += prior[1] * prior[0] ** 2
             m, s1, s2, sz, stz = self._L[j]
             t0 = self._buf[n - L][0]
             h1 = s1 - t0 * m  # sums of h = t - t0 over the newest L samples
@@ -246,6 +259,10 @@ class WitnessParams:
     drift_sigma_min_deg: float = 0.75  # its noise floor (the integrated gyro noise's walk)
     drift_max_turn_deg: float = 10.0  # ... only while the heading spans at most this
     bias_hold_deg: float = 10.0  # the warm-up's line goes on while the heading stays this near
+    comp_drift_glr: float = 30.0  # the hinge test on the compensated compass (0: off)
+    comp_drift_bias_sd_dps: float = 0.005  # ... the bias before it known to no better than this
+    drift_recover_s: float = 20.0  # after it, the compass taken back only once the slope of
+    drift_recover_max_dps: float = 0.05  # ... its innovation over this long is within this
 
 
 @dataclass(frozen=True)
@@ -279,6 +296,7 @@ class GyroWitness:
         self._comp_delayed: deque[tuple[float, float]] = deque()  # (t, z) not yet fed
         self.info = 0.0  # the bias fit's slope information, s^2 (bias sd = sigma/sqrt(info))
         self.hinge: HingeDrift | None = None  # made at the first test (the period known)
+        self._hinge_c: HingeDrift | None = None  # ... the one under a step's compensation
         self.drift_stat = 0.0  # the hinge test's ratio, this step
         self._drift_lag = 0  # ... and its lag (samples)
         self._recover_mean = p.recover_gate_deg  # the recovery's gate on the mean, deg
@@ -303,6 +321,10 @@ class GyroWitness:
         self.fault = False
         # innovations (output, test) while the compass agrees again after a fault
         self._agree: deque[tuple[float, float]] = deque(maxlen=p.recover_samples)
+        # after a drift under a compensation: (t, nu_o clipped at the gate) of the live
+        # compass, and whether the recovery also needs it to have stopped (_not_drifting)
+        self._agree_long: deque[tuple[float, float]] = deque()
+        self._recover_still = False
         self._run: deque[tuple[int, float]] = deque(maxlen=10)  # the last innovations
         self.nu_ref = 0.0
         self._suspect_k = 0
@@ -320,6 +342,7 @@ class GyroWitness:
         self.offset: float | None = None
         self._comp_ok = False
         self._gc = [0.0, 0.0]
+        self._comp_prior: tuple[float, float] | None = None  # (z's slope, info) before it
 
     @property
     def ready(self) -> bool:
@@ -386,9 +409,16 @@ class GyroWitness:
                 self._agree.append((nu_o, nu))
             else:
                 self._agree.clear()
+            if repeating:
+                self._agree_long.clear()
+            elif self._recover_still:
+                self._agree_long.append((self.t, max(-gate, min(gate, nu_o))))
+                while self._agree_long[0][0] < self.t - p.drift_recover_s - 1e-9:
+                    self._agree_long.popleft()
             n_ok = len(self._agree)
             mean_o = sum(a for a, _ in self._agree) / n_ok if n_ok else 0.0
-            if n_ok >= p.recover_samples and abs(mean_o) <= self._recover_mean:
+            if (n_ok >= p.recover_samples and abs(mean_o) <= self._recover_mean
+                    and self._not_drifting()):
                 self.fault = self.suspect = False
                 self.clear()
                 self._recover_mean = p.recover_gate_deg
@@ -397,13 +427,15 @@ class GyroWitness:
                 self.psi += mean_o
                 self.psi_t += sum(b for _, b in self._agree) / n_ok
                 self._agree.clear()
+                self._agree_long.clear()
+                self._recover_still = False
                 recovered = True
             if not recovered and self._comp_ok:
-                self._compensate(nu_o, nu, sigma)
+                confirmed = self._compensate(nu_o, nu, sigma)
             elif recovered:
                 self._end_comp(keep_segment=True)
-            return WitnessStep(self.psi, nu, 0.0, sigma, self.suspect, False, False, recovered,
-                               False)
+            return WitnessStep(self.psi, nu, 0.0, sigma, self.suspect, confirmed, False,
+                               recovered, False)
         self.g_pos = max(0.0, self.g_pos + s - p.kappa)
         self.g_neg = max(0.0, self.g_neg - s - p.kappa)
         xs = max(-p.slow_clip, min(p.slow_clip, x))
@@ -442,6 +474,7 @@ class GyroWitness:
             self.fault = True
             self.suspect = True
             self._agree.clear()
+            self._recover_still = False
             self._rollback()
             self._end_comp()
             self._comp_ok = p.comp_samples > 0 and self.confirmed_fast
@@ -453,6 +486,7 @@ class GyroWitness:
             self.confirmed_fast = False
             self.fault = self.suspect = True
             self._agree.clear()
+            self._recover_still = False
             self._rollback(self.k - drift_lag, fast=True)
             self._end_comp()
             # a slow drift is small when found (0.05 deg/s: ~1.8 deg): taken back only once
@@ -485,22 +519,37 @@ class GyroWitness:
         return WitnessStep(self.psi, nu, level, sigma, self.suspect, confirmed, dismissed, False,
                            burst)
 
-    def _drift_test(self, nu_o: float, sigma: float, skip: bool, step: bool) -> int:
+    def _drift_test(self, nu_o: float, sigma: float, skip: bool, step: bool,
+                    glr: float | None = None, offset: float = 0.0,
+                    prior: tuple[float, float] | None = None) -> int:
         """The hinge test (:class:`HingeDrift`) on ``z = y - sum r dt``, the compass clipped
         at ``clip`` sigmas of the output heading (outliers, spikes); the lag (samples) of a
         confirmed drift, else 0. The samples of a noise burst or a jump (``skip``: a spike,
         an outlier, a step's first sample; a slow drift never jumps) are not pushed; while a
-        fast CUSUM is rising (``step``) the CUSUMs judge, not this test."""
+        fast CUSUM is rising (``step``) the CUSUMs judge, not this test. Under a step's
+        compensation ``nu_o`` is the compensated innovation, ``offset`` the step's and ``glr``
+        the level (``comp_drift_glr``)."""
         p = self.p
-        if p.drift_glr <= 0.0 or skip:
+        level = p.drift_glr if glr is None else glr
+        if level <= 0.0 or skip:
             return 0
         lim = p.clip * sigma
         c_o = max(-lim, min(lim, nu_o))
-        if self.hinge is None:
-            nw = max(12, round(p.drift_window_s / self._dt))
-            self.hinge = HingeDrift(nw, tuple(nw * i // 8 for i in range(1, 7)))
-        self.hinge.push(self.t, self._y_unw - (nu_o - c_o) - self._G)
-        stat, lag = self.hinge.test(max(sigma, p.drift_sigma_min_deg))
+        nw = max(12, round(p.drift_window_s / self._dt))
+        if prior is None:
+            if self.hinge is None:
+                self.hinge = HingeDrift(nw, tuple(nw * i // 8 for i in range(1, 7)))
+            hinge = self.hinge
+        else:
+            # under a compensation the window starts at the offset's learning and the slope
+            # before the drift is known (the prior): the hinge is tested from one lag of
+            # baseline on, at lags of 1/16 of the window (its onset undoes the corrections)
+            if self._hinge_c is None:
+                self._hinge_c = HingeDrift(nw, tuple(nw * i // 16 for i in range(1, 13)),
+                                           min_baseline=nw // 16)
+            hinge = self._hinge_c
+        hinge.push(self.t, self._y_unw - offset - (nu_o - c_o) - self._G)
+        stat, lag = hinge.test(max(sigma, p.drift_sigma_min_deg), prior)
         # Only while the vehicle holds its heading: z of a real compass is not a line across
         # turns (deviation with heading, an untilted magnetometer, the gyro's scale); on the
         # BlueROV2 dive z fell 7 deg in 15 s while the vehicle turned 11 deg, and the test
@@ -515,16 +564,16 @@ class GyroWitness:
             self._hmin.pop()
         self._hmin.append((k, h))
         for dq in (self._hmax, self._hmin):
-            while dq[0][0] <= k - self.hinge.window:
+            while dq[0][0] <= k - hinge.window:
                 dq.popleft()
         if self._hmax[0][1] - self._hmin[0][1] > p.drift_max_turn_deg:
             # a turn: the window restarts from here (its line would bend across the turn)
-            self.hinge.clear()
+            hinge.clear()
             self._hmax.clear()
             self._hmin.clear()
             stat = 0.0
         self.drift_stat, self._drift_lag = stat, lag
-        return lag if stat >= p.drift_glr and not step else 0
+        return lag if stat >= level and not step else 0
 
     def clear(self) -> None:
         """Reset both CUSUMs (after a recovery, or while a noise burst lasts)."""
@@ -569,8 +618,17 @@ class GyroWitness:
         else shows: a real compass's deviation changes with heading, so z is not one line
         across turns; the warm-up's line therefore goes on only while the heading is held
         (:meth:`_segment`)."""
+        bias, info = self._slope(self._S, self._Sp, self._Sf)
+        if info > 0.0:
+            self.bias = bias
+        self.info = info
+
+    @staticmethod
+    def _slope(*segments: list[float]) -> tuple[float, float]:
+        """The bias from these segments' sums (each its own intercept) and its information
+        ``sum (t - mean t)^2`` (s^2); (0, 0) if none has any."""
         num = info = 0.0
-        for T in (self._S, self._Sp, self._Sf):
+        for T in segments:
             if T[0] < 3.0:
                 continue
             stt = T[2] - T[1] * T[1] / T[0]  # sum (t - mean t)^2
@@ -579,9 +637,7 @@ class GyroWitness:
             stz = T[4] - T[1] * T[3] / T[0]
             num += -stz  # information-weighted slope: (stz / stt) * stt
             info += stt
-        if info > 0.0:
-            self.bias = num / info
-        self.info = info
+        return (num / info if info > 0.0 else 0.0), info
 
     def _segment(self, psi: float) -> list[float]:
         """The bias fit's sums that a healthy compass sample taken at heading ``psi`` joins:
@@ -631,6 +687,24 @@ class GyroWitness:
               (self.gs_pos / p.slow_h, 2), (self.gs_neg / p.slow_h, 3))
         return max(gs)[1]
 
+    def _not_drifting(self) -> bool:
+        """After a drift confirmed under a compensation: the slope of the innovation (clipped
+        at the recovery's gate) over the last ``drift_recover_s`` is within
+        ``drift_recover_max_dps`` (a drifting compass crosses the dead reckoning: within the
+        gate for 2 s, its mean near 0, and still drifting); always True otherwise."""
+        p = self.p
+        if not self._recover_still:
+            return True
+        pts = self._agree_long  # (kept to drift_recover_s by update)
+        if not pts or pts[0][0] > self.t - p.drift_recover_s + self._dt + 1e-9:
+            return False
+        n = len(pts)
+        mt = sum(q[0] for q in pts) / n
+        mx = sum(q[1] for q in pts) / n
+        stt = sum((q[0] - mt) ** 2 for q in pts)
+        slope = sum((q[0] - mt) * (q[1] - mx) for q in pts) / stt
+        return abs(slope) <= p.drift_recover_max_dps
+
     def _end_comp(self, keep_segment: bool = False) -> None:
         """End the compensation; its compass segment stays in the bias fit only with
         ``keep_segment`` (the compass came back: the samples fed were a level's)."""
@@ -639,11 +713,12 @@ class GyroWitness:
         self.offset = None
         self._comp_ok = False
         self._gc = [0.0, 0.0]
+        self._comp_prior = None
         if not keep_segment and self._Sf[0] > 0.0:
             self._Sf = [0.0, 0.0, 0.0, 0.0, 0.0]
             self._combine()
 
-    def _compensate(self, nu_o: float, nu: float, sigma: float) -> None:
+    def _compensate(self, nu_o: float, nu: float, sigma: float) -> bool:
         """A confirmed step (fast CUSUM): a compass off by a constant still carries the
         heading's changes, and the gyro dead reckoning drifts by the bias estimate's error
         (0.05 deg/s made 3 deg in the minute after a step 3 s after the warm-up). Over
@@ -655,13 +730,17 @@ class GyroWitness:
         output heading as a healthy compass does (the heading loop, ``heading_tau_s``). A jump
         (``jump_sigmas``) of the compensated innovation is not used, and a slow CUSUM on it
         (``slow_*``) ends the compensation for this fault (a ramp, or the compass healing:
-        the recovery test then takes it back)."""
+        the recovery test then takes it back). The hinge test (``comp_drift_glr``) watches the
+        compensated compass as it watches a healthy one: a slow drift that begins under the
+        compensation (a compass that stepped and then keeps drifting) is a second fault,
+        confirmed (True): the compensation's corrections since the hinge are undone and the
+        compensation ends (gyro dead reckoning, the bias without the step's segment)."""
         p = self.p
         assert self.psi is not None
         if self.offset is None:
             self._comp.append((self.t, nu_o, self._y_unw - self._G))
             if len(self._comp) < p.comp_samples:
-                return
+                return False
             t_first = self._comp[0][0]
             pts = self._comp
             for _ in range(2):  # the line, then again without the outliers (> 3 sigma)
@@ -685,30 +764,53 @@ class GyroWitness:
                 # at 1 deg noise, seed 6 drift:20@35 of the nonlinear plant); the segment
                 # then learns on from the compensated compass (_feed_segment).
                 b_old = self.bias
+                # the hinge's slope before the drift: the bias without the step's compass
+                b0, info0 = self._slope(self._S, self._Sp)
+                if p.comp_drift_bias_sd_dps > 0.0:  # known to no better than this
+                    s_h = max(sigma, p.drift_sigma_min_deg)
+                    info0 = min(info0, (s_h / p.comp_drift_bias_sd_dps) ** 2)
+                self._comp_prior = (-b0, info0)
                 self._Sf = [0.0, 0.0, 0.0, 0.0, 0.0]
                 for t_i, _, z_i in pts:
                     self._fit(self._Sf, self._lam, t_i, z_i, update_bias=False)
                 self._combine()
                 self.offset = mx + (b_old - self.bias) * (t_first - mt)
+                if self._hinge_c is not None:
+                    self._hinge_c.clear()
             else:
                 self._comp_ok = False  # not a level: dead reckoning for this fault
             self._comp.clear()
-            return
+            return False
         x = (nu_o - self.offset) / sigma
         xs_ = max(-p.slow_clip, min(p.slow_clip, x))
         self._gc[0] = max(0.0, self._gc[0] + xs_ - p.slow_kappa)
         self._gc[1] = max(0.0, self._gc[1] - xs_ - p.slow_kappa)
         if max(self._gc) >= p.slow_h:
             self._end_comp()
-            return
+            return False
+        lag = self._drift_test(nu_o - self.offset, sigma, abs(x) >= p.jump_sigmas, False,
+                               p.comp_drift_glr, self.offset, self._comp_prior)
+        if lag:
+            # a second fault: the compass drifts under the compensation (since the hinge)
+            self._rollback(self.k - lag, fast=True)
+            off = self.offset
+            self._end_comp()
+            self._recover_mean = min(p.recover_gate_deg,
+                                     0.5 * abs(self._y_unw - off - self.psi))
+            self._recover_still = p.drift_recover_s > 0.0
+            self._agree_long.clear()
+            return True
         if abs(x) >= p.jump_sigmas:
-            return
+            return False
         c = max(-p.clip * sigma, min(p.clip * sigma, nu_o - self.offset))
+        halfway = p.comp_drift_glr > 0.0 and self.drift_stat >= 0.5 * p.comp_drift_glr
         self._feed_segment(self._y_unw - (nu_o - self.offset - c) - self._G,
-                           max(self._gc) >= 0.5 * p.slow_h)
+                           max(self._gc) >= 0.5 * p.slow_h or halfway)
         a = self._dt / p.heading_tau_s
         self.psi += a * c
         self.psi_t += a * c
+        self._corr.append((self.k, a * c))
+        return False
 
     def _feed_segment(self, z: float, doubtful: bool) -> None:
         """The compensated compass (``z = y - sum r dt``, its outliers clipped) into the bias
@@ -730,6 +832,7 @@ class GyroWitness:
         self.fault = self.suspect = True
         self.var.frozen = True
         self._agree.clear()
+        self._recover_still = False
         self._rollback(self.k - samples_back, fast=True)
 
     def _rollback(self, k0: int | None = None, fast: bool | None = None) -> None:

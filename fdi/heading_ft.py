@@ -102,6 +102,17 @@ class FtConfig:
     gyro_bias_hold_deg: float = field(default=10.0, metadata={
         "ge": 0.0, "doc": "the warm-up's bias line goes on while the heading stays this near "
         "its end's (0: the later samples their own segment)"})
+    gyro_comp_drift_glr: float = field(default=30.0, metadata={
+        "ge": 0.0, "doc": "the hinge test on a step's compensated compass: a drift after the "
+        "step is a second fault (likelihood ratio; 0: off)"})
+    gyro_comp_drift_bias_sd_dps: float = field(default=0.005, metadata={
+        "ge": 0.0, "doc": "... the bias before the step known to no better than this (0: its "
+        "fit's information)"})
+    gyro_drift_recover_s: float = field(default=20.0, metadata={
+        "ge": 0.0, "doc": "after a drift under a step's compensation, the compass is taken back "
+        "only once its innovation's slope over this long (0: off) ..."})
+    gyro_drift_recover_max_dps: float = field(default=0.05, metadata={
+        "gt": 0.0, "doc": "... is within this (a drifting compass crossing the dead reckoning)"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
     gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from firmware_host.devtools.rov_harness import GOALS, hold_floor, measure
+from firmware_host.devtools.rov_harness import GOALS, hold_floor, measure, step_then_drift
 from firmware_host.rov.config import Plant, RovConfig, load_rov_config, project_root
 
 SEEDS = range(1, 11)
@@ -110,3 +110,16 @@ def test_hold_floor_is_what_the_shortfall_says(cfg: RovConfig) -> None:
     raw = hold_floor(cfg, "nonlinear", SEEDS, gyro=True, vehicle_pid=False)["worst"]
     assert 2.0 < raw < 3.5
     assert hold_floor(cfg, "nomoto", SEEDS, gyro=True)["worst"] < 0.5
+
+
+def test_a_drift_after_a_compensated_step_is_confirmed_on_the_nonlinear_plant(
+        cfg: RovConfig) -> None:
+    """A 10 deg step at 40 s, then +-0.1 deg/s from 60 s (docs/rov.md, seventh pass): the
+    drift is confirmed as a second fault in every run (goal 40 s; measured worst 25.0 s,
+    seed 4). SHORTFALL: the heading error from the drift's start on, goal 3 deg, measured
+    3.09 (seed 3, ramp +0.1): the step's offset learned ~1 deg off, then dead reckoning on a
+    bias 0.018 deg/s off (before this pass: never confirmed, 9.26 deg; with the drift
+    confirmed but the drifting compass taken back as it crossed the dead reckoning: 3.75)."""
+    res = step_then_drift(cfg, "nonlinear", SEEDS)
+    assert res["delay_s"]["worst"] is not None and res["delay_s"]["worst"] <= 40.0
+    assert res["err_after_deg"]["worst"] <= 3.3

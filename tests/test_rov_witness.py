@@ -8,6 +8,7 @@ checked against numbers it cannot tune itself to.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -366,3 +367,62 @@ def test_the_warm_ups_bias_line_goes_on_while_the_heading_is_held() -> None:
     assert w._S[0] > 150.0 and w._Sp[0] == 0.0
     w, _ = _run(600, seed=1, turn_dps=2.0)
     assert w._hold_ref is None and w._Sp[0] > 300.0
+
+
+def _step_then_ramp(params: WitnessParams, seed: int, n: int = 800, rate: float = 0.1,
+                    end: int = 10**9) -> tuple[list[int], float]:
+    """A 10 deg compass step at sample 300 (60 s), then, from sample 400 (20 s later, the
+    step's offset learned and compensating), a 0.1 deg/s ramp on top; the vehicle holds its
+    heading (0.2 deg/s swings), gyro bias 0.15 deg/s, compass noise 1 deg. The samples of the
+    confirmations (and, as ``-k``, the recoveries), and the worst |heading used - true| from
+    the ramp's start on (80 s); ``rate`` deg/s, both faults end at sample ``end``."""
+    rng = np.random.default_rng(seed)
+    w = GyroWitness(params)
+    psi = 40.0
+    worst = 0.0
+    conf: list[int] = []
+    for k in range(n):
+        r = 0.2 * math.sin(2 * math.pi * k * DT / 40.0)
+        psi += r * DT
+        w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
+        y = psi + float(rng.normal(0.0, 1.0))
+        if k < end:
+            y += (10.0 if k >= 300 else 0.0) + (rate * (k - 400) * DT if k >= 400 else 0.0)
+        st = w.update(y % 360.0, DT)
+        if st.confirmed:
+            conf.append(k)
+        if st.recovered:
+            conf.append(-k)
+        if k >= 400:
+            worst = max(worst, abs(st.psi - psi))
+    return conf, worst
+
+
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_a_drift_under_the_step_compensation_is_a_second_fault(seed: int) -> None:
+    """A compass that stepped and then keeps drifting: the hinge test on the compensated
+    compass (its slope before the drift known from the bias fit) confirms the drift within
+    40 s (15-18 s over these seeds) and the compensation ends (dead reckoning, the heading used
+    0.7-1.3 deg off); without it the drift is never confirmed: the compensation follows it, or
+    its slow CUSUM ends it unannounced (1.5-7.6 deg off)."""
+    on, worst_on = _step_then_ramp(WitnessParams(), seed)
+    off, worst_off = _step_then_ramp(WitnessParams(comp_drift_glr=0.0), seed)
+    assert len(off) == 1 and 300 <= off[0] <= 305
+    assert len(on) == 2 and on[0] == off[0]
+    assert 0 < (on[1] - 400) * DT <= 40.0
+    assert worst_on < 1.5 and worst_on < worst_off
+
+
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_a_compass_drifting_back_across_the_truth_is_not_taken_back(seed: int) -> None:
+    """After a drift under a step's compensation (10 deg, then -0.1 deg/s: the compass
+    crosses the truth 100 s into the drift) the compass is not taken back while it drifts
+    (before: taken back at the crossing, when it agreed with the dead reckoning for 2 s);
+    a compass that stops drifting and is healthy again is (within drift_recover_s + 2 s)."""
+    p = WitnessParams()
+    drifting, _ = _step_then_ramp(p, seed, n=1000, rate=-0.1)
+    assert len(drifting) == 2 and all(k > 0 for k in drifting)
+    before, _ = _step_then_ramp(replace(p, drift_recover_s=0.0), seed, n=1000, rate=-0.1)
+    assert any(k < 0 for k in before)
+    healed, _ = _step_then_ramp(p, seed, n=1000, rate=-0.1, end=700)
+    assert len(healed) == 3 and -healed[2] - 700 <= (p.drift_recover_s + 2.0) / DT

@@ -19,6 +19,10 @@ Scenarios, per seed (onsets after the 20 s warm-up):
   confirmation;
 * ``long``: ``long_s`` (3600) seconds at 2 deg compass noise with a turn every 60 s: no
   confirmation; then a 20 deg drift: confirmed within 5 s.
+
+Reported, not among the goals of :func:`run_all` (:func:`step_then_drift`): a compass that
+steps and then drifts (a 10 deg step at 40 s, +-0.1 deg/s from 60 s, with a gyro): the drift
+confirmed as a second fault, and the heading error from the drift's start on.
 """
 
 from __future__ import annotations
@@ -244,6 +248,30 @@ def fault_at_turn(cfg: RovConfig, plant: Plant, seeds: Sequence[int], *, gyro: b
                     ok += int(not early and tc is not None and tc - on <= 5 * c.period_s + 1e-9)
             out[f"{lag:g} s, {mag:g} deg"] = f"{ok}/{n}"
     return out
+
+
+def step_then_drift(cfg: RovConfig, plant: Plant, seeds: Sequence[int], *,
+                    step_deg: float = 10.0, step_at_s: float = 40.0, rate_dps: float = 0.1,
+                    ramp_at_s: float = 60.0, duration_s: float = 140.0
+                    ) -> dict[str, dict[str, Any]]:
+    """A second fault under a step's compensation (gyro): ``drift:STEP@STEP_AT`` and then
+    ``ramp:+-RATE@RAMP_AT`` on top, per seed both signs of the ramp. The worst delay of the
+    first confirmation at or after the ramp's start (``inf``: none; a confirmation before the
+    step counts as a miss too) and the worst |heading error| from the ramp's start on."""
+    c = plant_config(cfg, plant)
+    delay, err = Worst(), Worst()
+    for seed in seeds:
+        for sign in (1.0, -1.0):
+            specs = [f"drift:{step_deg:g}@{step_at_s:g}", f"ramp:{sign * rate_dps:g}@{ramp_at_s:g}"]
+            ep = run_experiment(c, [parse_fault(s) for s in specs], duration_s, ft=True,
+                                seed=seed, gyro=True)
+            where = f"seed {seed} " + " + ".join(specs)
+            conf = _confirms(ep)
+            tc = _first_after(conf, ramp_at_s)
+            early = any(t < step_at_s - 1e-9 for t in conf)
+            delay.add(INF if early or tc is None else tc - ramp_at_s, where)
+            err.add(max(abs(_err(e)) for e in ep if e["t"] >= ramp_at_s - 1e-9), where)
+    return {"delay_s": delay.as_dict(), "err_after_deg": err.as_dict()}
 
 
 def run_all(
