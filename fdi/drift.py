@@ -204,17 +204,19 @@ class DriftTest:
             for a in (self._t, self._be, self._bn, self._ve, self._vn):
                 del a[:cut]
 
-    def _estimate(self, factor: float) -> tuple[float, ...]:
-        """σ_H from the differences collected so far (× ``factor``), capped by (D5); the
-        configured value where fewer than 20 were collected, and never wider than it."""
+    def _estimate(self, factor: float = 1.0, at_most_configured: bool = False
+                  ) -> tuple[float, ...]:
+        """σ_H from the differences collected so far (× ``factor``), never below
+        ``floor_frac`` of the configured value, capped by (D5); the configured value where
+        fewer than 20 were collected (``at_most_configured``: and never wider than it)."""
         out = []
         for j, configured in enumerate(self._configured):
             xs = sorted(self._cal[j])
             if len(xs) < 20:
                 out.append(configured)
                 continue
-            est = factor * 1.4826 * xs[len(xs) // 2]
-            out.append(min(configured, max(est, self.floor_frac * configured)))
+            est = max(factor * 1.4826 * xs[len(xs) // 2], self.floor_frac * configured)
+            out.append(min(configured, est) if at_most_configured else est)
         return concave_cap(self.horizons, out)
 
     def _calibrate_step(self, t: float, b: tuple[float, float]) -> None:
@@ -230,17 +232,9 @@ class DriftTest:
                 self._cal[j].append(abs(b[1] - self._bn[i]))
         if self._prov_until is not None and t >= self._prov_until:
             self._prov_until = None
-            self._prov = self._estimate(self.precal_factor)
+            self._prov = self._estimate(self.precal_factor, at_most_configured=True)
         if t >= self._cal_until:
-            out = []
-            for j, configured in enumerate(self._configured):
-                xs = sorted(self._cal[j])
-                if len(xs) < 20:
-                    out.append(configured)
-                    continue
-                est = 1.4826 * xs[len(xs) // 2]
-                out.append(max(est, self.floor_frac * configured))
-            self._base = concave_cap(self.horizons, out)
+            self._base = self._estimate()
             self._prov = None
             self.set_quantum(self.quantum)
             self.calibrated = True
