@@ -193,10 +193,13 @@ class LevelHold:
         e_old = math.nan  # the old track's distance from that level
         if self.old and not stale:
             s_side = p.side_sigmas * sigma_at(30.0, p.horizons_s, p.sigma_m)
+            # After a step back to an older level (prefer_raw) the caller's rule for that
+            # step, within 0.6 of the way (rover.py, _back_at_old_level); else a third.
+            frac = 0.6 if self.prefer_raw else 1.0 / 3.0
             for t_o, (oe, on) in self.old:
                 e_new = math.hypot(b[0] - oe, b[1] - on)
                 e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)
-                if e_new <= e_track / 3.0 and e_track >= s_side:
+                if e_new <= frac * e_track and e_track >= s_side:
                     at_old, e_old = t_o, e_track
                     break
         # How long the new fixes have sat at an older level, consistent with their own Doppler

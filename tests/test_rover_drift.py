@@ -242,6 +242,19 @@ def test_hold_after_a_step_back_passes_the_consistent_receiver_on() -> None:
     assert set(_hold_run(plain, [(6.0, 0.0)] * 20, 100.0, 0.1)) == {"track"}
 
 
+def test_after_a_step_back_the_older_level_is_matched_as_the_step_back_was() -> None:
+    """Fixes that stepped back towards an older level (prefer_raw) end the hold at 0.6 of the
+    way, the caller's rule for that step back; otherwise a third of the way is asked."""
+    fixes = [(1.5, 0.0)] * 150  # 1.5 m from the older level, the track 3 m from it
+    back = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), old=[(40.0, (0.0, 0.0))],
+                     slow=False, prefer_raw=True)
+    acts = _hold_run(back, fixes, 100.0, 0.1)
+    assert "new_level" in acts and acts.index("new_level") <= 12
+    plain = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0), old=[(40.0, (0.0, 0.0))],
+                      slow=False)
+    assert "new_level" not in _hold_run(plain, fixes, 100.0, 0.1)
+
+
 def test_slow_hold_ends_when_the_receiver_is_consistent_for_30_s() -> None:
     hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0))
     acts = _hold_run(hold, [(6.0, 0.0)] * 400, 100.0, 0.1)
