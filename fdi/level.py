@@ -126,7 +126,8 @@ class LevelHold:
         # The last epoch the fixes stepped (beyond exit_sigmas of their noise), and by how
         # much (m): the caller's, from before the hold, until the hold sees one.
         self._step_t, self._step_m = last_step if last_step is not None else (-math.inf, 0.0)
-        self._dev: deque[tuple[float, float]] = deque()  # (t, |b − b_a|) over 2L
+        self._dev: deque[tuple[float, float, float, float]] = deque()  # (t, |b − b_a|, b − b_a)
+        # over 2L
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
         self._long: deque[tuple[float, float, float]] = deque()  # ... over CONSISTENT_S
 
@@ -178,16 +179,22 @@ class LevelHold:
             self._agree_b = b
         if self._agree_since is not None and t - self._agree_since >= p.exit_lag_s - 1e-9:
             return HoldStep("exit", track, g)
-        # A slow fault that ended: a step back towards the old track, then consistency.
+        # A slow fault that ended: a step back towards the old track, then consistency. Or a
+        # step back *across* it (at least the whole way back, ending no further off): the
+        # anchor sat inside a slow drift, and the drift's end overshoots it.
         dev = math.hypot(re, rn)
         hist = self._dev
-        hist.append((t, dev))
+        hist.append((t, dev, re, rn))
         while len(hist) > 1 and hist[1][0] <= t - 2.0 * p.exit_lag_s:
             hist.popleft()
         if self.slow and not stale and self_ok and self.stale_m == 0.0:
-            before = hist[0][1]
-            if (t - hist[0][0] >= p.exit_lag_s and dev <= 0.5 * before
-                    and before - dev >= p.exit_sigmas * p.sigma_m[0]):
+            t_b, before, re0, rn0 = hist[0]
+            back = -((re - re0) * re0 + (rn - rn0) * rn0) / before if before > 0.0 else 0.0
+            if t - t_b >= p.exit_lag_s and before - dev >= p.exit_sigmas * p.sigma_m[0] and (
+                    dev <= 0.5 * before):
+                return HoldStep("ended", track, g)
+            if (t - t_b >= p.exit_lag_s and back >= before and dev <= before
+                    and back >= p.exit_sigmas * p.sigma_m[0] * 2.0):
                 return HoldStep("ended", track, g)
         at_old = math.nan
         e_old = math.nan  # the old track's distance from that level

@@ -153,8 +153,10 @@ class RoverDetectorParams:
     # an abrupt one's, hold_exit_s).
     hold_level_s: float = field(default=10.0, metadata={"ge": 0.0})
     # An abrupt step back to an older level is passed on (not replaced by the track) when
-    # the track left that level by back_side_sigmas x σ(30 s) or more.
-    back_side_sigmas: float = field(default=1.0, metadata={"gt": 0.0})
+    # the track left that level by back_side_sigmas x σ(30 s) or more (2, the hold's side
+    # test: at 1 the end of two small missed ramps was passed on, but so were the 3 epochs
+    # of a 1.69 m burst, before the calibration, tests/test_rover_detection.py at 10 Hz).
+    back_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
     hold_output_s: float = field(default=10.0, metadata={"ge": 0.0})  # then alarm, no output
     hold_max_s: float = field(default=120.0, metadata={"gt": 0.0})  # then the receiver again
     # An abrupt step the track went on to accept (a multipath step) is remembered this long:
@@ -952,10 +954,8 @@ class RoverIsolator:
         The end of a slow fault or a level step that was missed or accepted (an undetected
         ramp, a multipath step taken as the receiver's level): the old track is the faulty
         side, and replacing the returning fix by it would be worse than the receiver. The
-        track left the level by at least ``back_side_sigmas`` x σ(30 s) (half fdi/level.py's
-        ``new_level`` side test: an undetected 0.02-0.04 m/s ramp moves the track 1 m, 1-2
-        σ(30 s); replacing its end by the track was 0.2 m RMS worse than the receiver over
-        the 10 s after), and the fix is within half that departure of it and within
+        track left the level by at least ``back_side_sigmas`` x σ(30 s) (as fdi/level.py's
+        ``new_level`` side test), and the fix is within half that departure of it and within
         ``hold_exit_sigmas`` of the drift σ at the level's age. It only chooses what is passed
         on (the caller's state goes on as for a replacement), so a jump that happens to land
         there costs that epoch the raw fix, never more."""

@@ -255,6 +255,19 @@ def test_after_a_step_back_the_older_level_is_matched_as_the_step_back_was() -> 
     assert "new_level" not in _hold_run(plain, fixes, 100.0, 0.1)
 
 
+def test_a_slow_hold_ends_when_the_fixes_step_back_across_its_track() -> None:
+    """The anchor sat 1.4 m inside a slow drift: at the drift's end the fixes step 2.8 m back,
+    past the old track (1.4 m beyond it). That is the fault's end, not a new one."""
+    fixes = [(1.5 + 0.005 * j, 0.0) for j in range(20)] + [(-1.35, 0.0)] * 30
+    hold = LevelHold(HP, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0))
+    acts = _hold_run(hold, fixes, 100.0, 0.1)
+    assert "ended" in acts and 20 < acts.index("ended") <= 32
+    # A step only part of the way back (not past the track) ends nothing by this rule.
+    part = LevelHold(HP, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0))
+    fixes = [(1.5 + 0.005 * j, 0.0) for j in range(20)] + [(0.9, 0.0)] * 30
+    assert "ended" not in _hold_run(part, fixes, 100.0, 0.1)
+
+
 def test_slow_hold_ends_when_the_receiver_is_consistent_for_30_s() -> None:
     hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0))
     acts = _hold_run(hold, [(6.0, 0.0)] * 400, 100.0, 0.1)
@@ -300,7 +313,7 @@ def test_a_step_back_after_a_missed_ramp_passes_the_receiver_on() -> None:
 def test_the_end_of_a_ramp_within_two_sigmas_is_passed_on() -> None:
     """A missed 0.008 m/s ramp for 80 s leaves the track 0.64 m off the level before it:
     1.6 σ(30 s). Its end, a step back to that level, is passed on at back_side_sigmas = 1;
-    at 2 (the hold's side test) the track was held 0.64 m off, worse than the receiver."""
+    at 2 (the default: 1 also passed a burst's epochs on) the track is held 0.64 m off."""
     def end(back_side: float) -> list[tuple[float, float | None, str]]:
         p = replace(RoverDetectorParams(), drift_sigma_m=(0.1, 0.15, 0.25, 0.4, 0.6),
                     drift_calibrate_s=0.0, drift_warn_sigmas=0.0, back_side_sigmas=back_side)
