@@ -97,16 +97,15 @@ class HoldStep:
 class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
-    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_old_b", "_old_since", "_prev",
-                 "_recent", "_step_m", "_step_t", "anchor_b", "anchor_t", "anchor_v", "matched_t",
-                 "old", "p", "prefer_raw", "slow", "stale_m", "t0", "was_raw")
+    __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_old_b", "_old_since", "_recent",
+                 "anchor_b", "anchor_t", "anchor_v", "matched_t", "old", "p", "prefer_raw", "slow",
+                 "stale_m", "t0", "was_raw")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
                  anchor_b: tuple[float, float], anchor_v: tuple[float, float],
                  stale_m: float = 0.0,
                  old: list[tuple[float, tuple[float, float]]] | None = None,
-                 slow: bool = True, prefer_raw: bool = False,
-                 last_step: tuple[float, float] | None = None) -> None:
+                 slow: bool = True, prefer_raw: bool = False) -> None:
         self.p = p
         self.prefer_raw = prefer_raw  # the fixes stepped back to an older level before it
         self.t0 = t0
@@ -122,17 +121,14 @@ class LevelHold:
         self._agree_b = (0.0, 0.0)
         self._old_since: float | None = None  # the new fixes at an older level since, and
         self._old_b = (0.0, 0.0)  # ... their Doppler-free value then
-        self._prev: tuple[float, float, float] | None = None  # the last epoch's (t, b_e, b_n)
-        # The last epoch the fixes stepped (beyond exit_sigmas of their noise), and by how
-        # much (m): the caller's, from before the hold, until the hold sees one.
-        self._step_t, self._step_m = last_step if last_step is not None else (-math.inf, 0.0)
-        self._dev: deque[tuple[float, float, float, float]] = deque()  # (t, |b − b_a|, b − b_a)
-        # over 2L
+        # (t, |b − b_a|, b − b_a) over 2L
+        self._dev: deque[tuple[float, float, float, float]] = deque()
         self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
         self._long: deque[tuple[float, float, float]] = deque()  # ... over CONSISTENT_S
 
     def step(self, t: float, b: tuple[float, float], v: tuple[float, float],
-             d: tuple[float, float], stale: bool, dt: float, fresh: bool = False) -> HoldStep:
+             d: tuple[float, float], stale: bool, dt: float, fresh: bool = False,
+             last_step: tuple[float, float] | None = None) -> HoldStep:
         """The receiver's Doppler-free value ``b`` at ``t``, its Doppler ``v`` and the
         integrated displacement ``d``; ``stale``: the receiver repeats its whole fix;
         ``fresh``: this fix differs from the previous one (position, speed or course)."""
@@ -148,13 +144,6 @@ class LevelHold:
         var = s * s + dv * dv + (0.5 * self.stale_m) ** 2
         re, rn = b[0] - self.anchor_b[0], b[1] - self.anchor_b[1]
         g = math.sqrt((re * re + rn * rn) / var)
-        # Did the fixes step since the previous epoch (beyond exit_sigmas of the drift σ)?
-        pv = self._prev
-        if pv is not None:
-            jump = math.hypot(b[0] - pv[1], b[1] - pv[2])
-            if jump > p.exit_sigmas * sigma_at(max(t - pv[0], 1e-3), p.horizons_s, p.sigma_m):
-                self._step_t, self._step_m = t, jump
-        self._prev = (t, b[0], b[1])
         # The receiver against its own Doppler over the fixed lag.
         rec = self._recent
         rec.append((t, b[0], b[1]))
@@ -187,14 +176,14 @@ class LevelHold:
         hist.append((t, dev, re, rn))
         while len(hist) > 1 and hist[1][0] <= t - 2.0 * p.exit_lag_s:
             hist.popleft()
-        if self.slow and not stale and self_ok and self.stale_m == 0.0:
-            t_b, before, re0, rn0 = hist[0]
+        t_b, before, re0, rn0 = hist[0]
+        if (self.slow and not stale and self_ok and self.stale_m == 0.0
+                and t - t_b >= p.exit_lag_s):
+            s1 = p.exit_sigmas * p.sigma_m[0]
+            # the move since then towards the old track, along the line from it
             back = -((re - re0) * re0 + (rn - rn0) * rn0) / before if before > 0.0 else 0.0
-            if t - t_b >= p.exit_lag_s and before - dev >= p.exit_sigmas * p.sigma_m[0] and (
-                    dev <= 0.5 * before):
-                return HoldStep("ended", track, g)
-            if (t - t_b >= p.exit_lag_s and back >= before and dev <= before
-                    and back >= p.exit_sigmas * p.sigma_m[0] * 2.0):
+            if ((dev <= 0.5 * before and before - dev >= s1)
+                    or (back >= before and dev <= before and back >= 2.0 * s1)):
                 return HoldStep("ended", track, g)
         at_old = math.nan
         e_old = math.nan  # the old track's distance from that level
@@ -220,14 +209,15 @@ class LevelHold:
         # A slow hold whose fixes *drifted* to the older level asks for level_lag_s of it: a
         # ramp that is still running sits, for a second or two, where some older level of a
         # wandering DGPS error happens to be (the ramp then ran on unflagged, and the next
-        # hold anchored inside it). Fixes that *stepped* (between two epochs, by half the old
-        # track's distance from that level or more) at most level_lag_s before they arrived
-        # there are a fault's end: the short lag, as before.
+        # hold anchored inside it). Fixes that *stepped* (``last_step``, the caller's last
+        # step of b between two epochs: (t, m)) by half the old track's distance from that
+        # level or more, at most level_lag_s before they arrived there, are a fault's end:
+        # the short lag, as before.
         need = 0.0
         if (self.slow and self.stale_m == 0.0 and p.level_lag_s > 0.0
                 and self._old_since is not None
-                and (self._old_since - self._step_t > p.level_lag_s + 1e-9
-                     or not self._step_m >= 0.5 * e_old)):
+                and (last_step is None or self._old_since - last_step[0] > p.level_lag_s + 1e-9
+                     or last_step[1] < 0.5 * e_old)):
             need = p.level_lag_s
         if (not math.isnan(at_old) and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
                 and t - rec[0][0] >= p.exit_lag_s - 1e-9

@@ -152,11 +152,6 @@ class RoverDetectorParams:
     # A slow hold's (a drift) "new_level": the new fixes at an older level this long (0: as
     # an abrupt one's, hold_exit_s).
     hold_level_s: float = field(default=10.0, metadata={"ge": 0.0})
-    # An abrupt step back to an older level is passed on (not replaced by the track) when
-    # the track left that level by back_side_sigmas x σ(30 s) or more (2, the hold's side
-    # test: at 1 the end of two small missed ramps was passed on, but so were the 3 epochs
-    # of a 1.69 m burst, before the calibration, tests/test_rover_detection.py at 10 Hz).
-    back_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
     hold_output_s: float = field(default=10.0, metadata={"ge": 0.0})  # then alarm, no output
     hold_max_s: float = field(default=120.0, metadata={"gt": 0.0})  # then the receiver again
     # An abrupt step the track went on to accept (a multipath step) is remembered this long:
@@ -602,8 +597,7 @@ class RoverIsolator:
                 and self._enter_hold(
                     fix.t_s, dres if drift_fault else None, "+".join(reasons),
                     slow=stale_fault or (drift_fault and not abrupt and dres is not None
-                                         and dres.horizon_s > 1.0),
-                    last_step=self._last_step)):
+                                         and dres.horizon_s > 1.0))):
             return self._hold_step(fix, z, r, d, v, b, stale, dt, t)
         # Isolation: replace the faulty fix by its prediction before the filter update (with
         # R inflated by replaced_r_factor: a prediction is not a measurement).
@@ -734,7 +728,7 @@ class RoverIsolator:
         return p.stale_p > 0.0 and rate**run <= p.stale_p
 
     def _enter_hold(self, t_s: float, dres: DriftResult | None, reason: str,
-                    slow: bool, last_step: tuple[float, float] | None = None) -> bool:
+                    slow: bool) -> bool:
         """Start a hold on the last trusted reference before the fault; False if none."""
         drift, hp = self._drift, self._hold_p
         assert drift is not None and hp is not None
@@ -757,7 +751,7 @@ class RoverIsolator:
         # The hold's clock starts with the run of replacements that led to it (seconds).
         t0 = self._run_t0 if self._consec > 0 else t_s
         self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow,
-                               prefer_raw=self._stepped_back, last_step=last_step)
+                               prefer_raw=self._stepped_back)
         self._hold_reason = reason
         self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
         return True
@@ -777,7 +771,8 @@ class RoverIsolator:
         hold = self._hold
         drift = self._drift
         assert hold is not None and drift is not None
-        hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt, self._stale_run == 0)
+        hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt, self._stale_run == 0,
+                       self._last_step)
         t.drift = hs.g
         reason = self._hold_reason
         if hs.action in ("exit", "ended", "new_level", "consistent"):
@@ -954,8 +949,10 @@ class RoverIsolator:
         The end of a slow fault or a level step that was missed or accepted (an undetected
         ramp, a multipath step taken as the receiver's level): the old track is the faulty
         side, and replacing the returning fix by it would be worse than the receiver. The
-        track left the level by at least ``back_side_sigmas`` x σ(30 s) (as fdi/level.py's
-        ``new_level`` side test), and the fix is within half that departure of it and within
+        track left the level by at least ``hold_side_sigmas`` x σ(30 s) (fdi/level.py's
+        ``new_level``; 1 x passed the end of two small missed ramps on, but also the 3 epochs
+        of a 1.69 m burst before the calibration: docs/evaluation.md, fourth pass), and the
+        fix is within half that departure of it and within
         ``hold_exit_sigmas`` of the drift σ at the level's age. It only chooses what is passed
         on (the caller's state goes on as for a replacement), so a jump that happens to land
         there costs that epoch the raw fix, never more."""
@@ -966,7 +963,7 @@ class RoverIsolator:
             return None
         r_t, (re_, rn), _ = ref
         sig = drift.sigmas
-        s_side = self.p.back_side_sigmas * sigma_at(30.0, hp.horizons_s, sig)
+        s_side = hp.side_sigmas * sigma_at(30.0, hp.horizons_s, sig)
         for t_o, (oe, on) in drift.levels_between(r_t - LEVEL_KEEP_S, r_t - 20.0):
             e_track = math.hypot(re_ - oe, rn - on)
             s_age = sigma_at(t_s - t_o, hp.horizons_s, sig)
