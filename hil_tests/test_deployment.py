@@ -241,13 +241,29 @@ def test_rov_with_operator_link(tmp_path: Path) -> None:
             gcs.close()
     assert rc == 0, err
     texts = [m.text for _, m in gcs.of("STATUSTEXT") if "telemetry" in m.text]
-    assert texts[:3] == ["FDI compass: telemetry lost, holding last command",
-                         "FDI compass: telemetry lost, neutral thrust",
-                         "FDI compass: telemetry back"]  # nothing said at the start
+    hold, neutral, back = ("FDI compass: telemetry lost, holding last command",
+                           "FDI compass: telemetry lost, neutral thrust",
+                           "FDI compass: telemetry back")
+    # Nothing is said at the start. The plant's 2 s dropout is one episode hold -> neutral ->
+    # back. A loaded machine can delay the simulator's thread by a period or more: that is a
+    # real lapse of telemetry and is announced too (hold -> back, or -> neutral -> back if it
+    # passes dropout_hold_s), so the episodes are checked, not their number (CI saw one).
+    assert texts and texts[0] == hold
+    episodes: list[list[str]] = []
+    for t in texts:
+        if t == hold:
+            episodes.append([t])
+        else:
+            episodes[-1].append(t)
+    for e in episodes[:-1]:
+        assert e in ([hold, back], [hold, neutral, back]), texts
+    assert episodes[-1] in ([hold, back], [hold, neutral, back], [hold], [hold, neutral]), texts
+    assert [hold, neutral, back] in episodes, texts
     assert {m.name for _, m in gcs.of("NAMED_VALUE_FLOAT")} >= {"HDG", "HDG_MEAS"}
     summary = json.loads((tmp_path / "live" / "summary.json").read_text())
     assert summary["vehicle"] == "rov" and summary["runtime"]["stopped_by"] == "SIGTERM"
-    assert summary["failsafe"] == {"episodes": 1, "neutral": 1}
+    assert summary["failsafe"] == {"episodes": len(episodes),
+                                   "neutral": sum(neutral in e for e in episodes)}
     assert summary["counts"]["telemetry"] >= 15 and summary["port"]["losses"] == 0
     lines = (tmp_path / "live" / "epochs.jsonl").read_text().splitlines()
     assert len(lines) == summary["steps"] - 1 or len(lines) == summary["steps"]
