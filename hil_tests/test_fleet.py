@@ -142,14 +142,15 @@ def test_serial_localcluster_and_scheduler_give_the_same_rows(
     errors = {Path(r["log"]).name: r["error"] for r in serial.rows if r["error"]}
     assert set(errors) == {"damaged.cap", "empty.log"}, errors
     assert all("no NMEA sentences" in e for e in errors.values())
-    # The sweep reaches the detector: a 0.2 m grey gate floor replaces more fixes than a 3 m
-    # one (measured 90 against 83). The flagged count is not monotone in the gate: what a 3 m
-    # gate passes the drift and Doppler tests flag instead (196 against 197).
+    # The sweep reaches the detector: the points' replaced counts differ. Their order depends
+    # on the logs: with the shared corpus a 0.2 m grey gate floor replaced more fixes than a
+    # 3 m one (90 against 83), on the generated runs alone fewer (77 against 79): what a tight
+    # gate replaces early, the drift and Doppler tests hold later under a loose one.
     by_point = {p: pooled([r for r in serial.rows if r["point"] == p]) for p in configs}
     tight, _, loose = (by_point[p] for p in configs)
     assert tight["scored_logs"] == loose["scored_logs"] == 20
     assert tight["epochs"] == loose["epochs"]
-    assert tight["replaced"] > loose["replaced"]
+    assert tight["replaced"] != loose["replaced"]
 
 
 def test_fleet_command_writes_tables_json_and_reports_bad_input(
