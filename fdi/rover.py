@@ -30,7 +30,8 @@ Beyond the paper, for real data (each is a parameter, and the paper preset turns
   over horizons in seconds (1, 3, 10, 30 s), a GLR with σ calibrated once per receiver and
   never learned; it catches slow ramps and frozen receivers. A receiver that repeats its whole
   fix bit for bit for ``stale_s`` (position, speed and course) is frozen, whatever its speed;
-  sooner when its position repeats while its own speed says it moved ``stale_move_m``, or
+  sooner when its position repeats while its own speed says it moved ``stale_move_m`` and
+  ``stale_move_quanta`` of its coordinate quanta, or
   when it repeats its whole fix more often in a row than its own history makes likely
   (``stale_p``: a receiver whose fix changes every epoch is frozen at its second repeat; one
   that repeats often, a static hold at stops, is given up to ``stale_s``). Between
@@ -140,7 +141,10 @@ class RoverDetectorParams:
     stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
     # ... or its position repeated while its own speed says it moved this far (0: off);
     # beyond a coordinate quantum
-    stale_move_m: float = field(default=0.3, metadata={"ge": 0.0})
+    stale_move_m: float = field(default=0.15, metadata={"ge": 0.0})
+    # ... and at least this many of its coordinate quanta (the larger axis; learned from the
+    # fixes, the rule waits for it; 0: stale_move_m alone)
+    stale_move_quanta: float = field(default=1.6, metadata={"ge": 0.0})
     # ... or after n repeats in a row where this receiver's chance of them, p^n, is at most
     # stale_p; p is learned from all its pairs of fixes: (repeats + 1) / (pairs + 2). A
     # receiver whose fix changes every epoch is found frozen at its second repeat; one that
@@ -399,12 +403,11 @@ class RoverIsolator:
         # its speed and course too): what the hold must know.
         frozen = self._stale_check(fix)
         stale = frozen and self._stale_run > 0
-        if self._drift is not None:
-            de, dn = abs(z[0] - self._last_e), abs(z[1] - self._last_n)
-            self._last_e, self._last_n = z[0], z[1]
-            quant = self._quant
-            if 1e-4 < de < quant[0] or 1e-4 < dn < quant[1]:  # rare: NaN compares false
-                self._learn_quantum(de, dn)
+        de, dn = abs(z[0] - self._last_e), abs(z[1] - self._last_n)
+        self._last_e, self._last_n = z[0], z[1]
+        quant = self._quant
+        if 1e-4 < de < quant[0] or 1e-4 < dn < quant[1]:  # rare: NaN compares false
+            self._learn_quantum(de, dn)
 
         quality = []
         if p.min_sats and fix.num_sats is not None and fix.num_sats < p.min_sats:
@@ -709,11 +712,18 @@ class RoverIsolator:
             return False
         held = fix.t_s - since
         p = self.p
-        # A live receiver that says it moved stale_move_m (more than a coordinate quantum:
-        # 0.19 m at 4 decimals of minutes) cannot repeat its position bit for bit. (Three
-        # quanta of 1.9 cm were not enough: at 10 Hz and 0.84 m/s a live receiver repeated
-        # one, its noise undoing the 8 cm it moved.)
+        # A live receiver that says it moved stale_move_m, and stale_move_quanta of its
+        # coordinate quanta, cannot repeat its position bit for bit. The quanta keep a coarse
+        # receiver (0.19 m at 4 decimals of minutes: 0.30 m) where a 0.2 m step repeats its
+        # rounded position; the floor keeps a fine one's noise (three quanta of 1.9 cm were
+        # not enough: at 10 Hz and 0.84 m/s a live receiver repeated one, its noise undoing
+        # the 8 cm it moved). The quantum is the larger of the axes that have changed (a
+        # receiver driving along one axis may never move the other); the rule waits for one.
         move = p.stale_move_m
+        if p.stale_move_quanta > 0.0:
+            qe, qn = self._quant
+            q = qe if qn == math.inf else qn if qe == math.inf else max(qe, qn)
+            move = max(move, p.stale_move_quanta * q)
         if move > 0.0 and fix.speed_mps is not None and fix.speed_mps * held >= move:
             return True
         run = self._stale_run
@@ -884,16 +894,16 @@ class RoverIsolator:
     def _learn_quantum(self, de: float, dn: float) -> None:
         """A smaller non-zero change of a coordinate between consecutive fixes (``de``, ``dn``;
         above 0.1 mm: the local frame's curvature; below 1 m): the receiver's rounding is the
-        smallest, given to the drift test once both axes have one (D6)."""
+        smallest, given to the drift test once both axes have one (D6), and the frozen test's
+        scale (``stale_move_quanta``)."""
         q = self._quant
         changed = False
         for i, dz in ((0, de), (1, dn)):
             if 1e-4 < dz < q[i] and dz < 1.0:
                 q[i] = dz
                 changed = True
-        if changed and q[0] < math.inf and q[1] < math.inf:
-            drift = self._drift
-            assert drift is not None
+        drift = self._drift
+        if changed and q[0] < math.inf and q[1] < math.inf and drift is not None:
             drift.set_quantum(max(q[0], q[1]))
 
     def _is_step(self, t_s: float, b: tuple[float, float],

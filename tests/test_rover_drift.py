@@ -395,11 +395,12 @@ def test_a_receiver_with_a_static_hold_is_given_longer() -> None:
 
 
 def test_a_position_that_repeats_while_the_doppler_moves_is_frozen() -> None:
-    """Its own speed (1 m/s) says it moved stale_move_m (0.3 m) by the third repeat at 10 Hz
-    (the fourth where the reported speed is under 1 m/s), whatever the coordinate quantum."""
-    for quantum in (0.018, 0.18):
+    """Its own speed (1 m/s) says it moved stale_move_m (0.15 m) and 1.6 of its coordinate
+    quanta: with 1.8 cm coordinates by the second repeat at 10 Hz (the third where the
+    reported speed is under 1 m/s), with 18 cm ones (0.29 m) by the third (or fourth)."""
+    for quantum, (first, last) in ((0.018, (150.2, 150.3)), (0.18, (150.3, 150.4))):
         run = _receiver_run((150.0, 160.0), position_only=True, quantum=quantum)
-        assert 150.3 - 1e-9 <= min(_frozen_at(run)) <= 150.4 + 1e-9
+        assert first - 1e-9 <= min(_frozen_at(run)) <= last + 1e-9
         assert _frozen_at(_receiver_run(quantum=quantum)) == []
 
 
