@@ -52,6 +52,17 @@ alone (``g_watch``, a flag): the tests that hold a fix or keep it out of the ref
 the configured σ, so the calibration's sample is what it would have been (used everywhere, the
 provisional σ kept long excursions out of it and σ(100 s) came out 15 % lower).
 
+The calibration proper is a sample too: over 300 s there are about 2·(300 − H)/H independent
+H-long differences (two axes), 58 at 10 s but 18 at 30 s and 4 at 100 s, and a median of 18
+is 30-40 % low often enough to matter (``sim rover-harness``, seeds 401-405: σ(30 s) 0.187 m
+on a 1 Hz receiver whose error and Doppler noise give about 0.27 m, and a 24 s false hold).
+For horizons of at least ``margin_min_h`` the calibrated σ carries its own uncertainty:
+
+    σ_H ← σ_H·(1 + m/√n_H),   n_H = max(1, 2·(T − H)/H)              (D8)
+
+with m = ``margin`` and T = ``calibrate_s``; the shorter horizons, which have many samples
+and find the ramps in time, are left as they are.
+
 Coarse coordinates (a receiver that writes 4 decimals of minutes rounds latitude to 0.19 m)
 add the variance of the difference of two rounding errors, uniform in ±q/2, to every σ:
 
@@ -116,13 +127,14 @@ class DriftTest:
 
     __slots__ = ("_base", "_be", "_bn", "_cal", "_cal_until", "_configured", "_keep", "_lt_e",
                  "_lt_n", "_lt_t", "_prov", "_prov_until", "_t", "_ve", "_vn", "calibrate_s",
-                 "calibrated", "floor_frac", "horizons", "lag_sd", "precal_factor", "precal_s",
-                 "quantum", "sigmas", "watch_s")
+                 "calibrated", "floor_frac", "horizons", "lag_sd", "margin", "margin_min_h",
+                 "precal_factor", "precal_s", "quantum", "sigmas", "watch_s")
 
     def __init__(self, horizons_s: Sequence[float], sigma_m: Sequence[float],
                  lag_sd_s: float, calibrate_s: float = 0.0, floor_frac: float = 0.2,
                  watch_s: float = 0.0, precal_s: float = 0.0,
-                 precal_factor: float = 2.0) -> None:
+                 precal_factor: float = 2.0, margin: float = 0.0,
+                 margin_min_h: float = 0.0) -> None:
         where = "[rover.detector]"
         if len(horizons_s) != len(sigma_m) or not horizons_s:
             raise ConfigError(where, "drift_sigma_m", "one value per drift_horizons_s",
@@ -159,6 +171,9 @@ class DriftTest:
         self._prov_until: float | None = None
         self._prov: tuple[float, ...] | None = None  # the provisional σ (with D6), till then
         self.floor_frac = floor_frac
+        # The calibration's own uncertainty (D8), for H >= margin_min_h.
+        self.margin = margin
+        self.margin_min_h = margin_min_h
         self.calibrated = calibrate_s <= 0.0
         self._cal_until: float | None = None
         self._cal: list[array[float]] = [array("d") for _ in self.horizons]
@@ -215,7 +230,12 @@ class DriftTest:
             if len(xs) < 20:
                 out.append(configured)
                 continue
-            est = max(factor * 1.4826 * xs[len(xs) // 2], self.floor_frac * configured)
+            est = factor * 1.4826 * xs[len(xs) // 2]
+            h = self.horizons[j]
+            if self.margin > 0.0 and h >= self.margin_min_h and not at_most_configured:
+                n = max(1.0, 2.0 * (self.calibrate_s - h) / h)  # (D8)
+                est *= 1.0 + self.margin / math.sqrt(n)
+            est = max(est, self.floor_frac * configured)
             out.append(min(configured, est) if at_most_configured else est)
         return concave_cap(self.horizons, out)
 

@@ -125,6 +125,10 @@ class RoverDetectorParams:
     # drift_prefactor, never wider than drift_sigma_m, until the calibration proper.
     drift_precal_s: float = field(default=120.0, metadata={"ge": 0.0})
     drift_prefactor: float = field(default=2.0, metadata={"ge": 1.0})
+    # The calibration's own uncertainty: each σ_H x (1 + drift_cal_k / sqrt(n_H)), n_H
+    # the independent H-long differences the calibration saw (2 axes), H >= drift_cal_min_h.
+    drift_cal_k: float = field(default=1.5, metadata={"ge": 0.0})
+    drift_cal_min_h: float = field(default=30.0, metadata={"ge": 0.0})
     drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
     # Flag (warn) from this statistic on, the fix still passed on as it is (0: off).
     drift_warn_sigmas: float = field(default=4.5, metadata={"ge": 0.0})
@@ -288,7 +292,9 @@ class RoverIsolator:
             self._drift = DriftTest(p.drift_horizons_s, p.drift_sigma_m, p.drift_lag_sd_s,
                                     p.drift_calibrate_s, watch_s=p.ramp_window_s,
                                     precal_s=p.drift_precal_s,
-                                    precal_factor=p.drift_prefactor)
+                                    precal_factor=p.drift_prefactor,
+                                    margin=p.drift_cal_k,
+                                    margin_min_h=p.drift_cal_min_h)
             self._hold_p = self._hold_params(p, p.drift_sigma_m)
         else:
             self._drift = None

@@ -113,6 +113,27 @@ def test_calibration_once_at_start_then_frozen() -> None:
     assert test.sigmas == frozen
 
 
+def test_the_long_horizons_carry_the_calibration_s_own_uncertainty() -> None:
+    """(D8): σ_H x (1 + m/sqrt(n_H)) for H >= margin_min_h, n_H = 2 (T - H)/H: over 300 s,
+    18 differences at 30 s (x 1.354 with m = 1.5), 58 at 10 s left alone; the concave cap
+    (D5) still bounds the result by the shorter horizons."""
+    rng = np.random.default_rng(11)
+    dt = 0.2
+    err = _walk(rng, 1600, dt, tau=5.0, sigma=0.2)  # saturated by 10 s: the cap is far
+    plain = DriftTest(H[:4], (1.0,) * 4, 0.0, calibrate_s=300.0, floor_frac=0.02)
+    wide = DriftTest(H[:4], (1.0,) * 4, 0.0, calibrate_s=300.0, floor_frac=0.02,
+                     margin=1.5, margin_min_h=30.0)
+    for k in range(1600):
+        for d in (plain, wide):
+            d.commit(k * dt, (err[k, 0], err[k, 1]), (0.0, 0.0))
+    assert plain.calibrated and wide.calibrated
+    assert wide.sigmas[:3] == plain.sigmas[:3]
+    expected = plain.sigmas[3] * (1.0 + 1.5 / math.sqrt(2.0 * (300.0 - 30.0) / 30.0))
+    cap = plain.sigmas[2] * math.sqrt(3.0)  # (D5) from the 10 s horizon
+    assert wide.sigmas[3] == pytest.approx(min(expected, cap))
+    assert wide.sigmas[3] > 1.2 * plain.sigmas[3]
+
+
 def test_a_provisional_calibration_sharpens_the_watched_horizon_only() -> None:
     """After precal_s the watched horizon's statistic uses the same robust estimate x
     precal_factor (never wider than configured); the σ that hold or withhold fixes stay as
