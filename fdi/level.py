@@ -18,7 +18,8 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
   ``exit_sigmas`` of the drift σ at the track's age (eq. D3) **and** with their own Doppler
   over L (a receiver consistent with itself): then the hold ends and the receiver is
   accepted. After a frozen stretch (the receiver repeated its speed and course too, so the
-  Doppler the old track was moved by is void) only the second condition is asked;
+  Doppler the old track was moved by is void, whatever speed it repeated: 0 at a stop while
+  the vehicle drives off) only the second condition is asked;
 * the new fixes are also right when, after L seconds consistent with their own Doppler, they
   sit at the level of an *older* trusted reference b_o (the long-term levels 20-300 s before
   the anchor, one every 10 s) while the old track does not: ``|b − b_o| ≤ ⅓·|b_a − b_o|`` and
@@ -98,14 +99,14 @@ class LevelHold:
     """One hold, from the epoch it starts; :meth:`step` once an epoch with Doppler."""
 
     __slots__ = ("_agree_b", "_agree_since", "_dev", "_long", "_old_b", "_old_since", "_recent",
-                 "anchor_b", "anchor_t", "anchor_v", "matched_t", "old", "p", "prefer_raw", "slow",
-                 "stale_m", "t0", "was_raw")
+                 "anchor_b", "anchor_t", "anchor_v", "frozen", "matched_t", "old", "p",
+                 "prefer_raw", "slow", "stale_m", "t0", "was_raw")
 
     def __init__(self, p: HoldParams, t0: float, anchor_t: float,
                  anchor_b: tuple[float, float], anchor_v: tuple[float, float],
                  stale_m: float = 0.0,
                  old: list[tuple[float, tuple[float, float]]] | None = None,
-                 slow: bool = True, prefer_raw: bool = False) -> None:
+                 slow: bool = True, prefer_raw: bool = False, frozen: bool = False) -> None:
         self.p = p
         self.prefer_raw = prefer_raw  # the fixes stepped back to an older level before it
         self.t0 = t0
@@ -113,6 +114,10 @@ class LevelHold:
         self.anchor_b = anchor_b
         self.anchor_v = anchor_v
         self.stale_m = stale_m  # displacement integrated from a void (frozen) Doppler
+        # The receiver repeated its whole fix during the hold (or when it began): its Doppler
+        # was void, whatever speed it repeated (a receiver frozen at a stop repeats 0 m/s while
+        # the vehicle drives off: 10 m of the Doppler chain missing, with stale_m = 0).
+        self.frozen = frozen or stale_m > 0.0
         self.old = old or []  # older trusted levels (t_o, b_o), before the anchor
         self.matched_t = math.nan  # the level the new fixes were found at ("new_level")
         self.slow = slow
@@ -138,6 +143,7 @@ class LevelHold:
         if stale:
             self.stale_m += math.hypot(v[0], v[1]) * dt
             self.slow = True
+            self.frozen = True
         age = t - self.anchor_t
         s = sigma_at(age, p.horizons_s, p.sigma_m)
         dv = p.lag_sd_s * math.hypot(v[0] - self.anchor_v[0], v[1] - self.anchor_v[1])
@@ -154,7 +160,7 @@ class LevelHold:
             max(t - t_old, 1e-3), p.horizons_s, p.sigma_m)
         # After a frozen stretch the old track rests on a void Doppler: the receiver, live
         # again and consistent with its own Doppler over the lag, is the evidence.
-        agrees = not stale and (g <= p.exit_sigmas or (self.stale_m > 0.0 and self_ok))
+        agrees = not stale and (g <= p.exit_sigmas or (self.frozen and self_ok))
         if agrees and self._agree_since is not None:
             # ... and the receiver stays consistent with itself since the agreement began.
             ab = self._agree_b
@@ -177,7 +183,7 @@ class LevelHold:
         while len(hist) > 1 and hist[1][0] <= t - 2.0 * p.exit_lag_s:
             hist.popleft()
         t_b, before, re0, rn0 = hist[0]
-        if (self.slow and not stale and self_ok and self.stale_m == 0.0
+        if (self.slow and not stale and self_ok and not self.frozen
                 and t - t_b >= p.exit_lag_s):
             s1 = p.exit_sigmas * p.sigma_m[0]
             # the move since then towards the old track, along the line from it
@@ -214,7 +220,7 @@ class LevelHold:
         # level or more, at most level_lag_s before they arrived there, are a fault's end:
         # the short lag, as before.
         need = 0.0
-        if (self.slow and self.stale_m == 0.0 and p.level_lag_s > 0.0
+        if (self.slow and not self.frozen and p.level_lag_s > 0.0
                 and self._old_since is not None
                 and (last_step is None or self._old_since - last_step[0] > p.level_lag_s + 1e-9
                      or last_step[1] < 0.5 * e_old)):
@@ -252,7 +258,7 @@ class LevelHold:
         if t - self.t0 > (p.max_s if self.slow else p.output_s):
             return HoldStep("give_up", track, g)
         if not stale and (g <= p.exit_sigmas or not math.isnan(at_old)
-                          or (self.stale_m > 0.0 and fresh)
+                          or (self.frozen and fresh)
                           or ((self.prefer_raw or self.was_raw) and self_ok)):
             self.was_raw = True
             return HoldStep("raw", track, g)

@@ -767,7 +767,7 @@ class RoverIsolator:
         # The hold's clock starts with the run of replacements that led to it (seconds).
         t0 = self._run_t0 if self._consec > 0 else t_s
         self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow,
-                               prefer_raw=self._stepped_back)
+                               prefer_raw=self._stepped_back, frozen=self._stale_run > 0)
         self._hold_reason = reason
         self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
         return True
@@ -796,7 +796,7 @@ class RoverIsolator:
             # the older references' level while the old track does not (the old track was
             # the faulty side: its references go).
             self._hold = None
-            if hold.stale_m > 0.0:
+            if hold.frozen:
                 # The Doppler was void while the receiver was frozen: the Doppler-free values
                 # before and after no longer line up.
                 drift.reset()

@@ -425,6 +425,18 @@ def test_a_position_that_repeats_while_the_doppler_moves_is_frozen() -> None:
         assert _frozen_at(_receiver_run(quantum=quantum)) == []
 
 
+def test_a_receiver_frozen_at_a_stop_is_taken_back_when_it_resumes() -> None:
+    """A receiver that pins its fix at stops (speed 0) freezes at 110 s, at a stop; the vehicle
+    drives off at 115 s and the receiver resumes at 125 s, 10 m on. Its frozen speed was 0, so
+    no displacement was integrated from the void Doppler: the hold still knows the Doppler was
+    void and takes the live, self-consistent receiver back within 2 s (it alarmed for 30 s,
+    until CONSISTENT_S: `coarse` 10 Hz seed 602, 122 clean epochs)."""
+    run = _receiver_run((110.0, 125.0), static_hold=True)
+    back = min(t for t, d in run if t >= 125.0 and d.action == "accept")
+    assert back <= 127.5
+    assert all(d.action == "accept" for t, d in run if back <= t < 195.0)
+
+
 # ------------------------------------------------------------------ the ramp's own horizon
 
 
