@@ -417,9 +417,10 @@ def test_a_receiver_with_a_static_hold_is_given_longer() -> None:
 
 def test_a_position_that_repeats_while_the_doppler_moves_is_frozen() -> None:
     """Its own speed (1 m/s) says it moved stale_move_m (0.15 m) and 1.6 of its coordinate
-    quanta: with 1.8 cm coordinates by the second repeat at 10 Hz (the third where the
-    reported speed is under 1 m/s), with 18 cm ones (0.29 m) by the third (or fourth)."""
-    for quantum, (first, last) in ((0.018, (150.2, 150.3)), (0.18, (150.3, 150.4))):
+    quanta: with 1.8 cm coordinates at the second repeat at 10 Hz (0.3 m, the rule before,
+    took the third), with 18 cm ones (0.29 m) at the third (the fourth where the reported
+    speed is under 0.96 m/s)."""
+    for quantum, (first, last) in ((0.018, (150.2, 150.2)), (0.18, (150.3, 150.4))):
         run = _receiver_run((150.0, 160.0), position_only=True, quantum=quantum)
         assert first - 1e-9 <= min(_frozen_at(run)) <= last + 1e-9
         assert _frozen_at(_receiver_run(quantum=quantum)) == []
