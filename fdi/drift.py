@@ -219,11 +219,11 @@ class DriftTest:
             for a in (self._t, self._be, self._bn, self._ve, self._vn):
                 del a[:cut]
 
-    def _estimate(self, factor: float = 1.0, at_most_configured: bool = False
-                  ) -> tuple[float, ...]:
+    def _estimate(self, factor: float = 1.0, provisional: bool = False) -> tuple[float, ...]:
         """σ_H from the differences collected so far (× ``factor``), never below
         ``floor_frac`` of the configured value, capped by (D5); the configured value where
-        fewer than 20 were collected (``at_most_configured``: and never wider than it)."""
+        fewer than 20 were collected. The calibration proper carries its own uncertainty (D8);
+        a ``provisional`` one (D7) has its factor instead and is never wider than configured."""
         out = []
         for j, configured in enumerate(self._configured):
             xs = sorted(self._cal[j])
@@ -232,11 +232,11 @@ class DriftTest:
                 continue
             est = factor * 1.4826 * xs[len(xs) // 2]
             h = self.horizons[j]
-            if self.margin > 0.0 and h >= self.margin_min_h and not at_most_configured:
+            if self.margin > 0.0 and h >= self.margin_min_h and not provisional:
                 n = max(1.0, 2.0 * (self.calibrate_s - h) / h)  # (D8)
                 est *= 1.0 + self.margin / math.sqrt(n)
             est = max(est, self.floor_frac * configured)
-            out.append(min(configured, est) if at_most_configured else est)
+            out.append(min(configured, est) if provisional else est)
         return concave_cap(self.horizons, out)
 
     def _calibrate_step(self, t: float, b: tuple[float, float]) -> None:
@@ -252,7 +252,7 @@ class DriftTest:
                 self._cal[j].append(abs(b[1] - self._bn[i]))
         if self._prov_until is not None and t >= self._prov_until:
             self._prov_until = None
-            self._prov = self._estimate(self.precal_factor, at_most_configured=True)
+            self._prov = self._estimate(self.precal_factor, provisional=True)
         if t >= self._cal_until:
             self._base = self._estimate()
             self._prov = None

@@ -72,6 +72,9 @@ from fdi.drift import sigma_at
 HoldAction = Literal["track", "raw", "alarm", "exit", "ended", "new_level", "consistent",
                      "give_up"]
 CONSISTENT_S = 30.0  # a receiver consistent with its own Doppler this long ends a slow hold
+# A fix within this fraction of the track's departure from an older level is back at it: the
+# isolator's step back (rover.py, _back_at_old_level) and a hold entered after one.
+BACK_AT_OLD_FRAC = 0.6
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,8 +199,8 @@ class LevelHold:
         if self.old and not stale:
             s_side = p.side_sigmas * sigma_at(30.0, p.horizons_s, p.sigma_m)
             # After a step back to an older level (prefer_raw) the caller's rule for that
-            # step, within 0.6 of the way (rover.py, _back_at_old_level); else a third.
-            frac = 0.6 if self.prefer_raw else 1.0 / 3.0
+            # step (BACK_AT_OLD_FRAC); else a third.
+            frac = BACK_AT_OLD_FRAC if self.prefer_raw else 1.0 / 3.0
             for t_o, (oe, on) in self.old:
                 e_new = math.hypot(b[0] - oe, b[1] - on)
                 e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)

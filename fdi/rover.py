@@ -62,7 +62,7 @@ from fdi.chi2 import threshold
 from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
 from fdi.grey import gm11_predict_shifted_enu
 from fdi.kalman import GpsKalman
-from fdi.level import HoldParams, LevelHold
+from fdi.level import BACK_AT_OLD_FRAC, HoldParams, LevelHold
 from fdi.three_zone import Action as ZoneAction
 from fdi.three_zone import ThreeZoneGate, ThreeZoneParams, Zone
 
@@ -727,8 +727,7 @@ class RoverIsolator:
         # receiver driving along one axis may never move the other); the rule waits for one.
         move = p.stale_move_m
         if p.stale_move_quanta > 0.0:
-            qe, qn = self._quant
-            q = qe if qn == math.inf else qn if qe == math.inf else max(qe, qn)
+            q = max((x for x in self._quant if x < math.inf), default=math.inf)
             move = max(move, p.stale_move_quanta * q)
         if move > 0.0 and fix.speed_mps is not None and fix.speed_mps * held >= move:
             return True
@@ -986,7 +985,7 @@ class RoverIsolator:
             if e_track < s_side:
                 continue  # the track has not left that level by more than its own noise
             e_new = math.hypot(b[0] - oe, b[1] - on)
-            if e_new <= 0.6 * e_track and e_new <= hp.exit_sigmas * s_age:
+            if e_new <= BACK_AT_OLD_FRAC * e_track and e_new <= hp.exit_sigmas * s_age:
                 return t_o
         return None
 
