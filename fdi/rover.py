@@ -70,6 +70,10 @@ Action = Literal["accept", "replace", "alarm", "no_fix"]
 # Epochs over which the receiver must agree with its own Doppler to be restarted on after an
 # alarm: short, so a real step is accepted again soon, long enough to expose a frozen fix.
 RAW_HORIZON = 3
+# The Doppler residual's prior variance (doppler_s0_m over the window's span) weighs as this
+# many residuals: its running mean learns the receiver's own within tens of epochs, then an
+# exponential average over gate_tau_epochs follows it.
+DOPPLER_PRIOR_N = 5
 # Epochs (beyond hold_exit_s) a step back to the level before a remembered step must stay
 # before the receiver is restarted on: more than a 2-epoch burst that happens to reverse it.
 STEP_END_EPOCHS = 3
@@ -241,7 +245,11 @@ class RoverIsolator:
         # consistent with itself over the window (a frozen or wandering fix is not)?
         self._raw_hist: deque[tuple[float, float, float, float]] = deque(maxlen=RAW_HORIZON)
         self._coast_since: float | None = None
+        # The Doppler residual's variance per axis: its prior scaled to the window's span
+        # once the fix interval is known (_set_inc_prior), then learned from accepted fixes.
         self._var_inc = params.doppler_s0_m**2
+        self._inc_prior_set = False
+        self._n_inc = 0  # residuals learned: the prior weighs as DOPPLER_PRIOR_N of them
         self._alarm = False
         self._good_run = 0
         self._var_h = params.gate_sigma0_m**2
@@ -361,6 +369,17 @@ class RoverIsolator:
             return w[-1]
         return gm11_predict_shifted_enu(w, self.p.shift_m)  # per axis
 
+    def _set_inc_prior(self, dt: float) -> None:
+        """The Doppler residual's prior variance at the first fix interval ``dt``:
+        ``doppler_s0_m`` is its σ per axis over a 1 s span, and the residual spans the window's
+        (window - 1) x dt seconds. The Doppler's integrated noise is a random walk, so the
+        variance grows with the span: at 1 Hz a 0.2 m prior was half a clean coarse
+        receiver's 11 s residual and flagged its first 20 s (docs/evaluation.md, sixth pass);
+        a span under 1 s keeps the 1 s value."""
+        span = (self.p.window - 1) * dt
+        self._var_inc = self.p.doppler_s0_m**2 * max(1.0, span)
+        self._inc_prior_set = True
+
     def _doppler_gate(self) -> float:
         p = self.p
         return max(p.doppler_floor_m, p.doppler_sigmas * math.sqrt(self._var_inc))
@@ -387,6 +406,9 @@ class RoverIsolator:
             # A stale or repeated epoch: its fix is not passed on.
             reason = "time_backwards" if dt < 0 else "duplicate_time"
             return self._decision("no_fix", False, reason, None, t)
+        if not self._inc_prior_set and dt is not None and 0.0 < dt <= p.max_gap_s:
+            self._set_inc_prior(dt)
+            t.doppler_gate = self._doppler_gate()
         z = fix.enu
         r = self._r(fix)
         # A 2D fix (no altitude: RMC/GLL only) has NaN up: hold the last known height with a
@@ -1036,7 +1058,9 @@ class RoverIsolator:
         self._rev = None
         self._coast_since = None
         if learn and t.doppler_res is not None and len(self._acc_hist) == self.p.window:
-            self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, self._ewma)
+            self._n_inc += 1
+            w = max(self._ewma, 1.0 / (self._n_inc + DOPPLER_PRIOR_N))
+            self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, w)
         d = self._disp
         lv = self._last_v or (0.0, 0.0)
         self._acc_hist.append((z[0], z[1], d[0], d[1], lv[0], lv[1]))

@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from firmware_host.devtools.rover_harness import scenario as harness_scenario
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.devtools.score import RoverScore, score_rover
 from firmware_host.rover.pipeline import RoverPipeline
@@ -130,3 +131,29 @@ def test_frozen_position_is_caught_by_the_doppler_test(rate: float, min_detect: 
     paper = load_config("rover-paper")
     sp, _ = run_scenario(paper, sc)
     assert sp.detection_rate < s.detection_rate
+
+
+def test_a_clean_coarse_receiver_s_first_seconds_at_1_hz_are_not_flagged() -> None:
+    """The Doppler test's prior is its σ over a 1 s span, scaled to the window's span: at 1 Hz
+    the 12-epoch residual spans 11 s, and a clean coarse receiver (0.05 m/s speed resolution,
+    0.05-0.1 m/s Doppler noise) moves 1.3-1.6 m against its integrated Doppler in that time.
+    A 0.2 m prior for every rate (gate 1.2 m) flagged its 15th-20th s (the harness's run,
+    `coarse` 1 Hz seed 404)."""
+    cfg = load_config("rover")
+    data: list[bytes] = []
+    truth: list[dict[str, Any]] = []
+    for _, d, tr in generate(harness_scenario("coarse", 404, 1.0)):
+        data.append(d)
+        truth.append(tr)
+    buf = io.StringIO()
+    pipe = RoverPipeline(cfg.rover, jsonl=buf)
+    pipe.feed(b"".join(data))
+    pipe.finish()
+    epochs = [json.loads(line) for line in buf.getvalue().splitlines()]
+    first_fault = min(tr["utc"] for tr in truth if tr["fault"])
+    before = [e for e in epochs if e["utc"] < first_fault - 10.0]
+    assert len(before) >= 40
+    assert not [e["utc"] for e in before if e["fault"]]
+    # The gate it started from: 6 x 0.2 m x sqrt(11 s), learned from there (the Doppler
+    # lag's share adds in quadrature: under 1 % here).
+    assert epochs[1]["doppler_gate"] == pytest.approx(6.0 * 0.2 * math.sqrt(11.0), rel=0.01)
