@@ -654,7 +654,11 @@ class RoverIsolator:
             self._window_append(t.pred, d)
             self.kf.update(t.pred, r)
             return self._coast(t.pred, t, "+".join(reasons) + "+coast")
-        return self._raise_alarm(z, r, "+".join(reasons), t)
+        # A run of steps back (the receiver's fixes passed on) that the replacements ran out
+        # on: the Doppler chain is intact, so the drift test's levels are kept (rebased) and a
+        # later return to them is still known as one (at 10 Hz the 5 replacements are 0.5 s,
+        # under the hold_exit_s + STEP_END_EPOCHS a step's end needs).
+        return self._raise_alarm(z, r, "+".join(reasons), t, keep_levels=back and have_doppler)
 
     def _step_zones(
         self,
