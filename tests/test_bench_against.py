@@ -23,8 +23,15 @@ def test_against_rows_judge_the_ratio_and_the_process_time() -> None:
         next(n for n in rows if n.startswith("throughput"))
     assert startup["value"] == 0.25 and startup["ok"] is False and "0.330 s" in \
         next(n for n in rows if n.startswith("nmea-rtk"))
-    res["against"]["ratio"] = 1.2
-    assert not bench.against_rows(res)[0]["ok"]
+    # The default goal: no slower than the commit, within the noise (0.95).
+    res["against"]["ratio"] = 0.97
+    assert bench.against_rows(res)[0]["ok"] is True
+    res["against"]["ratio"] = 0.9
+    assert bench.against_rows(res)[0]["ok"] is False
+    # A speed-up goal travels with the measurement (--ratio-goal 1.5: issue 19's).
+    res["against"].update(ratio=1.2, goal=1.5)
+    row = bench.against_rows(res)[0]
+    assert row["ok"] is False and row["goal"] == ">= 1.5"
     assert bench.against_rows({"against": {"error": "no git"}, "startup": {"error": "x"}}) == []
 
 
