@@ -406,7 +406,8 @@ class RoverIsolator:
             # A stale or repeated epoch: its fix is not passed on.
             reason = "time_backwards" if dt < 0 else "duplicate_time"
             return self._decision("no_fix", False, reason, None, t)
-        if not self._inc_prior_set and dt is not None and 0.0 < dt <= p.max_gap_s:
+        if (not self._inc_prior_set and p.doppler_test and dt is not None
+                and 0.0 < dt <= p.max_gap_s):
             self._set_inc_prior(dt)
             t.doppler_gate = self._doppler_gate()
         z = fix.enu
