@@ -113,6 +113,8 @@ class RoverDetectorParams:
     doppler_test: bool = True
     doppler_sigmas: float = field(default=6.0, metadata={"ge": 0.0})
     doppler_floor_m: float = field(default=0.5, metadata={"gt": 0.0})
+    # The residual's prior σ per axis over a 1 s span, x sqrt(the window's span in s) at the
+    # first fix interval (a random walk), then learned (weighing as DOPPLER_PRIOR_N residuals).
     doppler_s0_m: float = field(default=0.2, metadata={"gt": 0.0})
     max_coast_s: float = field(default=30.0, metadata={"ge": 0.0})
     # Slow faults and level changes (issue 13, fdi/drift.py and fdi/level.py; beyond the
