@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from firmware_host.devtools.rover_harness import replay as harness_replay
 from firmware_host.devtools.rover_harness import scenario as harness_scenario
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.devtools.score import RoverScore, score_rover
@@ -139,17 +140,7 @@ def test_a_clean_coarse_receiver_s_first_seconds_at_1_hz_are_not_flagged() -> No
     0.05-0.1 m/s Doppler noise) moves 1.3-1.6 m against its integrated Doppler in that time.
     A 0.2 m prior for every rate (gate 1.2 m) flagged its 15th-20th s (the harness's run,
     `coarse` 1 Hz seed 404)."""
-    cfg = load_config("rover")
-    data: list[bytes] = []
-    truth: list[dict[str, Any]] = []
-    for _, d, tr in generate(harness_scenario("coarse", 404, 1.0)):
-        data.append(d)
-        truth.append(tr)
-    buf = io.StringIO()
-    pipe = RoverPipeline(cfg.rover, jsonl=buf)
-    pipe.feed(b"".join(data))
-    pipe.finish()
-    epochs = [json.loads(line) for line in buf.getvalue().splitlines()]
+    epochs, truth = harness_replay(load_config("rover"), harness_scenario("coarse", 404, 1.0))
     first_fault = min(tr["utc"] for tr in truth if tr["fault"])
     before = [e for e in epochs if e["utc"] < first_fault - 10.0]
     assert len(before) >= 40
