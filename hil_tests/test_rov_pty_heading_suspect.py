@@ -2,8 +2,13 @@
 
 The simulated vehicle streams on the pty's master side in real time (``serve_pty``); the bridge
 runs ``run_rov`` (the Runner, ``OutlandRovVehicle``, ``link_step``, the controller) on the slave
-path by URL. A one-sample 90 deg compass jump in the FIR's warm-up (where e^2 alone would not
+path by URL. A three-sample 90 deg compass jump in the FIR's warm-up (where e^2 alone would not
 open criterion 1) is flagged by the driver, opens a suspect, is substituted and not confirmed.
+
+Three samples, not one: on RS-232 each period uses the newest frame waiting, so a bridge that
+stalls 0.1 s (a loaded CI machine did, stop 25) reads a one-sample jump together with the next,
+plausible frame and never uses the jump. That is the right behaviour, but it left this test
+with nothing flagged to check; a 0.12 s stall at any step around the jump passes with three.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ PROTO = load_protocol(ROOT / "config" / "protocols" / "outland1000.toml")
 def test_flagged_jump_over_pty_is_substituted_not_confirmed() -> None:
     cfg = RovConfig(period_s=0.05)  # 20 Hz to keep it short: warm-up is 100 samples = 5 s
     with PtyPair() as pty:
-        plant = RovPlant(cfg.sim, [parse_fault("spike:90@2-2.05")])  # one 20 Hz sample
+        plant = RovPlant(cfg.sim, [parse_fault("spike:90@2-2.15")])  # three 20 Hz samples
         srv = RovSimServer(plant, PROTO, "rs232", node=1, period_s=cfg.period_s)
         stop = threading.Event()
         th = threading.Thread(target=serve_pty, args=(pty, srv, stop), daemon=True)
