@@ -218,9 +218,10 @@ def test_report_command_prints_the_tables(
 
 
 def test_report_seed_lists() -> None:
-    from firmware_host.devtools.insgnss_report import _seeds, range_verdict
+    from firmware_host.commands.checks import seed_list
+    from firmware_host.devtools.insgnss_report import range_verdict
 
-    assert _seeds("1-3,7") == [1, 2, 3, 7]
+    assert seed_list("1-3,7") == [1, 2, 3, 7]
     pos = {"up": {"min": -1.0, "max": 1.0}}
     assert range_verdict(pos, "up").endswith("✓✓")  # span 2.0 <= 0.7 × 5.19
     assert range_verdict({"up": {"min": -2.6, "max": 2.5}}, "up").endswith(" ✓")

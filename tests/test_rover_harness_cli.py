@@ -44,3 +44,33 @@ def test_rover_harness_interrupted_reports_what_ran(monkeypatch: pytest.MonkeyPa
     doc = json.loads(out.read_text(encoding="utf-8"))
     assert doc["partial"] is True and [r["seed"] for r in doc["runs"]] == [1]
     assert doc["rows"][0]["seeds"] == [1]
+
+
+def test_rover_harness_takes_a_seed_range(monkeypatch: pytest.MonkeyPatch,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    seen: list[tuple[str, int, float]] = []
+
+    def record(cfg: Any, *, models: Any, seeds: Any, rates: Any, duration_s: float,
+               out: list[Any], step: Any) -> None:
+        seen.extend((m, s, r) for m in models for s in seeds for r in rates)
+
+    monkeypatch.setattr(rover_harness, "run_matrix", record)
+    assert cli.main(["sim", "rover-harness", "--seeds", "801-803,9", "--models", "gm,coarse",
+                     "--rates", "1,10", "--duration", "60"]) == 0
+    assert sorted({s for _, s, _ in seen}) == [9, 801, 802, 803]
+    assert {m for m, _, _ in seen} == {"gm", "coarse"} and {r for _, _, r in seen} == {1.0, 10.0}
+
+
+@pytest.mark.parametrize("flag, value, found", [
+    ("--seeds", "801..805", "801..805"),
+    ("--seeds", "5-1", "5-1"),
+    ("--models", "gm,rtk", "gm,rtk"),
+    ("--rates", "1,0", "0"),
+])
+def test_rover_harness_bad_lists_are_usage_errors(flag: str, value: str, found: str,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["sim", "rover-harness", flag, value])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert flag in err and found in err and "Traceback" not in err and "internal" not in err

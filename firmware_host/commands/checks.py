@@ -22,7 +22,7 @@ import argparse
 import math
 import os
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TypeVar
 
@@ -246,7 +246,47 @@ def _non_negative_int(text: str) -> int:
     return n
 
 
+def _seed_list(text: str) -> list[int]:
+    """Seeds as ``1-5``, ``1,3`` or both (``1-3,8``): whole numbers, ranges low to high."""
+    out: list[int] = []
+    for part in (p.strip() for p in text.split(",")):
+        lo, dash, hi = part.partition("-")
+        try:
+            a, b = int(lo), int(hi if dash else lo)
+        except ValueError:
+            raise UsageError(
+                f"value: expected seeds like 1-5 or 1,3, found {text!r}") from None
+        if b < a:
+            raise UsageError(f"value: expected a range low to high, found {part!r}")
+        out.extend(range(a, b + 1))
+    return out
+
+
+def _positive_float_list(text: str) -> list[float]:
+    """Positive numbers, comma separated (``1,5,10``)."""
+    parts = [p.strip() for p in text.split(",") if p.strip()]
+    if not parts:
+        raise UsageError(f"value: expected numbers like 1,5,10, found {text!r}")
+    return [_positive_float(p) for p in parts]
+
+
+def choice_list(choices: Sequence[str], name: str) -> Callable[[str], list[str]]:
+    """An ``argparse`` type: names from ``choices``, comma separated, each checked."""
+
+    def check(text: str) -> list[str]:
+        names = [p.strip() for p in text.split(",") if p.strip()]
+        bad = [n for n in names if n not in choices]
+        if bad or not names:
+            raise UsageError(f"value: expected {name} from {', '.join(choices)} (comma "
+                             f"separated), found {text!r}")
+        return names
+
+    return _as_type(check, name)
+
+
 positive_float = _as_type(_positive_float, "positive_float")
+seed_list = _as_type(_seed_list, "seed_list")
+positive_float_list = _as_type(_positive_float_list, "positive_float_list")
 non_negative_float = _as_type(_non_negative_float, "non_negative_float")
 positive_int = _as_type(_positive_int, "positive_int")
 non_negative_int = _as_type(_non_negative_int, "non_negative_int")

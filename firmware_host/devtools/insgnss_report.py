@@ -33,7 +33,12 @@ import numpy as np
 
 from fdi.errors import UsageError
 from fdi.insgnss import INS_STRATEGIES, InsGnssStrategy
-from firmware_host.commands.checks import input_file_arg, output_file_arg
+from firmware_host.commands.checks import (
+    input_file_arg,
+    output_file_arg,
+    positive_float_list,
+    seed_list,
+)
 from firmware_host.commands.progress import Progress
 from firmware_host.commands.tables import (
     Block,
@@ -71,26 +76,6 @@ TABLE2_PRESET = CONFIG_DIR / "insgnss-table2.toml"
 TABLE2_METHODS: tuple[InsGnssStrategy, ...] = ("none", "downweight", "three_zone", "fault_state")
 SPAN_TOLERANCE = 0.25  # the calibration: spans without robust filtering within 25 %
 GOAL = 0.7  # "our goal is 30 % tighter than the paper": span at most 0.7 of Table 2's
-
-
-def _seeds(text: str) -> list[int]:
-    out: list[int] = []
-    for part in text.split(","):
-        lo, _, hi = part.partition("-")
-        try:
-            a, b = int(lo), int(hi or lo)
-        except ValueError as err:
-            raise argparse.ArgumentTypeError(
-                f"seeds: expected like 1-5 or 1,3, got {text!r}") from err
-        out.extend(range(a, b + 1))
-    return out
-
-
-def _floats(text: str) -> list[float]:
-    try:
-        return [float(x) for x in text.split(",")]
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"expected like 1.15,2,5, got {text!r}") from err
 
 
 def with_sigma_v(setup: InsGnssSetup, sigma_v_m: float) -> InsGnssSetup:
@@ -405,13 +390,13 @@ def table2_calibrated(seeds: Sequence[int], setup: InsGnssSetup | None = None,
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seeds", type=_seeds, default=_seeds("1-5"),
+    parser.add_argument("--seeds", type=seed_list, default=[1, 2, 3, 4, 5],
                         help="seeds, like 1-5 or 1,3 (default 1-5)")
     parser.add_argument(
         "--config", type=input_file_arg, action="append", default=None,
         help="preset TOML, repeatable (default: config/insgnss-paper.toml and "
              "config/insgnss.toml)")
-    parser.add_argument("--sweep-sigma-v", type=_floats, default=[],
+    parser.add_argument("--sweep-sigma-v", type=positive_float_list, default=[],
                         help="also run paper-deviation on the first preset with these vertical "
                              "GNSS noises, m (like 1.15,2,3,5)")
     parser.add_argument("--scenario", choices=PAPER_SCENARIOS, action="append", default=None,

@@ -40,7 +40,13 @@ from typing import Any
 from fdi.drift import calibrate
 from fdi.geodesy import LocalFrame
 from firmware_host.commands import tables
-from firmware_host.commands.checks import output_file_arg, positive_float
+from firmware_host.commands.checks import (
+    choice_list,
+    output_file_arg,
+    positive_float,
+    positive_float_list,
+    seed_list,
+)
 from firmware_host.commands.progress import Progress
 from firmware_host.devtools.rover_sim import ERROR_MODELS, RoverScenario, generate
 from firmware_host.rover.pipeline import RoverPipeline
@@ -374,11 +380,13 @@ def _clean(x: Any) -> Any:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default="rover", help="config file or preset name")
-    parser.add_argument("--seeds", default=",".join(map(str, REPORT_SEEDS)),
-                        help="seeds, comma separated (the report seeds; tuning used 101-103)")
-    parser.add_argument("--models", default=",".join(ERROR_MODELS),
+    parser.add_argument("--seeds", type=seed_list, default=list(REPORT_SEEDS),
+                        help="seeds, like 1-5 or 1,3 (the report seeds; tuning used 101-103)")
+    parser.add_argument("--models", type=choice_list(ERROR_MODELS, "models"),
+                        default=list(ERROR_MODELS),
                         help="receiver error models, comma separated")
-    parser.add_argument("--rates", default="1,5,10", help="fix rates in Hz, comma separated")
+    parser.add_argument("--rates", type=positive_float_list, default=[1.0, 5.0, 10.0],
+                        help="fix rates in Hz, comma separated")
     parser.add_argument("--duration", type=positive_float, default=1200.0,
                         help="seconds per run")
     parser.add_argument("--json", default=None, type=output_file_arg,
@@ -388,9 +396,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)
     cfg = load_config(args.config)
-    models = [m for m in args.models.split(",") if m]
-    seeds = [int(s) for s in args.seeds.split(",") if s]
-    rates = [float(r) for r in args.rates.split(",") if r]
+    models: list[str] = args.models
+    seeds: list[int] = args.seeds
+    rates: list[float] = args.rates
     t0 = time.perf_counter()
     runs: list[RunMetrics] = []
     partial = False
