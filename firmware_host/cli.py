@@ -52,6 +52,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "record a serial port's raw bytes to a capture file",
     ),
     "run": ("firmware_host.commands.run", "run on the vehicle with the configured ports"),
+    "calibrate": (
+        "firmware_host.commands.calibrate",
+        "calibrate the rover's drift test once, on recordings of clean drives",
+    ),
     "eval": (
         "firmware_host.devtools.eval",
         "score detectors against the truth, beside the baselines",
@@ -133,6 +137,7 @@ EXAMPLES: dict[str, str] = {
     "replay": "fdi-bridge replay --config rover run/rover.nmea --out replayed",
     "record": "fdi-bridge record /dev/ttyUSB0 --baud 115200 --duration 600 --out gps.cap",
     "run": "fdi-bridge run --config rover --out run-out --record rec",
+    "calibrate": "fdi-bridge calibrate clean-drive.cap --config rover --out rover-mine.toml",
     "eval": "fdi-bridge eval replayed --truth run/truth.jsonl   (or: fdi-bridge eval --suite "
             "--quick)",
     "bench": "fdi-bridge bench --duration 10 --json bench.json",

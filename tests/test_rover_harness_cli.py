@@ -51,7 +51,7 @@ def test_rover_harness_takes_a_seed_range(monkeypatch: pytest.MonkeyPatch,
     seen: list[tuple[str, int, float]] = []
 
     def record(cfg: Any, *, models: Any, seeds: Any, rates: Any, duration_s: float,
-               out: list[Any], step: Any) -> None:
+               out: list[Any], step: Any, offline_calibration: bool) -> None:
         seen.extend((m, s, r) for m in models for s in seeds for r in rates)
 
     monkeypatch.setattr(rover_harness, "run_matrix", record)

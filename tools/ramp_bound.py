@@ -23,6 +23,7 @@ from multiprocessing import Pool
 import numpy as np
 
 from firmware_host.devtools import rover_harness as H
+from firmware_host.rover.calibration import doppler_free
 from firmware_host.runtime.config import load_config
 
 HORIZON_S = 10.0
@@ -52,7 +53,7 @@ def _run(job: tuple[str, float, int]) -> tuple[str, float, int, float, list[floa
 
     clean_d: list[float] = []
     ramps: list[float] = []  # per ramp >= MIN_RATE_MPS: the largest statistic in its 10 s
-    for chain in H.doppler_free(epochs, 0.15):
+    for chain in doppler_free(epochs, 0.15):
         ts = [c[0] for c in chain]
         for i, (t, _, _) in enumerate(chain):
             s = _stat(chain, ts, i)

@@ -27,6 +27,7 @@ Seeds: the defaults were tuned on seeds 101-103 (``TUNE_SEEDS``); the report use
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import io
 import json
 import logging
@@ -37,7 +38,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from fdi.drift import calibrate
 from fdi.geodesy import LocalFrame
 from firmware_host.commands import tables
 from firmware_host.commands.checks import (
@@ -49,6 +49,7 @@ from firmware_host.commands.checks import (
 )
 from firmware_host.commands.progress import Progress
 from firmware_host.devtools.rover_sim import ERROR_MODELS, RoverScenario, generate
+from firmware_host.rover.calibration import calibrate_records, starting_sigma
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 
@@ -224,18 +225,47 @@ def measure(epochs: Sequence[dict[str, Any]], truth: Sequence[dict[str, Any]], *
 def run_matrix(cfg: BridgeConfig, *, models: Sequence[str] = ERROR_MODELS,
                seeds: Sequence[int] = REPORT_SEEDS, rates: Sequence[float] = RATES,
                duration_s: float = 1200.0, out: list[RunMetrics] | None = None,
-               step: Callable[[str], None] | None = None) -> list[RunMetrics]:
+               step: Callable[[str], None] | None = None,
+               offline_calibration: bool = False) -> list[RunMetrics]:
     """Every (model, rate, seed) run measured; ``out`` is filled as the runs come (what a ^C
-    keeps) and ``step(label)`` called after each (a progress bar)."""
+    keeps) and ``step(label)`` called after each (a progress bar). ``offline_calibration``:
+    each receiver calibrated first on a clean drive of its own (:func:`offline_calibrated`)."""
     done: list[RunMetrics] = out if out is not None else []
     for model in models:
         for rate in rates:
             for seed in seeds:
-                epochs, truth = replay(cfg, scenario(model, seed, rate, duration_s))
+                run_cfg = (offline_calibrated(cfg, model, seed, rate, duration_s)
+                           if offline_calibration else cfg)
+                epochs, truth = replay(run_cfg, scenario(model, seed, rate, duration_s))
                 done.append(measure(epochs, truth, model=model, seed=seed, rate_hz=rate))
                 if step is not None:
                     step(f"{model} {rate:g} Hz seed {seed}")
     return done
+
+
+#: The clean drive a receiver is calibrated on is another day's: seed + this, same receiver.
+CALIBRATION_SEED_OFFSET = 100_000
+
+
+def offline_calibrated(cfg: BridgeConfig, model: str, seed: int, rate_hz: float,
+                       duration_s: float = 1200.0) -> BridgeConfig:
+    """``cfg`` with the drift test calibrated offline (``fdi-bridge calibrate``) on a clean
+    drive of the same receiver at the same rate: the generator's receiver of ``seed``
+    (``receiver_seed``; the ``gm`` model has one receiver), another error realisation, path
+    and Doppler noise (seed + :data:`CALIBRATION_SEED_OFFSET`), no faults (the ``multipath``
+    model keeps its steps: they are that receiver's). The test starts from
+    :func:`~firmware_host.rover.calibration.starting_sigma` and still calibrates over the
+    run's first ``drift_calibrate_s``, as ``fdi-bridge calibrate``'s configuration does."""
+    d = cfg.rover.detector
+    # The multipath model's steps at the rate the harness's runs have them (1 event in 5).
+    clean = RoverScenario(rate_hz=rate_hz, duration_s=duration_s,
+                          seed=seed + CALIBRATION_SEED_OFFSET, receiver_seed=seed, kinds=(),
+                          error_model=model, fault_every_s=45.0 * (len(KINDS) + 1),
+                          min_gap_s=25.0)
+    cal = calibrate_records([replay(cfg, clean)[0]], d.drift_horizons_s, d.drift_lag_s,
+                            margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h)
+    det = dataclasses.replace(d, drift_sigma_m=starting_sigma(cal, d.drift_sigma_m))
+    return dataclasses.replace(cfg, rover=dataclasses.replace(cfg.rover, detector=det))
 
 
 # --------------------------------------------------------------------------- the bullets
@@ -391,6 +421,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="seconds per run")
     parser.add_argument("--json", default=None, type=output_file_arg,
                         help="also write every number to this JSON file")
+    parser.add_argument("--offline-calibration", action="store_true",
+                        help="calibrate each receiver's drift test first on a clean drive of "
+                             "its own (as fdi-bridge calibrate): it starts from 1.5 x those "
+                             "sigma instead of the wide drift_sigma_m")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -405,7 +439,7 @@ def run(args: argparse.Namespace) -> int:
     with Progress(len(models) * len(seeds) * len(rates), "rover harness", unit="run") as bar:
         try:
             run_matrix(cfg, models=models, seeds=seeds, rates=rates, duration_s=args.duration,
-                       out=runs, step=bar.step)
+                       out=runs, step=bar.step, offline_calibration=args.offline_calibration)
         except KeyboardInterrupt:  # ^C: what was measured is reported, marked partial
             partial = True
     rows = summarise(runs)
@@ -427,41 +461,10 @@ def run(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- calibration
 
 
-def doppler_free(records: Sequence[dict[str, Any]], lag_s: float
-                 ) -> list[list[tuple[float, float, float]]]:
-    """(t, b_e, b_n) of (D1) in :mod:`fdi.drift` from a pipeline's records, split where the
-    Doppler chain breaks (no fix, no speed); the pipeline's own local metres."""
-    chains: list[list[tuple[float, float, float]]] = [[]]
-    de = dn = 0.0
-    last: tuple[float, float, float] | None = None  # t, ve, vn
-    for r in records:
-        sp, co = r.get("speed"), r.get("course")
-        if r.get("e") is None or sp is None or r.get("utc") is None:
-            chains.append([])
-            last = None
-            continue
-        c = math.radians(co) if co is not None else 0.0
-        ve, vn = (sp * math.sin(c), sp * math.cos(c)) if co is not None else (0.0, 0.0)
-        t = float(r["utc"])
-        if last is not None:
-            dt = t - last[0]
-            de += 0.5 * (ve + last[1]) * dt
-            dn += 0.5 * (vn + last[2]) * dt
-        last = (t, ve, vn)
-        chains[-1].append((t, r["e"] - de - lag_s * ve, r["n"] - dn - lag_s * vn))
-    return [c for c in chains if len(c) > 10]
-
-
 def calibrate_receiver(cfg: BridgeConfig, runs: Sequence[RoverScenario]) -> tuple[float, ...]:
     """The drift test's σ per horizon (``drift_sigma_m``) on clean runs of one receiver: the
-    largest over the runs of :func:`fdi.drift.calibrate`."""
+    largest over the runs' chains (:func:`firmware_host.rover.calibration.calibrate_records`)."""
     d = cfg.rover.detector
-    worst = [0.0] * len(d.drift_horizons_s)
-    for sc in runs:
-        epochs, _ = replay(cfg, sc)
-        for chain in doppler_free(epochs, d.drift_lag_s):
-            if chain[-1][0] - chain[0][0] < 2 * d.drift_horizons_s[-1]:
-                continue
-            sig = calibrate(chain, d.drift_horizons_s)
-            worst = [max(a, b) for a, b in zip(worst, sig, strict=True)]
-    return tuple(round(x, 4) for x in worst)
+    cal = calibrate_records([replay(cfg, sc)[0] for sc in runs], d.drift_horizons_s,
+                            d.drift_lag_s)
+    return cal.sigma_m

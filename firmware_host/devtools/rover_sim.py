@@ -108,6 +108,9 @@ class RoverScenario:
     start_utc_s: float = 10 * 3600.0
     date: tuple[int, int, int] = (2010, 5, 12)
     error_model: str = "gm"  # one of ERROR_MODELS; "gm" is the model of the module docstring
+    # The field models' receiver and tractor are drawn from this seed (None: ``seed``): the
+    # same receiver on another day is another ``seed`` with the same ``receiver_seed``.
+    receiver_seed: int | None = None
 
 
 @dataclass
@@ -164,6 +167,8 @@ class FaultEvent:
 
 def plan_faults(sc: RoverScenario, n_epochs: int, rng: np.random.Generator) -> list[FaultEvent]:
     """Fault events spread over the run, at least ``min_gap_s`` apart, after a 20 s start."""
+    if not sc.kinds:  # a clean run
+        return []
     dt = 1.0 / sc.rate_hz
     events: list[FaultEvent] = []
     t = 20.0
@@ -341,6 +346,8 @@ def plan_field_faults(sc: RoverScenario, n_epochs: int, rng: np.random.Generator
     kinds = list(sc.kinds)
     if sc.error_model == "multipath" and "multipath" not in kinds:
         kinds.append("multipath")
+    if not kinds:  # a clean run
+        return []
     dt = 1.0 / sc.rate_hz
     events: list[FaultEvent] = []
     t = 30.0
@@ -387,7 +394,8 @@ def _quantise_deg(x: float, decimals: int) -> float:
 
 def generate_field(sc: RoverScenario) -> Iterator[tuple[float, bytes, dict[str, object]]]:
     """The field models' generator: ``(time_s, nmea_bytes, truth_record)`` per epoch."""
-    fm = draw_field_model(sc.error_model, sc.seed)
+    fm = draw_field_model(sc.error_model, sc.seed if sc.receiver_seed is None
+                          else sc.receiver_seed)
     rng = np.random.default_rng([sc.seed, ERROR_MODELS.index(sc.error_model), 1])
     dt = 1.0 / sc.rate_hz
     n = round(sc.duration_s * sc.rate_hz)

@@ -1,0 +1,103 @@
+"""``fdi-bridge calibrate``: the rover's drift test calibrated once, on clean recordings.
+
+By default the drift test (``fdi/drift.py``) learns the receiver's noise over its first
+``drift_calibrate_s`` (300 s) of every start and uses the wide ``drift_sigma_m`` until then,
+so a slow drift that begins in those minutes is found late. This command calibrates a receiver
+once, on recordings of clean drives (``fdi-bridge record``, or a plain NMEA log), the way an
+autopilot keeps its compass calibration: it prints σ per horizon and the ``drift_sigma_m``
+line to paste under ``[rover.detector]`` (1.5 × σ, never wider than before:
+:data:`firmware_host.rover.calibration.START_FACTOR`), and ``--out FILE`` writes the whole
+configuration with it. The test starts from these instead of the wide ones and still
+calibrates on the day's first ``drift_calibrate_s`` (the sky and the multipath are the day's); set
+``drift_calibrate_s = 0`` to keep them for good. Record at the rate the receiver will run at,
+for at least twice the longest horizon (200 s with the defaults) with speed and course on
+every fix; several recordings are better than one (the largest σ is kept).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+from fdi.errors import FdiBridgeError, UsageError
+from firmware_host.commands.checks import input_file_arg, output_file_arg
+from firmware_host.commands.config_cmd import effective_toml
+from firmware_host.commands.replay import load_input
+from firmware_host.rover.calibration import START_FACTOR, calibrate_records, starting_sigma
+from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime.config import bridge_config, load_bridge_file
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("logs", nargs="+", type=input_file_arg, metavar="LOG",
+                        help="recordings of one receiver's clean drives (capture or NMEA log)")
+    parser.add_argument("--config", default="rover",
+                        help="the configuration the receiver runs with (file or preset)")
+    parser.add_argument("--out", type=output_file_arg, default=None,
+                        help="write that configuration with the calibration to this TOML file")
+
+
+def records_of(path: str | Path, pipe_cfg: Any) -> list[dict[str, Any]]:
+    """The rover pipeline's epoch records over one recording."""
+    inp = load_input(path)
+    buf = io.StringIO()
+    pipe = RoverPipeline(pipe_cfg, jsonl=buf)
+    for _, chunk in inp.chunks:
+        pipe.feed(chunk)
+    pipe.finish()
+    return [json.loads(line) for line in buf.getvalue().splitlines()]
+
+
+def detector_lines(start: tuple[float, ...]) -> list[str]:
+    return ["[rover.detector]",
+            "drift_sigma_m = [" + ", ".join(f"{s:g}" for s in start) + "]"]
+
+
+def run(args: argparse.Namespace) -> int:
+    bf = load_bridge_file(args.config)  # ConfigError: printed by the CLI, exit 2
+    cfg = bridge_config(bf)
+    d = cfg.rover.detector
+    if not (d.drift_test and d.predictor == "doppler" and d.strategy == "grey"):
+        raise UsageError(f"{args.config}: the drift test does not run in this configuration "
+                         f"(drift_test = {str(d.drift_test).lower()}, predictor = "
+                         f"{d.predictor!r}, strategy = {d.strategy!r}): nothing to calibrate")
+    runs = [records_of(p, cfg.rover) for p in args.logs]
+    for p, records in zip(args.logs, runs, strict=True):
+        if not any(r.get("e") is not None for r in records):
+            raise FdiBridgeError(f"{p}: no position fixes in it (a capture or NMEA log of the "
+                                 f"receiver is expected)")
+    try:
+        cal = calibrate_records(runs, d.drift_horizons_s, d.drift_lag_s,
+                                margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h)
+    except ValueError as err:
+        raise FdiBridgeError(f"cannot calibrate on {', '.join(map(str, args.logs))}: {err}; "
+                             f"record a longer drive at a steady run of fixes") from None
+    print(f"{len(args.logs)} recording(s), {cal.chains} stretch(es) with an unbroken Doppler "
+          f"chain, {cal.seconds:.0f} s of fixes")
+    start = starting_sigma(cal, d.drift_sigma_m)
+    print(f"{'horizon s':>10} {'sigma m':>9} {'start m':>8} {'was m':>7} {'differences':>12}")
+    for h, s, st, was, n in zip(cal.horizons_s, cal.sigma_m, start, d.drift_sigma_m,
+                                cal.independent, strict=True):
+        print(f"{h:>10g} {s:>9.4f} {st:>8.4f} {was:>7g} {n:>12.0f}")
+    print(f"(start: {START_FACTOR:g} x sigma, never wider than was; the drift test starts "
+          f"there and still calibrates on each day's first {d.drift_calibrate_s:g} s)")
+    print()
+    print("\n".join(detector_lines(start)))
+    if args.out:
+        det = dataclasses.replace(d, drift_sigma_m=start)
+        out_bf = dataclasses.replace(
+            bf, name=f"{cfg.name}-calibrated",
+            description=(f"{cfg.name} with the drift test calibrated by fdi-bridge calibrate "
+                         f"on {', '.join(Path(p).name for p in args.logs)}"),
+            rover=dataclasses.replace(cfg.rover, detector=det))
+        body = effective_toml(out_bf).split("\n", 1)[1]  # its first line names the source
+        Path(args.out).write_text(
+            f"# {args.config} calibrated by: fdi-bridge calibrate "
+            f"{' '.join(map(str, args.logs))} --config {args.config}\n" + body,
+            encoding="utf-8")
+        print(f"\nwrote {args.out} (use it as --config {args.out})")
+    return 0
