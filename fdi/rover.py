@@ -121,8 +121,8 @@ class RoverDetectorParams:
     # paper). Needs predictor = "doppler" and strategy = "grey". drift_sigma_m: the per-axis
     # σ of the Doppler-free value's change over each horizon: with drift_calibrate_s > 0 the
     # wide value used until the receiver is calibrated, once, on its first drift_calibrate_s
-    # seconds of trusted fixes; with 0, the receiver's offline calibration
-    # (firmware_host/devtools/rover_harness.py: calibrate_receiver).
+    # seconds of trusted fixes; with 0, as configured (a receiver calibrated offline:
+    # fdi-bridge calibrate, firmware_host/rover/calibration.py).
     drift_test: bool = True
     drift_horizons_s: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0)
     drift_sigma_m: tuple[float, ...] = (0.3, 0.4, 0.6, 0.9, 1.4)
@@ -131,6 +131,11 @@ class RoverDetectorParams:
     # drift_prefactor, never wider than drift_sigma_m, until the calibration proper.
     drift_precal_s: float = field(default=120.0, metadata={"ge": 0.0})
     drift_prefactor: float = field(default=2.0, metadata={"ge": 1.0})
+    # The calibration at start never goes below this fraction of drift_sigma_m: 0.2 for the
+    # wide defaults; fdi-bridge calibrate writes 1/1.5, so a day's calibration can widen a
+    # receiver's offline σ but not narrow them (it sees only the fixes it trusts, and from
+    # the offline σ it trusts fewer: multipath 10 Hz seed 202, a false hold at 860 s).
+    drift_floor_frac: float = field(default=0.2, metadata={"ge": 0.0, "le": 1.0})
     # The calibration's own uncertainty: each σ_H x (1 + drift_cal_k / sqrt(n_H)), n_H
     # the independent H-long differences the calibration saw (2 axes), H >= drift_cal_min_h.
     drift_cal_k: float = field(default=1.5, metadata={"ge": 0.0})
@@ -300,7 +305,8 @@ class RoverIsolator:
     def _make_drift(self, p: RoverDetectorParams) -> None:
         if p.drift_test and p.predictor == "doppler" and p.strategy == "grey":
             self._drift = DriftTest(p.drift_horizons_s, p.drift_sigma_m, p.drift_lag_sd_s,
-                                    p.drift_calibrate_s, watch_s=p.ramp_window_s,
+                                    p.drift_calibrate_s, floor_frac=p.drift_floor_frac,
+                                    watch_s=p.ramp_window_s,
                                     precal_s=p.drift_precal_s,
                                     precal_factor=p.drift_prefactor,
                                     margin=p.drift_cal_k,

@@ -46,7 +46,10 @@ def test_calibrate_writes_a_config_with_the_receiver_s_sigma(
     assert all(s < w for s, w in zip(d.drift_sigma_m, default.drift_sigma_m, strict=True))
     ref = H.offline_calibrated(load_config("rover"), "dgps", 903, 5.0, 600.0)
     assert d.drift_sigma_m == ref.rover.detector.drift_sigma_m
-    # Everything else is the configuration it came from (it still calibrates at start).
+    # The day's calibration at start may widen them, not narrow them; everything else is
+    # the configuration it came from (it still calibrates at start).
+    assert d.drift_floor_frac == pytest.approx(1.0 / 1.5, abs=1e-4)
+    assert default.drift_floor_frac == 0.2 and "drift_floor_frac = 0.6667" in printed
     assert d.drift_calibrate_s == default.drift_calibrate_s == 300.0
     assert d.drift_horizons_s == default.drift_horizons_s and d.gate_m == default.gate_m
 
@@ -88,3 +91,14 @@ def test_a_file_with_no_fixes_and_a_config_without_the_drift_test(
     cap = _drive(tmp_path, "clean", seed=6, receiver=6, duration_s=60.0)
     assert cli.main(["calibrate", str(cap), "--config", "rover-paper"]) == 2
     assert "drift test does not run" in capsys.readouterr().err
+
+
+def test_the_floor_reaches_the_drift_test() -> None:
+    import dataclasses
+
+    from fdi.rover import RoverIsolator
+
+    det = load_config("rover").rover.detector
+    for frac in (0.2, 0.6667):
+        iso = RoverIsolator(dataclasses.replace(det, drift_floor_frac=frac))
+        assert iso._drift is not None and iso._drift.floor_frac == frac

@@ -27,7 +27,13 @@ from fdi.errors import FdiBridgeError, UsageError
 from firmware_host.commands.checks import input_file_arg, output_file_arg
 from firmware_host.commands.config_cmd import effective_toml
 from firmware_host.commands.replay import load_input
-from firmware_host.rover.calibration import START_FACTOR, calibrate_records, starting_sigma
+from firmware_host.rover.calibration import (
+    START_FACTOR,
+    START_FLOOR_FRAC,
+    calibrate_records,
+    calibrated_detector,
+    starting_sigma,
+)
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import bridge_config, load_bridge_file
 
@@ -54,7 +60,8 @@ def records_of(path: str | Path, pipe_cfg: Any) -> list[dict[str, Any]]:
 
 def detector_lines(start: tuple[float, ...]) -> list[str]:
     return ["[rover.detector]",
-            "drift_sigma_m = [" + ", ".join(f"{s:g}" for s in start) + "]"]
+            "drift_sigma_m = [" + ", ".join(f"{s:g}" for s in start) + "]",
+            f"drift_floor_frac = {START_FLOOR_FRAC:g}"]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -88,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     print()
     print("\n".join(detector_lines(start)))
     if args.out:
-        det = dataclasses.replace(d, drift_sigma_m=start)
+        det = calibrated_detector(d, cal)
         out_bf = dataclasses.replace(
             bf, name=f"{cfg.name}-calibrated",
             description=(f"{cfg.name} with the drift test calibrated by fdi-bridge calibrate "

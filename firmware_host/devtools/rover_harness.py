@@ -49,7 +49,7 @@ from firmware_host.commands.checks import (
 )
 from firmware_host.commands.progress import Progress
 from firmware_host.devtools.rover_sim import ERROR_MODELS, RoverScenario, generate
-from firmware_host.rover.calibration import calibrate_records, starting_sigma
+from firmware_host.rover.calibration import calibrate_records, calibrated_detector
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 
@@ -264,7 +264,7 @@ def offline_calibrated(cfg: BridgeConfig, model: str, seed: int, rate_hz: float,
                           min_gap_s=25.0)
     cal = calibrate_records([replay(cfg, clean)[0]], d.drift_horizons_s, d.drift_lag_s,
                             margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h)
-    det = dataclasses.replace(d, drift_sigma_m=starting_sigma(cal, d.drift_sigma_m))
+    det = calibrated_detector(d, cal)
     return dataclasses.replace(cfg, rover=dataclasses.replace(cfg.rover, detector=det))
 
 

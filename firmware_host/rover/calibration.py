@@ -20,6 +20,7 @@ the recordings hold few independent differences at a horizon.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -111,9 +112,23 @@ def calibrate_records(runs: Sequence[Sequence[dict[str, Any]]], horizons_s: Sequ
 START_FACTOR = 1.5
 
 
+#: ``drift_floor_frac`` with an offline calibration: the day's calibration at start may widen
+#: the σ but not narrow them below the offline ones (it sees only the fixes it trusts, fewer
+#: from the tighter start: `multipath` 10 Hz seed 202 of ``sim rover-harness
+#: --offline-calibration``, a false hold at 860 s, 67 epochs, with the default 0.2).
+START_FLOOR_FRAC = round(1.0 / START_FACTOR, 4)
+
+
 def starting_sigma(cal: Calibration, configured: Sequence[float],
                    factor: float = START_FACTOR) -> tuple[float, ...]:
     """``drift_sigma_m`` for a receiver calibrated offline: ``factor`` × its σ, never wider
     than ``configured`` (the wide defaults)."""
     return tuple(round(min(c, factor * s), 4)
                  for s, c in zip(cal.sigma_m, configured, strict=True))
+
+
+def calibrated_detector(det: Any, cal: Calibration) -> Any:
+    """The ``[rover.detector]`` parameters ``det`` started from ``cal``: ``drift_sigma_m``
+    from :func:`starting_sigma`, ``drift_floor_frac`` :data:`START_FLOOR_FRAC`."""
+    return dataclasses.replace(det, drift_sigma_m=starting_sigma(cal, det.drift_sigma_m),
+                               drift_floor_frac=START_FLOOR_FRAC)
