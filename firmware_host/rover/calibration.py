@@ -105,10 +105,11 @@ def calibrate_records(runs: Sequence[Sequence[dict[str, Any]]], horizons_s: Sequ
 
 #: The calibrated σ are another day's: the drift test starts from this many times them (never
 #: wider than configured), as the provisional calibration (D7) does from its short sample.
-#: Chosen on `sim rover-harness --offline-calibration` seeds 1-5 and 801-805: 1.0 found 29 and
-#: 18 more ramps in time but flagged 77 and 64 clean epochs (a false hold at 131 s on `dgps`
-#: 10 Hz seed 801: its clean drive gave σ(10 s) 0.13 m); 1.5: 10 and 8 more ramps, 5 and 11
-#: flagged (0 and 7 before); 2.0: 3 more on 1-5 (docs/evaluation.md, seventh pass).
+#: Chosen on `sim rover-harness --offline-calibration` seeds 1-5 and 801-805 (before the floor
+#: below): 1.0 found 29 and 18 more ramps in time but flagged 12 and 64 clean epochs (a false
+#: hold at 131 s on `dgps` 10 Hz seed 801: its clean drive gave σ(10 s) 0.13 m); 1.5: 10 and
+#: 8 more ramps, 5 and 11 flagged (0 and 7 before); 2.0: 3 more on 1-5 (docs/evaluation.md,
+#: seventh pass).
 START_FACTOR = 1.5
 
 
