@@ -102,3 +102,18 @@ def test_the_floor_reaches_the_drift_test() -> None:
     for frac in (0.2, 0.6667):
         iso = RoverIsolator(dataclasses.replace(det, drift_floor_frac=frac))
         assert iso._drift is not None and iso._drift.floor_frac == frac
+
+
+def test_an_output_that_cannot_be_written_is_a_clear_error(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    cap = _drive(tmp_path, "clean", seed=100_903, receiver=903, duration_s=300.0)
+
+    def full_disk(self: Path, *a: object, **k: object) -> int:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", full_disk)
+    assert cli.main(["calibrate", str(cap), "--out", str(tmp_path / "mine.toml")]) == 1
+    err = capsys.readouterr().err
+    assert "mine.toml: cannot write the configuration: No space left on device" in err
+    assert "Traceback" not in err

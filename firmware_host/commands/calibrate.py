@@ -90,8 +90,10 @@ def run(args: argparse.Namespace) -> int:
     for h, s, st, was, n in zip(cal.horizons_s, cal.sigma_m, start, d.drift_sigma_m,
                                 cal.independent, strict=True):
         print(f"{h:>10g} {s:>9.4f} {st:>8.4f} {was:>7g} {n:>12.0f}")
+    then = (f"still calibrates on each day's first {d.drift_calibrate_s:g} s"
+            if d.drift_calibrate_s > 0 else "keeps them (drift_calibrate_s = 0)")
     print(f"(start: {START_FACTOR:g} x sigma, never wider than was; the drift test starts "
-          f"there and still calibrates on each day's first {d.drift_calibrate_s:g} s)")
+          f"there and {then})")
     print()
     print("\n".join(detector_lines(start)))
     if args.out:
@@ -102,9 +104,13 @@ def run(args: argparse.Namespace) -> int:
                          f"on {', '.join(Path(p).name for p in args.logs)}"),
             rover=dataclasses.replace(cfg.rover, detector=det))
         body = effective_toml(out_bf).split("\n", 1)[1]  # its first line names the source
-        Path(args.out).write_text(
-            f"# {args.config} calibrated by: fdi-bridge calibrate "
-            f"{' '.join(map(str, args.logs))} --config {args.config}\n" + body,
-            encoding="utf-8")
+        try:
+            Path(args.out).write_text(
+                f"# {args.config} calibrated by: fdi-bridge calibrate "
+                f"{' '.join(map(str, args.logs))} --config {args.config}\n" + body,
+                encoding="utf-8")
+        except OSError as err:  # a full disk, a read-only mount: said, not a traceback
+            raise FdiBridgeError(f"{args.out}: cannot write the configuration: "
+                                 f"{err.strerror or err}") from None
         print(f"\nwrote {args.out} (use it as --config {args.out})")
     return 0
