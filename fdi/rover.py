@@ -188,6 +188,11 @@ class RoverDetectorParams:
     # Time.
     max_gap_s: float = field(default=5.0, metadata={"gt": 0.0})
 
+    @property
+    def runs_drift_test(self) -> bool:
+        """The drift test runs: it needs the Doppler predictor and the grey strategy."""
+        return self.drift_test and self.predictor == "doppler" and self.strategy == "grey"
+
 
 class FixInput(NamedTuple):
     """One receiver epoch in local metres (``None`` position: the receiver has no fix).
@@ -303,7 +308,7 @@ class RoverIsolator:
                           p.hold_output_s, p.hold_max_s, p.hold_level_s)
 
     def _make_drift(self, p: RoverDetectorParams) -> None:
-        if p.drift_test and p.predictor == "doppler" and p.strategy == "grey":
+        if p.runs_drift_test:
             self._drift = DriftTest(p.drift_horizons_s, p.drift_sigma_m, p.drift_lag_sd_s,
                                     p.drift_calibrate_s, floor_frac=p.drift_floor_frac,
                                     watch_s=p.ramp_window_s,

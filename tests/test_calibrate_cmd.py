@@ -13,19 +13,16 @@ import pytest
 
 from firmware_host import cli
 from firmware_host.devtools import rover_harness as H
-from firmware_host.devtools.rover_sim import RoverScenario, write_run
+from firmware_host.devtools.rover_sim import write_run
 from firmware_host.runtime.config import load_config
 
 
 def _drive(tmp: Path, name: str, *, seed: int, receiver: int, duration_s: float,
            rate_hz: float = 5.0, model: str = "dgps") -> Path:
-    """A clean drive of the generator's receiver ``receiver`` as the harness's offline
-    calibration makes it (the multipath model keeps its steps, 1 event in 5)."""
-    sc = RoverScenario(rate_hz=rate_hz, duration_s=duration_s, seed=seed, receiver_seed=receiver,
-                       kinds=(), error_model=model, fault_every_s=45.0 * (len(H.KINDS) + 1),
-                       min_gap_s=25.0)
+    """A clean drive of the generator's receiver ``receiver``, as the harness's offline
+    calibration makes it, recorded as a capture."""
     out = tmp / name
-    write_run(sc, out)
+    write_run(H.clean_drive(model, seed, receiver, rate_hz, duration_s), out)
     return out / "rover.cap"
 
 

@@ -18,15 +18,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import io
-import json
 from pathlib import Path
-from typing import Any
 
 from fdi.errors import FdiBridgeError, UsageError
 from firmware_host.commands.checks import input_file_arg, output_file_arg
 from firmware_host.commands.config_cmd import effective_toml
 from firmware_host.commands.replay import load_input
+from firmware_host.devtools.eval import run_ours
 from firmware_host.rover.calibration import (
     START_FACTOR,
     START_FLOOR_FRAC,
@@ -34,7 +32,6 @@ from firmware_host.rover.calibration import (
     calibrated_detector,
     starting_sigma,
 )
-from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import bridge_config, load_bridge_file
 
 
@@ -47,17 +44,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write that configuration with the calibration to this TOML file")
 
 
-def records_of(path: str | Path, pipe_cfg: Any) -> list[dict[str, Any]]:
-    """The rover pipeline's epoch records over one recording."""
-    inp = load_input(path)
-    buf = io.StringIO()
-    pipe = RoverPipeline(pipe_cfg, jsonl=buf)
-    for _, chunk in inp.chunks:
-        pipe.feed(chunk)
-    pipe.finish()
-    return [json.loads(line) for line in buf.getvalue().splitlines()]
-
-
 def detector_lines(start: tuple[float, ...]) -> list[str]:
     return ["[rover.detector]",
             "drift_sigma_m = [" + ", ".join(f"{s:g}" for s in start) + "]",
@@ -68,11 +54,11 @@ def run(args: argparse.Namespace) -> int:
     bf = load_bridge_file(args.config)  # ConfigError: printed by the CLI, exit 2
     cfg = bridge_config(bf)
     d = cfg.rover.detector
-    if not (d.drift_test and d.predictor == "doppler" and d.strategy == "grey"):
+    if not d.runs_drift_test:
         raise UsageError(f"{args.config}: the drift test does not run in this configuration "
                          f"(drift_test = {str(d.drift_test).lower()}, predictor = "
                          f"{d.predictor!r}, strategy = {d.strategy!r}): nothing to calibrate")
-    runs = [records_of(p, cfg.rover) for p in args.logs]
+    runs = [run_ours(cfg, b"".join(c for _, c in load_input(p).chunks))[0] for p in args.logs]
     for p, records in zip(args.logs, runs, strict=True):
         if not any(r.get("e") is not None for r in records):
             raise FdiBridgeError(f"{p}: no position fixes in it (a capture or NMEA log of the "

@@ -247,6 +247,16 @@ def run_matrix(cfg: BridgeConfig, *, models: Sequence[str] = ERROR_MODELS,
 CALIBRATION_SEED_OFFSET = 100_000
 
 
+def clean_drive(model: str, seed: int, receiver_seed: int, rate_hz: float,
+                duration_s: float = 1200.0) -> RoverScenario:
+    """A drive of the generator's receiver ``receiver_seed`` with no faults (``seed``: its
+    error realisation, path and Doppler noise); the ``multipath`` model keeps its steps, at the
+    rate the harness's runs have them (1 event in 5)."""
+    return RoverScenario(rate_hz=rate_hz, duration_s=duration_s, seed=seed,
+                         receiver_seed=receiver_seed, kinds=(), error_model=model,
+                         fault_every_s=45.0 * (len(KINDS) + 1), min_gap_s=25.0)
+
+
 def offline_calibrated(cfg: BridgeConfig, model: str, seed: int, rate_hz: float,
                        duration_s: float = 1200.0) -> BridgeConfig:
     """``cfg`` with the drift test calibrated offline (``fdi-bridge calibrate``) on a clean
@@ -257,11 +267,7 @@ def offline_calibrated(cfg: BridgeConfig, model: str, seed: int, rate_hz: float,
     :func:`~firmware_host.rover.calibration.starting_sigma` and still calibrates over the
     run's first ``drift_calibrate_s``, as ``fdi-bridge calibrate``'s configuration does."""
     d = cfg.rover.detector
-    # The multipath model's steps at the rate the harness's runs have them (1 event in 5).
-    clean = RoverScenario(rate_hz=rate_hz, duration_s=duration_s,
-                          seed=seed + CALIBRATION_SEED_OFFSET, receiver_seed=seed, kinds=(),
-                          error_model=model, fault_every_s=45.0 * (len(KINDS) + 1),
-                          min_gap_s=25.0)
+    clean = clean_drive(model, seed + CALIBRATION_SEED_OFFSET, seed, rate_hz, duration_s)
     cal = calibrate_records([replay(cfg, clean)[0]], d.drift_horizons_s, d.drift_lag_s,
                             margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h)
     det = calibrated_detector(d, cal)
@@ -456,15 +462,3 @@ def run(args: argparse.Namespace) -> int:
         print(f"rover harness interrupted after {len(runs)} runs (partial)", file=sys.stderr)
         return 130
     return 0
-
-
-# --------------------------------------------------------------------------- calibration
-
-
-def calibrate_receiver(cfg: BridgeConfig, runs: Sequence[RoverScenario]) -> tuple[float, ...]:
-    """The drift test's σ per horizon (``drift_sigma_m``) on clean runs of one receiver: the
-    largest over the runs' chains (:func:`firmware_host.rover.calibration.calibrate_records`)."""
-    d = cfg.rover.detector
-    cal = calibrate_records([replay(cfg, sc)[0] for sc in runs], d.drift_horizons_s,
-                            d.drift_lag_s)
-    return cal.sigma_m

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fdi.drift import calibrate, concave_cap
+from fdi.rover import RoverDetectorParams
 
 
 @dataclass(frozen=True)
@@ -128,7 +129,7 @@ def starting_sigma(cal: Calibration, configured: Sequence[float],
                  for s, c in zip(cal.sigma_m, configured, strict=True))
 
 
-def calibrated_detector(det: Any, cal: Calibration) -> Any:
+def calibrated_detector(det: RoverDetectorParams, cal: Calibration) -> RoverDetectorParams:
     """The ``[rover.detector]`` parameters ``det`` started from ``cal``: ``drift_sigma_m``
     from :func:`starting_sigma`, ``drift_floor_frac`` :data:`START_FLOOR_FRAC`."""
     return dataclasses.replace(det, drift_sigma_m=starting_sigma(cal, det.drift_sigma_m),
