@@ -299,6 +299,20 @@ class _TcpConn:
 
 
 MAX_TCP_BACKLOG = 64 * 1024
+TCP_SNDBUF_BYTES = 64 * 1024
+"""The kernel send buffer asked for on each TCP connection (Linux doubles it and stops
+autotuning it). Left to autotune, a client that stops reading lets the kernel hold up to
+tcp_wmem's maximum (4 MB by default, more on tuned kernels): at telemetry rates a minute of
+stale packets, and a drop point that depends on the machine. Bounded, a slow client holds at
+most about twice this in the kernel, plus ``MAX_TCP_BACKLOG``, plus its endpoint's queue; past
+that its oldest packets are dropped and counted (``dropped_queue_full``), so it gets fresh
+telemetry when it reads again, and the other clients are unaffected."""
+
+
+def _tcp_options(sock: socket.socket) -> None:
+    sock.setblocking(False)
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, TCP_SNDBUF_BYTES)
 
 
 class _TcpBase(Link):
@@ -413,8 +427,7 @@ class TcpServerLink(_TcpBase):
                 sock, addr = self.listener.accept()
             except (BlockingIOError, OSError):
                 break
-            sock.setblocking(False)
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            _tcp_options(sock)
             self._n += 1
             out.append(TcpClientConnLink(f"{self.url}#{self._n}", sock, ("tcp", self._n, addr)))
         self.children = [c for c in self.children if c.has_peer()] + out
@@ -475,8 +488,7 @@ class TcpClientLink(_TcpBase):
 
     def _connect(self, timeout_s: float) -> socket.socket:
         sock = socket.create_connection(self._addr, timeout=timeout_s)
-        sock.setblocking(False)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        _tcp_options(sock)
         return sock
 
     def _lost(self, c: _TcpConn) -> None:
