@@ -446,7 +446,8 @@ def test_config_rejects_unknown_message_names() -> None:
 def test_each_tcp_client_is_its_own_endpoint_and_a_stalled_one_starves_nobody(
     tmp_path: Path,
 ) -> None:  # item 15
-    r = _router(tmp_path, gcs=EndpointConfig("tcpin:127.0.0.1:0"), queue_packets=500)
+    queue = 500
+    r = _router(tmp_path, gcs=EndpointConfig("tcpin:127.0.0.1:0"), queue_packets=queue)
     ap = _Peer(1, 1)
     stalled = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 2048)
@@ -501,7 +502,7 @@ def test_each_tcp_client_is_its_own_endpoint_and_a_stalled_one_starves_nobody(
         # Linux), the link's backlog, the endpoint's queue, and its own small receive buffer.
         # Autotuned, the kernel alone held 2.3 MB here and more on the CI machine (no drops).
         pkt = len(ap.p.send_statustext(6, "telemetry 000000 " + "x" * 30))
-        held = (2 * TCP_SNDBUF_BYTES + MAX_TCP_BACKLOG + 16 * 1024) // pkt + 500
+        held = (2 * TCP_SNDBUF_BYTES + MAX_TCP_BACKLOG + 16 * 1024) // pkt + queue
         assert n - held <= dropped < n
     finally:
         r.close()
