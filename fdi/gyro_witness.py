@@ -38,12 +38,16 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   above ``h_suspect``, slow above ``slow_h / 2``, or ``|s| >= jump_sigmas``. Confirmed: either
   reaches its ``h`` and the innovations since the change began (Page's estimate: the last step
   the confirming CUSUM was 0; the newest 6) are a level or a ramp, their spread about a fitted
-  line (without the farthest sample) within ``spread_ratio`` sigmas. Dismissed: the fast CUSUM
+  line (without the one sample whose removal leaves the least spread) within
+  ``spread_ratio`` sigmas, and, for the fast one, their mean at least ``step_min_deg`` off
+  ``nu_ref`` (else the slow one judges: the first samples of a noise burst on one side look
+  like a small step). Dismissed: the fast CUSUM
   back at 0 and the slow one under ``slow_h / 4``, or ``max_suspect_s`` elapsed.
 * Noise burst: the trimmed short scale of the innovation's first differences
   (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` sigmas resets the CUSUMs,
   unless the last three innovations are one level beyond ``jump_sigmas`` sigmas and 3
-  short-scale sigmas (same side, within 2.5 sigma of a difference of each other): a step.
+  short-scale sigmas (same side, within 2.5 sigma of a difference of each other): a step,
+  whose fast CUSUM is then rebuilt from those three (an earlier burst call may have reset it).
 * Slow drifts (``drift_glr`` > 0): a hinge in ``z`` over ``drift_window_s``
   (:class:`HingeDrift`, a likelihood ratio against the straight line, the noise floored at
   ``drift_sigma_min_deg``): at ``drift_glr`` a drift is confirmed with its onset at the
@@ -248,6 +252,7 @@ class WitnessParams:
     jump_sigmas: float = 4.0
     burst_ratio: float = 2.5
     spread_ratio: float = 1.6
+    step_min_deg: float = 3.5  # the fast CUSUM confirms a level only this far off (0: any)
     warmup_samples: int = 100
     recover_gate_deg: float = 1.5
     recover_samples: int = 10
@@ -458,6 +463,16 @@ class GyroWitness:
                       and max(xs3) - min(xs3) <= 2.5 * math.sqrt(2.0))
             if not a_step:
                 self.clear()
+            else:
+                # a step whose second sample a burst call reset (seed 409, drift:-10@23): the
+                # fast CUSUM as Page's would have it from these three
+                g3 = sum(min(abs(v), p.clip) - p.kappa for v in xs3)
+                if xs3[0] > 0.0 and g3 > self.g_pos:
+                    self.g_pos = g3
+                    self._zero_at[0] = self.k - 3
+                elif xs3[0] < 0.0 and g3 > self.g_neg:
+                    self.g_neg = g3
+                    self._zero_at[1] = self.k - 3
         fast = max(self.g_pos, self.g_neg)
         slow = max(self.gs_pos, self.gs_neg)
         level = max(fast / p.h, slow / p.slow_h)
@@ -468,7 +483,10 @@ class GyroWitness:
                 self._zero_at[i] = self.k
         drift_lag = self._drift_test(nu_o, sigma, burst or abs(x) >= p.jump_sigmas,
                                      fast > p.h_suspect)
-        if level >= 1.0 and self._spread_ok(sigma):
+        conf_level = level
+        if fast / p.h >= 1.0 and self._too_small_for_a_step():
+            conf_level = slow / p.slow_h  # a level too small for a step: the slow CUSUM judges
+        if conf_level >= 1.0 and self._spread_ok(sigma):
             confirmed = True
             self.confirmed_fast = fast / p.h >= slow / p.slow_h
             self.fault = True
@@ -579,21 +597,41 @@ class GyroWitness:
         """Reset both CUSUMs (after a recovery, or while a noise burst lasts)."""
         self.g_pos = self.g_neg = self.gs_pos = self.gs_neg = 0.0
 
+    def _too_small_for_a_step(self) -> bool:
+        """The innovations since the change began (as :meth:`_spread_ok` takes them) are,
+        on average, nearer the slow mean than ``step_min_deg``: the first samples of a noise
+        burst that dwell on one side look like a small step to the fast CUSUM (3 deg bursts on
+        a 0.5 deg compass: means of 2.4-4.0 deg over 4-6 samples); steps of interest are 5 deg
+        or more. Such a level is left to the slow CUSUM (a real 3 deg step on a 0.5 deg
+        compass: 8-11 samples in the unit test, against 3 on the fast one)."""
+        if self.p.step_min_deg <= 0.0:
+            return False
+        k0 = self._zero_at[self._confirming_side()]
+        r = [x for k, x in self._run if k > k0][-6:]
+        if not r:
+            return False
+        return abs(sum(r) / len(r) - self.nu_ref) < self.p.step_min_deg
+
     def _spread_ok(self, sigma: float) -> bool:
         """The innovations since the change began (Page's estimate; the newest 6) are a level
-        or a ramp, not a burst: about a line fitted to them (without the sample farthest from
-        it), their spread is within ``spread_ratio`` sigmas."""
+        or a ramp, not a burst: about a line fitted to them without one sample (the one whose
+        removal leaves the least spread), their spread is within ``spread_ratio`` sigmas."""
         k0 = self._zero_at[self._confirming_side()]
         r = [x for k, x in self._run if k > k0][-6:]  # the newest: a step's first samples
         #                                              may straddle it
         if len(r) < 4:
             return True
-        res = _line_residuals(r)
-        if len(r) >= 4:
-            worst = max(range(len(r)), key=lambda i: abs(res[i]))
-            ts = [float(i) for i in range(len(r)) if i != worst]
-            r = [x for i, x in enumerate(r) if i != worst]
-            res = _line_residuals(r, ts)
+        # without the sample whose removal leaves the least spread: an outlier at an end
+        # pulls the line through all of them to itself, and the farthest from that line was
+        # another (seed 409, drift:20@46: a 34.7 sigma outlier on the step's first sample)
+        best: list[float] | None = None
+        for j in range(len(r)):
+            rj = _line_residuals([x for i, x in enumerate(r) if i != j],
+                                 [float(i) for i in range(len(r)) if i != j])
+            if best is None or sum(e * e for e in rj) < sum(e * e for e in best):
+                best = rj
+        assert best is not None
+        res = best
         sd = math.sqrt(sum(e * e for e in res) / (len(res) - 2))
         return sd <= self.p.spread_ratio * sigma
 

@@ -83,6 +83,9 @@ class FtConfig:
     gyro_jump_sigmas: float = field(default=4.0, metadata={"gt": 0.0})
     gyro_burst_ratio: float = field(default=2.5, metadata={"gt": 1.0})
     gyro_spread_ratio: float = field(default=1.6, metadata={"gt": 0.0})
+    gyro_step_min_deg: float = field(default=3.5, metadata={
+        "ge": 0.0, "doc": "the fast CUSUM confirms a level only this far off the innovation's "
+        "mean (the smallest step of interest, less the noise; 0: any)"})
     gyro_warmup_samples: int = field(default=100, metadata={"ge": 0})
     gyro_recover_gate_deg: float = field(default=1.5, metadata={"gt": 0.0})
     gyro_recover_samples: int = field(default=10, metadata={"ge": 1})

@@ -31,7 +31,9 @@ SHORTFALL: dict[tuple[str, str], tuple[float, str]] = {
     # for a 3-sigma level (seed 2: 8 of 9 samples negative). Seeds 1000-1279 (not the
     # harness's), nonlinear plant: 6 of 280 bursts confirmed with the fourth pass's bias fit,
     # 5 with the fifth's (Nomoto 13 -> 14): a 2 % rate that 10 seeds show or not by chance
-    # (fourth pass: 0 on 1-10, 1 on the Nomoto plant of 101-120).
+    # (fourth pass: 0 on 1-10, 1 on the Nomoto plant of 101-120). Ninth pass (a fast
+    # confirmation needs a level of 3.5 deg, gyro_step_min_deg): 1000-1279 nonlinear 5 -> 4,
+    # Nomoto 14 -> 3; this one's level was 3.8 deg (8 of 9 samples of one sign).
     ("nonlinear", "burst.confirmations"): (1.0, "a burst's chance run of one sign"),
 }
 

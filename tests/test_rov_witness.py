@@ -426,3 +426,63 @@ def test_a_compass_drifting_back_across_the_truth_is_not_taken_back(seed: int) -
     assert any(k < 0 for k in before)
     healed, _ = _step_then_ramp(p, seed, n=1000, rate=-0.1, end=700)
     assert len(healed) == 3 and -healed[2] - 700 <= (p.drift_recover_s + 2.0) / DT
+
+
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_a_level_too_small_for_a_step_is_left_to_the_slow_cusum(seed: int) -> None:
+    # The first samples of a noise burst that dwell on one side look like a 3 deg step to the
+    # fast CUSUM; steps of interest are >= 5 deg (step_min_deg 3.5). A real 3 deg level on a
+    # 0.5 deg compass is still confirmed, by the slow CUSUM, a few samples later.
+    p = WitnessParams()
+    assert p.step_min_deg == 3.5
+    _, ev = _run(400, "step", mag=3.0, noise=0.5, seed=seed)
+    k = next(k for k, e in ev if e == "confirmed")
+    assert 5 < k - 300 <= 25
+    _, ev = _run(400, "step", mag=3.0, noise=0.5, seed=seed, params=replace(p, step_min_deg=0.0))
+    k = next(k for k, e in ev if e == "confirmed")
+    assert 0 <= k - 300 <= 4
+    # a 5 deg step at 1 deg noise is still the fast CUSUM's, within 5 samples
+    _, ev = _run(400, "step", mag=5.0, noise=1.0, seed=seed)
+    k = next(k for k, e in ev if e == "confirmed")
+    assert 0 <= k - 300 <= 4
+
+
+# Seed 409 of the nonlinear plant (rov_harness, 1 deg compass noise): the compass minus the
+# true heading before and from a step's onset. A: drift:-10@23, whose differences raised the
+# short scale to a burst call at the step's second sample (the CUSUMs were reset). B:
+# drift:20@46, a compass outlier on the step's first sample (the spread test dropped another).
+_STEPS_409 = {
+    "burst-call": ([-1.21, 0.78, -0.50, -0.79, 1.78, -0.37, -1.65, 0.33, -1.76, 0.12],
+                   [-9.04, -11.75, -11.02, -8.63, -8.97, -10.87, -11.47], -10.0),
+    "outlier": ([-0.95, 0.52, -3.27, -0.72, 0.49, -0.19, 0.47],
+                [34.15, 21.28, 21.24, 18.63, 18.00, 21.13, 19.40], 20.0),
+}
+
+
+@pytest.mark.parametrize("case", sorted(_STEPS_409))
+@pytest.mark.parametrize("seed", range(1, 9))
+def test_steps_seed_409_confirmed_within_5_samples(case: str, seed: int) -> None:
+    """Both were confirmed at the sixth sample (eighth pass). A: the fast CUSUM is rebuilt
+    from the three samples that pass the step rule; B: the spread test leaves out the sample
+    whose removal leaves the least spread, not the farthest from a line the outlier pulled.
+    Before either fix: A 6 samples on seed 7, B 6 samples on 7 of these 8 seeds."""
+    pre, step, mag = _STEPS_409[case]
+    rng = np.random.default_rng(seed)
+    w = GyroWitness(WitnessParams())
+    psi = 40.0
+    conf = None
+    for k in range(320):
+        r = 2.0 * math.sin(2 * math.pi * k * DT / 40.0)
+        psi += r * DT
+        w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
+        y = psi + float(rng.normal(0.0, 1.0))
+        if 300 - len(pre) <= k < 300:
+            y = psi + pre[k - 300 + len(pre)]
+        elif 300 <= k < 300 + len(step):
+            y = psi + step[k - 300]
+        elif k >= 300:
+            y += mag
+        st = w.update(y % 360.0, DT)
+        if st.confirmed and conf is None:
+            conf = k - 300
+    assert conf is not None and 0 <= conf <= 5
