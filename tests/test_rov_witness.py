@@ -196,25 +196,33 @@ def test_step_after_a_run_of_large_differences_is_not_a_burst(seed: int) -> None
     """That run pushed the short scale over the burst level at the step's first samples,
     the CUSUMs were reset, and the 10 deg step was confirmed 6 samples after it (goal 5).
     Three innovations at one level beyond the jump test are a step, not a burst."""
+    conf = _replay_step(_PRE_STEP, _FROM_STEP, 10.0, seed, 0.45)
+    assert conf is not None and 0 <= conf <= 5
+
+
+def _replay_step(pre: list[float], from_step: list[float], mag: float, seed: int,
+                 noise: float) -> int | None:
+    """The slowly turning vehicle of :func:`_run` with a ``mag`` deg compass step at sample
+    300: the compass error ``pre`` in the samples just before it and ``from_step`` (the step
+    removed) in the first ones from it, seeded noise elsewhere; the samples from the step to
+    its first confirmation (None: none)."""
     rng = np.random.default_rng(seed)
     w = GyroWitness(WitnessParams())
     psi = 40.0
-    conf = None
     for k in range(320):
         r = 2.0 * math.sin(2 * math.pi * k * DT / 40.0)
         psi += r * DT
         w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
-        y = psi + float(rng.normal(0.0, 0.45))
-        if 291 <= k < 300:
-            y = psi + _PRE_STEP[k - 291]
-        elif 300 <= k < 308:
-            y = psi + _FROM_STEP[k - 300]
+        y = psi + float(rng.normal(0.0, noise))
+        if 300 - len(pre) <= k < 300:
+            y = psi + pre[k - 300 + len(pre)]
+        elif 300 <= k < 300 + len(from_step):
+            y = psi + from_step[k - 300]
         if k >= 300:
-            y += 10.0
-        st = w.update(y % 360.0, DT)
-        if st.confirmed and conf is None:
-            conf = k
-    assert conf is not None and 0 <= conf - 300 <= 5
+            y += mag
+        if w.update(y % 360.0, DT).confirmed:
+            return k - 300
+    return None
 
 
 def _step_with_bias_error(params: WitnessParams, seed: int) -> float:
@@ -467,22 +475,5 @@ def test_steps_seed_409_confirmed_within_5_samples(case: str, seed: int) -> None
     whose removal leaves the least spread, not the farthest from a line the outlier pulled.
     Before either fix: A 6 samples on seed 7, B 6 samples on 7 of these 8 seeds."""
     pre, step, mag = _STEPS_409[case]
-    rng = np.random.default_rng(seed)
-    w = GyroWitness(WitnessParams())
-    psi = 40.0
-    conf = None
-    for k in range(320):
-        r = 2.0 * math.sin(2 * math.pi * k * DT / 40.0)
-        psi += r * DT
-        w.propagate(r + 0.15 + float(rng.normal(0.0, 0.05)), DT)
-        y = psi + float(rng.normal(0.0, 1.0))
-        if 300 - len(pre) <= k < 300:
-            y = psi + pre[k - 300 + len(pre)]
-        elif 300 <= k < 300 + len(step):
-            y = psi + step[k - 300]
-        elif k >= 300:
-            y += mag
-        st = w.update(y % 360.0, DT)
-        if st.confirmed and conf is None:
-            conf = k - 300
+    conf = _replay_step(pre, [x - mag for x in step], mag, seed, 1.0)
     assert conf is not None and 0 <= conf <= 5
