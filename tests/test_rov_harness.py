@@ -125,3 +125,17 @@ def test_a_drift_after_a_compensated_step_is_confirmed_on_the_nonlinear_plant(
     res = step_then_drift(cfg, "nonlinear", SEEDS)
     assert res["delay_s"]["worst"] is not None and res["delay_s"]["worst"] <= 40.0
     assert res["err_after_deg"]["worst"] <= 3.3
+
+
+def test_bursts_that_dwelt_on_one_side_are_left_to_the_slow_cusum(cfg: RovConfig) -> None:
+    """Nomoto seeds 102, 408 and 506: a 3 deg noise burst's first 4-6 samples on one side,
+    at 2.4-3.2 deg, were confirmed as a step by the fast CUSUM. A step of interest is 5 deg
+    or more; with ``gyro_step_min_deg`` (3.5) such a level is the slow CUSUM's, and none of
+    these bursts confirms. Without it, each does."""
+    seeds = (102, 408, 506)
+    res = measure(cfg, "nomoto", seeds, gyro=True, which=("burst",))
+    assert res["burst.confirmations"]["worst"] == 0, res
+    off = replace(cfg, ft=replace(cfg.ft, gyro_step_min_deg=0.0))
+    for seed in seeds:
+        r = measure(off, "nomoto", (seed,), gyro=True, which=("burst",))
+        assert r["burst.confirmations"]["worst"] >= 1, (seed, r)
