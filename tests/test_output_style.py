@@ -87,7 +87,7 @@ def test_eval_suite_interrupted_writes_what_it_has(monkeypatch: pytest.MonkeyPat
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     """^C while the ROV part runs: the rover tables done so far, in eval.json/eval.md marked
     partial, on stdout too; exit 130."""
-    def interrupted() -> Any:
+    def interrupted(**_: Any) -> Any:
         raise KeyboardInterrupt
 
     monkeypatch.setattr(eval_mod, "rov_suite", interrupted)

@@ -297,7 +297,8 @@ class RoverCase:
 
 
 def rover_cases(quick: bool = False) -> list[RoverCase]:
-    """The rover scenarios. ``quick``: the 10 Hz jump case only (for the tests)."""
+    """The rover scenarios. ``quick``: the 10 Hz jump case only (for the tests; the suite's
+    ROV and INS/GNSS parts are cut down alike)."""
     kinds: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
         ("jump", ("jump",), {}),
         ("burst", ("burst",), {}),
@@ -344,17 +345,21 @@ ROV_PLANTS: tuple[tuple[Literal["nomoto", "nonlinear"], float], ...] = (
     ("nomoto", 0.5), ("nonlinear", 1.0), ("nonlinear", 2.0))
 
 
-def rov_suite(duration_s: float = 130.0, seed: int = 1) -> list[dict[str, Any]]:
+def rov_suite(duration_s: float = 130.0, seed: int = 1, quick: bool = False
+              ) -> list[dict[str, Any]]:
     """The ROV compass faults on both plants and noise levels, with the yaw gyro fed to the
-    controller and without, with fault tolerance and without (the plain PID)."""
+    controller and without, with fault tolerance and without (the plain PID). ``quick``: the
+    first fault on the first plant only (4 runs instead of 156; for the tests)."""
 
     base = RovConfig()
     rows = []
-    for plant, noise in ROV_PLANTS:
+    plants = ROV_PLANTS[:1] if quick else ROV_PLANTS
+    fault_sets = ROV_FAULTS[:1] if quick else ROV_FAULTS
+    for plant, noise in plants:
         sim = replace(base.sim, plant=plant, compass_noise_deg=noise)
         cfg = replace(base, sim=sim)
         for gyro in (True, False):
-            for specs in ROV_FAULTS:
+            for specs in fault_sets:
                 faults = [parse_fault(s) for s in specs]
                 for ft in (True, False):
                     ep = run_experiment(cfg, faults, duration_s, ft=ft, seed=seed, gyro=gyro)
@@ -564,7 +569,7 @@ def run_suite(
                     figures.append(str(p))
             done(case.name)
         if include_rov:
-            rov = rov_suite()
+            rov = rov_suite(quick=quick)
             done("rov")
         if include_insgnss:
             ins = insgnss_suite(seed, ["paper-single"] if quick else None,
@@ -669,7 +674,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the capture or NMEA log it came from: also re-run our strategies")
     parser.add_argument("--config", default="rover", help="config or preset")
     parser.add_argument("--suite", action="store_true", help="run the whole scenario suite")
-    parser.add_argument("--quick", action="store_true", help="suite: the 10 Hz jump case only")
+    parser.add_argument("--quick", action="store_true",
+                        help="suite: the 10 Hz jump case, one ROV fault on one plant and one "
+                        "INS/GNSS scenario (a smoke run)")
     parser.add_argument("--duration", type=positive_float, default=600.0,
                         help="suite: seconds per rover scenario")
     parser.add_argument("--seed", type=int, default=1, help="suite: random seed of the runs")
