@@ -606,34 +606,31 @@ class GyroWitness:
         compass: 8-11 samples in the unit test, against 3 on the fast one)."""
         if self.p.step_min_deg <= 0.0:
             return False
-        k0 = self._zero_at[self._confirming_side()]
-        r = [x for k, x in self._run if k > k0][-6:]
+        r = self._change_run()
         if not r:
             return False
         return abs(sum(r) / len(r) - self.nu_ref) < self.p.step_min_deg
+
+    def _change_run(self) -> list[float]:
+        """The innovations since the change began (Page's estimate: the last step the
+        confirming CUSUM was 0), the newest 6: a step's first samples may straddle it."""
+        k0 = self._zero_at[self._confirming_side()]
+        return [x for k, x in self._run if k > k0][-6:]
 
     def _spread_ok(self, sigma: float) -> bool:
         """The innovations since the change began (Page's estimate; the newest 6) are a level
         or a ramp, not a burst: about a line fitted to them without one sample (the one whose
         removal leaves the least spread), their spread is within ``spread_ratio`` sigmas."""
-        k0 = self._zero_at[self._confirming_side()]
-        r = [x for k, x in self._run if k > k0][-6:]  # the newest: a step's first samples
-        #                                              may straddle it
+        r = self._change_run()
         if len(r) < 4:
             return True
         # without the sample whose removal leaves the least spread: an outlier at an end
         # pulls the line through all of them to itself, and the farthest from that line was
         # another (seed 409, drift:20@46: a 34.7 sigma outlier on the step's first sample)
-        best: list[float] | None = None
-        for j in range(len(r)):
-            rj = _line_residuals([x for i, x in enumerate(r) if i != j],
-                                 [float(i) for i in range(len(r)) if i != j])
-            if best is None or sum(e * e for e in rj) < sum(e * e for e in best):
-                best = rj
-        assert best is not None
-        res = best
-        sd = math.sqrt(sum(e * e for e in res) / (len(res) - 2))
-        return sd <= self.p.spread_ratio * sigma
+        ss = min(sum(e * e for e in _line_residuals(
+            [x for i, x in enumerate(r) if i != j], [float(i) for i in range(len(r)) if i != j]))
+            for j in range(len(r)))
+        return math.sqrt(ss / (len(r) - 3)) <= self.p.spread_ratio * sigma
 
     def _fit(self, S: list[float], lam: float, t: float, z: float,
              update_bias: bool = True) -> None:
