@@ -172,9 +172,11 @@ def ideal_imu(traj: Trajectory, earth: EarthModel) -> tuple[FloatArray, FloatArr
     q_e = earth_step_quat(earth, dt)
     gyro = np.zeros((n, 3))
     accel = np.zeros((n, 3))
-    prev = NavState(tuple(traj.q[0]), tuple(traj.v[0]), tuple(traj.p[0]))
+    # Python floats, not NumPy scalars: the same doubles, several times faster to compute with
+    qs, vs, ps = traj.q.tolist(), traj.v.tolist(), traj.p.tolist()
+    prev = NavState(tuple(qs[0]), tuple(vs[0]), tuple(ps[0]))
     for k in range(1, n):
-        cur = NavState(tuple(traj.q[k]), tuple(traj.v[k]), tuple(traj.p[k]))
+        cur = NavState(tuple(qs[k]), tuple(vs[k]), tuple(ps[k]))
         w, f = invert_mechanization(prev, cur, dt, earth, q_e)
         gyro[k] = w
         accel[k] = f
