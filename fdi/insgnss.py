@@ -238,61 +238,33 @@ def mechanize(
     """Advance ``s`` in place by one IMU interval, eqs. (M1)–(M3); returns f^n (m/s²).
 
     ``omega_b`` and ``f_b`` are already bias-corrected; ``q_earth = Exp(−ω_ie^n Δt)``.
-
-    The IMU rate's inner loop: :func:`quat_rotate`, :meth:`EarthModel.gravity`,
-    :func:`quat_exp`, :func:`quat_mul` and :func:`quat_normalize` written out here, each
-    expression in the same order as in those functions, so the result is the same to the bit
-    (``tests/test_insgnss.py``) at about 2/3 of the time.
     """
-    v0x, v0y, v0z = s.v
-    p0x, p0y, p0z = s.p
-    qw, qx, qy, qz = s.q
-    # (M2) specific force to n with the attitude at the start of the interval: C(q) f_b
-    vx, vy, vz = f_b
-    tx = 2.0 * (qy * vz - qz * vy)
-    ty = 2.0 * (qz * vx - qx * vz)
-    tz = 2.0 * (qx * vy - qy * vx)
-    fnx = vx + qw * tx + (qy * tz - qz * ty)
-    fny = vy + qw * ty + (qz * tx - qx * tz)
-    fnz = vz + qw * tz + (qx * ty - qy * tx)
-    # gravity at p0 (EarthModel.gravity)
-    rz = p0z + EARTH_RADIUS_M
-    r2 = p0x * p0x + p0y * p0y + rz * rz
-    k = -earth._g0_r2 / (r2 * math.sqrt(r2))
-    w0, w1, w2 = earth.omega_ie_n
-    v1x = v0x + (fnx + k * p0x - 2.0 * (w1 * v0z - w2 * v0y)) * dt
-    v1y = v0y + (fny + k * p0y - 2.0 * (w2 * v0x - w0 * v0z)) * dt
-    v1z = v0z + (fnz + k * rz - 2.0 * (w0 * v0y - w1 * v0x)) * dt
+    v0, p0 = s.v, s.p
+    # (M2) specific force to n with the attitude at the start of the interval
+    fn = quat_rotate(s.q, f_b)
+    g = earth.gravity(p0)
+    w = earth.omega_ie_n
+    cor = (
+        2.0 * (w[1] * v0[2] - w[2] * v0[1]),
+        2.0 * (w[2] * v0[0] - w[0] * v0[2]),
+        2.0 * (w[0] * v0[1] - w[1] * v0[0]),
+    )
+    v1 = (
+        v0[0] + (fn[0] + g[0] - cor[0]) * dt,
+        v0[1] + (fn[1] + g[1] - cor[1]) * dt,
+        v0[2] + (fn[2] + g[2] - cor[2]) * dt,
+    )
     # (M3) trapezoidal position
     s.p = (
-        p0x + 0.5 * (v0x + v1x) * dt,
-        p0y + 0.5 * (v0y + v1y) * dt,
-        p0z + 0.5 * (v0z + v1z) * dt,
+        p0[0] + 0.5 * (v0[0] + v1[0]) * dt,
+        p0[1] + 0.5 * (v0[1] + v1[1]) * dt,
+        p0[2] + 0.5 * (v0[2] + v1[2]) * dt,
     )
-    s.v = (v1x, v1y, v1z)
-    # (M1) attitude: normalize(q_earth ⊗ q ⊗ Exp(ω_b Δt))
-    ew, ex, ey, ez = q_earth
-    aw = ew * qw - ex * qx - ey * qy - ez * qz
-    ax = ew * qx + ex * qw + ey * qz - ez * qy
-    ay = ew * qy - ex * qz + ey * qw + ez * qx
-    az = ew * qz + ex * qy - ey * qx + ez * qw
-    rx, ry, rz = omega_b[0] * dt, omega_b[1] * dt, omega_b[2] * dt
-    a2 = rx * rx + ry * ry + rz * rz
-    if a2 < 1e-12:
-        sh = 0.5 - a2 / 48.0
-        bw = 1.0 - a2 / 8.0
-    else:
-        ang = math.sqrt(a2)
-        sh = math.sin(0.5 * ang) / ang
-        bw = math.cos(0.5 * ang)
-    bx, by, bz = sh * rx, sh * ry, sh * rz
-    cw = aw * bw - ax * bx - ay * by - az * bz
-    cx = aw * bx + ax * bw + ay * bz - az * by
-    cy = aw * by - ax * bz + ay * bw + az * bx
-    cz = aw * bz + ax * by - ay * bx + az * bw
-    n = math.sqrt(cw * cw + cx * cx + cy * cy + cz * cz)
-    s.q = (cw / n, cx / n, cy / n, cz / n)
-    return (fnx, fny, fnz)
+    s.v = v1
+    # (M1) attitude
+    dq = quat_exp(omega_b[0] * dt, omega_b[1] * dt, omega_b[2] * dt)
+    s.q = quat_normalize(quat_mul(quat_mul(q_earth, s.q), dq))
+    return fn
 
 
 def earth_step_quat(earth: EarthModel, dt: float) -> Quat:

@@ -21,9 +21,6 @@ from fdi.insgnss import (
     invert_mechanization,
     mechanize,
     quat_conj,
-    quat_exp,
-    quat_mul,
-    quat_normalize,
     quat_rotate,
     quat_to_euler,
 )
@@ -104,41 +101,6 @@ def test_mechanisation_inverse_is_exact() -> None:
     mechanize(s, w, f, 0.01, earth, qe)
     assert s.v == pytest.approx(s1.v, abs=1e-12)
     assert s.q == pytest.approx(s1.q, abs=1e-12)
-
-
-def _mechanize_by_the_helpers(s: NavState, w: tuple, f: tuple, dt: float, earth: EarthModel,
-                              qe: tuple) -> tuple:
-    """(M1)-(M3) composed from the quaternion helpers and EarthModel.gravity, as written
-    before mechanize() was written out for speed."""
-    v0, p0 = s.v, s.p
-    fn = quat_rotate(s.q, f)
-    g = earth.gravity(p0)
-    o = earth.omega_ie_n
-    cor = (2.0 * (o[1] * v0[2] - o[2] * v0[1]), 2.0 * (o[2] * v0[0] - o[0] * v0[2]),
-           2.0 * (o[0] * v0[1] - o[1] * v0[0]))
-    v1 = tuple(v0[i] + (fn[i] + g[i] - cor[i]) * dt for i in range(3))
-    p1 = tuple(p0[i] + 0.5 * (v0[i] + v1[i]) * dt for i in range(3))
-    q1 = quat_normalize(quat_mul(quat_mul(qe, s.q), quat_exp(w[0] * dt, w[1] * dt, w[2] * dt)))
-    return q1, v1, p1, fn
-
-
-@pytest.mark.parametrize("rotation", [True, False])
-def test_mechanize_is_the_helpers_to_the_bit(rotation: bool) -> None:
-    """mechanize() inlines the helpers; seeded random states and samples, both branches of
-    Exp (tiny and normal rotations): every component equal, not approximately."""
-    rng = np.random.default_rng(7)
-    earth = EarthModel(rotation=rotation)
-    for i in range(300):
-        q = quat_normalize(tuple(rng.normal(size=4).tolist()))
-        s = NavState(q, tuple(rng.normal(0, 50, 3).tolist()), tuple(rng.normal(0, 1e4, 3).tolist()))
-        scale = 1e-7 if i % 3 == 0 else 1.0  # |w dt|^2 < 1e-12: the series branch
-        w = tuple((rng.normal(0, 1, 3) * scale).tolist())
-        f = tuple(rng.normal(0, 10, 3).tolist())
-        dt = float(rng.uniform(0.002, 0.05))
-        qe = earth_step_quat(earth, dt)
-        want = _mechanize_by_the_helpers(s, w, f, dt, earth, qe)
-        fn = mechanize(s, w, f, dt, earth, qe)
-        assert (s.q, s.v, s.p, fn) == want
 
 
 def test_the_nominal_state_stays_python_floats_after_an_update() -> None:
