@@ -290,6 +290,39 @@ def test_a_slow_hold_ends_when_the_fixes_step_back_across_its_track() -> None:
     assert "ended" not in _hold_run(part, fixes, 100.0, 0.1)
 
 
+def _stepped_run(hold: LevelHold, fixes: list[tuple[float, float]], j_step: int
+                 ) -> list[str]:
+    """``fixes`` at 10 Hz from t = 100 s, the caller's last step of b at index ``j_step``."""
+    out = []
+    for j, b in enumerate(fixes):
+        step = None if j < j_step else (100.0 + j_step * 0.1, math.dist(b, fixes[j_step - 1]))
+        out.append(hold.step(100.0 + j * 0.1, b, (1.0, 0.0), (0.0, 0.0), False, 0.1,
+                             last_step=step).action)
+    return out
+
+
+def test_a_slow_hold_ends_when_the_fixes_step_back_past_it_to_the_older_levels() -> None:
+    """A drift found late: the anchor sits 1.1 m into it, the fixes 0.6 m beyond the anchor
+    when the drift ends and they step 1.7 m back, 1.1 m past the anchor (further off than
+    before), to where the levels before the drift are. That is the fault's end."""
+    older = [(40.0, (-1.1, 0.0)), (50.0, (-1.2, 0.1)), (60.0, (-1.0, -0.1))]
+    fixes = [(0.5 + 0.005 * j, 0.0) for j in range(20)] + [(-1.1, 0.05)] * 30
+    acts = _stepped_run(LevelHold(HP, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=older),
+                        fixes, 20)
+    assert "ended" in acts and 20 < acts.index("ended") <= 32
+    # ... and the returning fixes are passed on (raw) from the step on, not the old track
+    assert acts[20:acts.index("ended")] == ["raw"] * (acts.index("ended") - 20)
+    # Without older levels there is no evidence for the new fixes: no end by this rule.
+    acts = _stepped_run(LevelHold(HP, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0)), fixes, 20)
+    assert "ended" not in acts
+    # The same step to a level that is no nearer the older ones (a multipath step past the
+    # track, sideways): no end.
+    side = [(0.5 + 0.005 * j, 0.0) for j in range(20)] + [(-0.8, 1.3)] * 30
+    acts = _stepped_run(LevelHold(HP, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=older),
+                        side, 20)
+    assert "ended" not in acts
+
+
 def test_slow_hold_ends_when_the_receiver_is_consistent_for_30_s() -> None:
     hold = LevelHold(HP, 100.0, 99.0, (3.0, 0.0), (1.0, 0.0))
     acts = _hold_run(hold, [(6.0, 0.0)] * 400, 100.0, 0.1)
