@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import pytest
@@ -15,3 +16,12 @@ def corpus() -> Path:
     if not CORPUS.is_dir():
         pytest.skip(f"shared corpus not found at {CORPUS} (a fresh clone without shared/)")
     return CORPUS
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """A shell without job control starts a background command with SIGINT ignored, and every
+    process it starts inherits that: the tests that send a command ^C (SIGINT) then saw it
+    ignored (``(pytest ... &)`` in a script: 2 failures). The default is put back, so the
+    commands under test get Python's KeyboardInterrupt as a user's terminal gives it."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
