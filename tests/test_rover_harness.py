@@ -12,6 +12,7 @@ import pytest
 from fdi.geodesy import LocalFrame
 from firmware_host.devtools.rover_harness import (
     measure,
+    offline_calibrated,
     replay,
     run_matrix,
     scenario,
@@ -260,3 +261,22 @@ def test_a_step_back_that_ends_in_an_alarm_keeps_the_levels_it_came_back_to() ->
     assert step.detected
     assert step.after_out_rms_m <= step.after_raw_rms_m + 1e-9, (step.after_out_rms_m,
                                                                  step.after_raw_rms_m)
+
+
+def test_a_step_whose_end_passed_as_good_is_forgotten() -> None:
+    """multipath 1 Hz seed 2001, offline-calibrated: a 0.5 m multipath step (148 s) was
+    remembered and accepted, and its end (173 s) passed the tests (a drift warning), so the
+    step was never matched. A 0.79 m multipath step at 200 s was its reverse within 0.14 m:
+    taken for its end and passed on, and its own end at 220 s was held 7 s as a new fault
+    (0.73 m against 0.22 m raw). Fixes that pass and stay at the reversal for hold_exit_s now
+    forget the step (fdi/rover.py, _passed_reversal). At 10 Hz the same seed's first epoch of
+    a step's end passes too, and the next is a fault: that end must still be matched."""
+    for rate, start in ((1.0, 36200.0), (10.0, 36146.4)):
+        cfg = offline_calibrated(load_config("rover"), "multipath", 2001, rate)
+        eps, truth = replay(cfg, scenario("multipath", 2001, rate))
+        m = measure(eps, truth)
+        step = next(e for e in m.events if e.kind == "multipath"
+                    and abs(e.start_s % 86400 - start) < 0.5)
+        assert step.detected
+        assert step.after_out_rms_m <= step.after_raw_rms_m + 1e-9, (
+            rate, step.after_out_rms_m, step.after_raw_rms_m)
