@@ -925,15 +925,13 @@ class RoverIsolator:
         assert drift is not None
         pr = self._passed_rev
         if pr is not None:
-            t0, (be, bn), t_r, last = pr
-            s1 = sigma_at(max(t_s - t_r, 1e-3), drift.horizons, drift.sigmas)
-            if (t_s - last <= 1.5 * dt + 1e-9
-                    and math.hypot(b[0] - be, b[1] - bn) <= p.hold_exit_sigmas * s1):
+            t0, b_r, t_r, last = pr
+            if t_s - last <= 1.5 * dt + 1e-9 and self._near(b, b_r, t_s - t_r):
                 if t_s - t_r >= p.hold_exit_s - 1e-9:
                     self._steps = [st for st in self._steps if st.t0 != t0]
                     self._passed_rev = None
                 else:
-                    self._passed_rev = (t0, (be, bn), t_r, t_s)
+                    self._passed_rev = (t0, b_r, t_r, t_s)
                 return
             self._passed_rev = None
         ref = drift.at_or_before(t_s)
@@ -942,8 +940,7 @@ class RoverIsolator:
         _, (ce, cn), _ = ref
         je, jn = b[0] - ce, b[1] - cn  # this epoch's step from the track
         for st in self._steps:
-            if st.accepted and math.hypot(je + st.se, jn + st.sn) <= 0.4 * math.hypot(
-                    st.se, st.sn):
+            if st.accepted and st.reversed_by(je, jn):
                 self._passed_rev = (st.t0, b, t_s, t_s)
                 return
 
@@ -964,16 +961,14 @@ class RoverIsolator:
         drift, p = self._drift, self.p
         assert drift is not None
         prev = self._rev
-        if prev is not None and prev[0] == rev:
-            s1 = sigma_at(max(t_s - prev[2], 1e-3), drift.horizons, drift.sigmas)
-            if math.hypot(b[0] - prev[1][0], b[1] - prev[1][1]) <= p.hold_exit_sigmas * s1:
-                if t_s - prev[2] >= p.hold_exit_s - 1e-9 and prev[3] + 1 >= STEP_END_EPOCHS:
-                    self._steps = [st for st in self._steps if st.t0 < rev]
-                    drift.forget_after(rev)
-                    self._rev = None
-                    return True
-                self._rev = (prev[0], prev[1], prev[2], prev[3] + 1)
-                return False
+        if prev is not None and prev[0] == rev and self._near(b, prev[1], t_s - prev[2]):
+            if t_s - prev[2] >= p.hold_exit_s - 1e-9 and prev[3] + 1 >= STEP_END_EPOCHS:
+                self._steps = [st for st in self._steps if st.t0 < rev]
+                drift.forget_after(rev)
+                self._rev = None
+                return True
+            self._rev = (prev[0], prev[1], prev[2], prev[3] + 1)
+            return False
         self._rev = (rev, b, t_s, 1)  # not where the step back began: start again
         return False
 
@@ -1004,6 +999,14 @@ class RoverIsolator:
         return math.hypot(b[0] - prev[0], b[1] - prev[1]) > self.p.hold_exit_sigmas * sigma_at(
             t_s - prev_t, drift.horizons, drift.sigmas)
 
+    def _near(self, b: tuple[float, float], b0: tuple[float, float], age: float) -> bool:
+        """``b`` within ``hold_exit_sigmas`` of the drift σ at ``age`` (s) of ``b0``: still
+        at the level where a step's end began (:meth:`_step_end`, :meth:`_passed_reversal`)."""
+        drift = self._drift
+        assert drift is not None
+        return math.hypot(b[0] - b0[0], b[1] - b0[1]) <= self.p.hold_exit_sigmas * sigma_at(
+            max(age, 1e-3), drift.horizons, drift.sigmas)
+
     def _step_back_to(self, t_s: float, b: tuple[float, float]) -> float | None:
         """Is the fix back at the level before a remembered step that the track accepted?
         The time of that step's reference, if so.
@@ -1027,9 +1030,9 @@ class RoverIsolator:
             t0, b0e, b0n, se, sn = st.t0, st.b0e, st.b0n, st.se, st.sn
             if t_s - t0 > self.p.step_pair_s or r_t <= t0 or not st.accepted:
                 continue  # too old, or the track was not seen at the stepped level
-            size = math.hypot(se, sn)
-            if math.hypot(je + se, jn + sn) <= 0.4 * size:
+            if st.reversed_by(je, jn):
                 return t0  # the reverse of the remembered step (slow drift cancels out)
+            size = math.hypot(se, sn)
             if math.hypot(ce - b0e - se, cn - b0n - sn) > 0.5 * size:
                 continue  # the track is not at the stepped level
             e_track = math.hypot(je, jn)
@@ -1221,6 +1224,11 @@ class _Step:
     se: float  # the step (east, north)
     sn: float
     accepted: bool = False  # the track was seen nearer the stepped level (_track_at)
+
+    def reversed_by(self, je: float, jn: float) -> bool:
+        """A step from the track of (``je``, ``jn``) is this step reversed, within 0.4 x its
+        size (both are measured over an epoch, so the slow DGPS error between them cancels)."""
+        return math.hypot(je + self.se, jn + self.sn) <= 0.4 * math.hypot(self.se, self.sn)
 
 
 @dataclass(slots=True)
