@@ -93,6 +93,12 @@ class HoldParams:
     max_s: float
     level_lag_s: float = 0.0  # a slow hold's "new_level" lag (0: exit_lag_s, as an abrupt one)
 
+    @property
+    def side_m(self) -> float:
+        """How far the old track must be off an older level for that level to be the other
+        side: ``side_sigmas`` σ(30 s), not grown with the age (the DGPS error is bounded)."""
+        return self.side_sigmas * sigma_at(30.0, self.horizons_s, self.sigma_m)
+
 
 @dataclass(frozen=True, slots=True)
 class HoldStep:
@@ -143,7 +149,6 @@ class LevelHold:
         levels)."""
         if not self.old:
             return False
-        p = self.p
         ae, an = self.anchor_b
         far = 0.0
         for _, (oe, on) in self.old:
@@ -151,7 +156,7 @@ class LevelHold:
             if math.hypot(b[0] - oe, b[1] - on) >= e_track:
                 return False
             far = max(far, e_track)
-        return far >= p.side_sigmas * sigma_at(30.0, p.horizons_s, p.sigma_m)
+        return far >= self.p.side_m
 
     def step(self, t: float, b: tuple[float, float], v: tuple[float, float],
              d: tuple[float, float], stale: bool, dt: float, fresh: bool = False,
@@ -225,7 +230,7 @@ class LevelHold:
         at_old = math.nan
         e_old = math.nan  # the old track's distance from that level
         if self.old and not stale:
-            s_side = p.side_sigmas * sigma_at(30.0, p.horizons_s, p.sigma_m)
+            s_side = p.side_m
             # After a step back to an older level (prefer_raw) the caller's rule for that
             # step (BACK_AT_OLD_FRAC); else a third.
             frac = BACK_AT_OLD_FRAC if self.prefer_raw else 1.0 / 3.0

@@ -352,8 +352,7 @@ class RoverIsolator:
         lv = self._last_v or (0.0, 0.0)
         self._acc_hist.append((z[0], z[1], 0.0, 0.0, lv[0], lv[1]))
         self._coast_since = None
-        self._win.clear()
-        self._fed = 0
+        self._window_clear()
         self._disp = [0.0, 0.0, 0.0]
         self._win.append(z)
         self.kf.reset(z, r)
@@ -488,8 +487,7 @@ class RoverIsolator:
                 self._disp[1] += 0.5 * (v[1] + lv[1]) * dt
             else:
                 # The window's Doppler-free values no longer line up: start it again.
-                self._win.clear()
-                self._fed = 0
+                self._window_clear()
                 self._disp = [0.0, 0.0, 0.0]
                 self._acc_hist.clear()
                 self._raw_hist.clear()
@@ -590,30 +588,27 @@ class RoverIsolator:
             # its end for a fault: 2.58 m worse than the receiver, held-out gm 5 Hz).
             watch = (not warn and dres is not None
                      and 0.0 < p.ramp_sigmas < dres.g_watch)
-            confirming = None
+            # Part of a step back being confirmed (below): passed on, and the confirmation
+            # goes on. Not a reference of the drift test yet: one at the level before the step
+            # hid the step from _step_back_to while the longer horizons still saw it, and the
+            # next fault held the stepped level (`multipath` 10 Hz seed 3003: a 0.52 m step's
+            # end held 1.8 s, 0.29 against 0.16 m raw over the 10 s after it).
+            confirming = False
             if self._rev is not None and b is not None and v is not None:
                 # A step back being confirmed: this fix passes the tests but is compared with
                 # the references of the stepped level; it may end the step.
                 rev = self._step_back_to(fix.t_s, b)
                 if rev is not None and self._step_end(fix.t_s, b, rev):
                     return self._resume(fix, z, r, d, v, b, t, "step_end")
-                if rev is not None:
-                    # Part of that step back: passed on, and the confirmation goes on. Not a
-                    # reference of the drift test yet: one at the level before the step hid
-                    # the step from _step_back_to while the longer horizons still saw it, and
-                    # the next fault held the stepped level (`multipath` 10 Hz seed 3003: a
-                    # 0.52 m step's end held 1.8 s, 0.29 against 0.16 m raw over the 10 s).
-                    confirming = self._rev
+                confirming = rev is not None
             elif self._steps and b is not None:
                 self._passed_reversal(fix.t_s, b, dt)
-            self._accepted(fix, z, t, learn=not warn)
+            self._accepted(fix, z, t, learn=not warn, step_back=confirming)
             self._window_append(z, d)
             self.kf.update(z, r)
-            if confirming is not None:
-                self._rev = confirming
             if warn:
                 return self._accept(z, t, "drift_warn", fault=True)
-            if confirming is None and b is not None and drift is not None and v is not None:
+            if not confirming and b is not None and drift is not None and v is not None:
                 drift.commit(fix.t_s, b, v)
                 if self._steps:
                     self._track_at(b)
@@ -894,8 +889,7 @@ class RoverIsolator:
         drift = self._drift
         assert drift is not None
         self._hold = None
-        self._win.clear()
-        self._fed = 0
+        self._window_clear()
         self._win.append((z[0] - d[0], z[1] - d[1], z[2] - d[2]))
         self._acc_hist.clear()
         self._acc_hist.append((z[0], z[1], d[0], d[1], v[0], v[1]))
@@ -1129,12 +1123,14 @@ class RoverIsolator:
         ))
 
     def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests,
-                  learn: bool = True) -> None:
+                  learn: bool = True, step_back: bool = False) -> None:
         """Bookkeeping for a fix passed on as it is: the run of replacements ends; ``learn``:
-        the gates learn from it (not while the drift test warns)."""
+        the gates learn from it (not while the drift test warns); ``step_back``: the fix is
+        part of a step back being confirmed, which goes on."""
         self._consec = 0
         self._stepped_back = False
-        self._rev = None
+        if not step_back:
+            self._rev = None
         self._coast_since = None
         if learn and t.doppler_res is not None and len(self._acc_hist) == self.p.window:
             self._n_inc += 1
@@ -1200,6 +1196,10 @@ class RoverIsolator:
         return dec._replace(consecutive=consecutive) if consecutive else dec
 
     # -------------------------------------------------------------- pieces
+
+    def _window_clear(self) -> None:
+        self._win.clear()
+        self._fed = 0
 
     def _window_append(self, value: tuple[float, float, float], d: list[float],
                        fed: bool = False) -> None:
