@@ -107,6 +107,10 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
         "rover done-means: a preset over every error model x seed x rate (issue 13)",
     ),
     "rov": ("firmware_host.rov.app", "ROV compass faults and fault-tolerant heading hold"),
+    "rov-harness": (
+        "firmware_host.devtools.rov_harness",
+        "ROV done-means: both plants x seeds, with and without the gyro (issue 14)",
+    ),
     "insgnss": (
         "firmware_host.devtools.insgnss_sim",
         "INS/GNSS three-zone robust filter: paper scenarios",
@@ -156,6 +160,7 @@ EXAMPLES: dict[str, str] = {
     "sim rover": "fdi-bridge sim rover --duration 60 --kinds jump,ramp --out run",
     "sim rover-harness": "fdi-bridge sim rover-harness --seeds 1,2 --rates 10 --duration 600",
     "sim rov": "fdi-bridge sim rov --fault drift:30@70 --out rov-run",
+    "sim rov-harness": "fdi-bridge sim rov-harness --seeds 1-3 --scenarios step,burst",
     "sim insgnss": "fdi-bridge sim insgnss --scenario paper-single --out ins-run",
     "sim insgnss-report": "fdi-bridge sim insgnss-report --seeds 1-2 --out insgnss.md",
 }

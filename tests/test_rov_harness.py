@@ -8,12 +8,25 @@ lists the shortfalls. Seeds 1-10 (the witness was tuned on seeds 101-120).
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import pytest
 
-from firmware_host.devtools.rov_harness import GOALS, hold_floor, measure, step_then_drift
+from firmware_host.devtools.rov_harness import (
+    GOALS,
+    Worst,
+    hold_floor,
+    measure,
+    merge,
+    step_then_drift,
+    table,
+)
 from firmware_host.rov.config import Plant, RovConfig, load_rov_config, project_root
 
 SEEDS = range(1, 11)
@@ -139,3 +152,43 @@ def test_bursts_that_dwelt_on_one_side_are_left_to_the_slow_cusum(cfg: RovConfig
     for seed in seeds:
         r = measure(off, "nomoto", (seed,), gyro=True, which=("burst",))
         assert r["burst.confirmations"]["worst"] >= 1, (seed, r)
+
+
+def test_runs_over_the_goal_are_counted_and_shown() -> None:
+    w = Worst(limit=5.0)
+    for v, where in ((4.0, "a"), (8.0, "b"), (5.0, "c"), (float("inf"), "d"), (6.0, "e")):
+        w.add(v, where)
+    d = w.as_dict()
+    assert (d["worst"], d["where"], d["runs"], d["over"]) == (None, "d", 5, 3)
+    res = {"step.delay_samples": {"worst": 8, "where": "seed 808", "runs": 20, "over": 1},
+           "burst.confirmations": {"worst": 0, "where": "seed 807", "runs": 2, "over": 0}}
+    text = table({"nonlinear/gyro": res})
+    assert "| 8 FAIL (1 of 20 runs) |" in text and "| 0 ok |" in text
+    assert "| stuck confirmed within (samples) | 10 | – |" in text  # not measured
+
+
+def test_seeds_measured_one_by_one_and_merged_are_the_seeds_measured_at_once(
+        cfg: RovConfig) -> None:
+    which = ("spike", "burst", "stuck")
+    whole = measure(cfg, "nomoto", (1, 2, 3), gyro=True, which=which)
+    parts = [measure(cfg, "nomoto", (s,), gyro=True, which=which) for s in (1, 2, 3)]
+    assert merge(parts) == whole
+    assert set(whole) == {k for k in GOALS if k.split(".")[0] in which}
+
+
+def test_the_command_prints_the_table_and_writes_measure_s_numbers(cfg: RovConfig,
+                                                                    tmp_path: Path) -> None:
+    """``fdi-bridge sim rov-harness``: what :func:`measure` gives, as a table and JSON."""
+    root = project_root()
+    out = subprocess.run(
+        [sys.executable, "-m", "firmware_host.cli", "sim", "rov-harness", "--seeds", "1-2",
+         "--plants", "nomoto", "--scenarios", "spike,burst", "--json", str(tmp_path / "r.json")],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+        env=dict(os.environ, PYTHONPATH=str(root)))
+    assert out.returncode == 0, out.stderr
+    assert "| criterion | goal | nomoto/gyro |" in out.stdout
+    assert "1 plant/gyro cases x 2 seeds in" in out.stdout
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["seeds"] == [1, 2] and doc["partial"] is False
+    assert doc["results"]["nomoto/gyro"] == measure(cfg, "nomoto", (1, 2), gyro=True,
+                                                    which=("spike", "burst"))
