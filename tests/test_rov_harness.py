@@ -164,7 +164,9 @@ def test_runs_over_the_goal_are_counted_and_shown() -> None:
            "burst.confirmations": {"worst": 0, "where": "seed 807", "runs": 2, "over": 0}}
     text = table({"nonlinear/gyro": res})
     assert "| 8 FAIL (1 of 20 runs) |" in text and "| 0 ok |" in text
-    assert "| stuck confirmed within (samples) | 10 | – |" in text  # not measured
+    assert "stuck confirmed within" not in text  # not measured by any column: no row
+    res2 = {"step.delay_samples": res["step.delay_samples"]}
+    assert "| 0 ok | – |" in table({"a": res, "b": res2})  # b measured no bursts
 
 
 def test_seeds_measured_one_by_one_and_merged_are_the_seeds_measured_at_once(
@@ -186,7 +188,8 @@ def test_the_command_prints_the_table_and_writes_measure_s_numbers(cfg: RovConfi
         cwd=tmp_path, capture_output=True, text=True, timeout=300,
         env=dict(os.environ, PYTHONPATH=str(root)))
     assert out.returncode == 0, out.stderr
-    assert "| criterion | goal | nomoto/gyro |" in out.stdout
+    assert out.stdout.splitlines()[0].split() == ["criterion", "goal", "nomoto/gyro"]
+    assert "noise bursts: confirmations" in out.stdout
     assert "1 plant/gyro cases x 2 seeds in" in out.stdout
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["seeds"] == [1, 2] and doc["partial"] is False

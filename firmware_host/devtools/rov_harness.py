@@ -39,6 +39,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
+from firmware_host.commands import tables
 from firmware_host.commands.checks import choice_list, output_file_arg, positive_float, seed_list
 from firmware_host.commands.progress import Progress
 from firmware_host.devtools.rov_experiment import run_experiment
@@ -310,12 +311,15 @@ def verdict(res: dict[str, dict[str, Any]]) -> dict[str, bool]:
     return out
 
 
-def table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
-    """Markdown: one row per goal, one column per ``plant/gyro`` label of ``results``."""
+def _table(results: dict[str, dict[str, dict[str, Any]]]) -> tables.Table:
+    """One row per goal, one column per ``plant/gyro`` label of ``results``: the worst seed's
+    value, ok or FAIL, and where it fails how many runs of how many do; – not measured (a
+    criterion no column measured is left out)."""
     labels = list(results)
-    lines = ["| criterion | goal | " + " | ".join(labels) + " |",
-             "|" + "---|" * (len(labels) + 2)]
+    t = tables.Table(["criterion", "goal", *labels], keep=2)
     for k, (text, limit) in GOALS.items():
+        if all(k not in results[lab] for lab in labels):
+            continue
         cells = []
         for lab in labels:
             r = results[lab].get(k)
@@ -327,8 +331,13 @@ def table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
             shown = "never" if v is None else f"{v:.2f}".rstrip("0").rstrip(".")
             n = f" ({r['over']} of {r['runs']} runs)" if not ok and r.get("over") else ""
             cells.append(f"{shown} {'ok' if ok else 'FAIL'}{n}")
-        lines.append(f"| {text} | {limit:g} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        t.add(text, f"{limit:g}", *cells)
+    return t
+
+
+def table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
+    """Markdown (docs/rov.md): one row per goal, one column per ``plant/gyro`` label."""
+    return _table(results).markdown()
 
 
 # --------------------------------------------------------------------------- CLI
@@ -375,7 +384,7 @@ def run(args: argparse.Namespace) -> int:
                     bar.step()
         except KeyboardInterrupt:  # ^C: what was measured is reported, marked partial
             partial = True
-    print(table(out))
+    print(_table(out).console())
     print(f"\n{len(cases)} plant/gyro cases x {len(args.seeds)} seeds in "
           f"{time.perf_counter() - t0:.1f} s (config {args.config})"
           + (" -- interrupted: partial" if partial else ""))
