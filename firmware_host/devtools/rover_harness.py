@@ -416,12 +416,13 @@ def _clean(x: Any) -> Any:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default="rover", help="config file or preset name")
-    parser.add_argument("--seeds", type=seed_list, default=list(REPORT_SEEDS),
+    parser.add_argument("--seeds", type=seed_list,
+                        default=",".join(str(s) for s in REPORT_SEEDS),
                         help="seeds, like 1-5 or 1,3 (the report seeds; tuning used 101-103)")
     parser.add_argument("--models", type=choice_list(ERROR_MODELS, "models"),
-                        default=list(ERROR_MODELS),
+                        default=",".join(ERROR_MODELS),
                         help="receiver error models, comma separated")
-    parser.add_argument("--rates", type=positive_float_list, default=[1.0, 5.0, 10.0],
+    parser.add_argument("--rates", type=positive_float_list, default="1,5,10",
                         help="fix rates in Hz, comma separated")
     parser.add_argument("--duration", type=positive_float, default=1200.0,
                         help="seconds per run")
