@@ -52,6 +52,12 @@ class Feeder(threading.Thread):
         self.pty = pty_pair
         self.halt = threading.Event()
 
+    def stop(self) -> None:
+        """Stop, and wait for the thread, before the pty is closed under it (a read on the
+        closed descriptor raised EBADF in the thread: a fresh-clone CI run's warning)."""
+        self.halt.set()
+        self.join(timeout=5.0)
+
     def run(self) -> None:
         for chunk in self.chunks:
             if self.halt.is_set():
@@ -78,7 +84,7 @@ def test_on_a_terminal_banner_then_a_refreshing_status_line(tmp_path: Path) -> N
         try:
             rc, text = cli_under_pty(_cmd(cfg)[3:], tmp_path, timeout=30.0, env=_env())
         finally:
-            feeder.halt.set()
+            feeder.stop()
     assert rc == 0, text
     assert "Traceback" not in text
     banner, rest = text.split("\r\n\r", 1)  # the terminal turns \n into \r\n
@@ -106,7 +112,7 @@ def test_on_a_pipe_banner_and_summary_without_the_live_line(tmp_path: Path) -> N
             proc = subprocess.run(_cmd(cfg), capture_output=True, env=_env(), cwd=tmp_path,
                                   timeout=30.0)
         finally:
-            feeder.halt.set()
+            feeder.stop()
     err, out = proc.stderr.decode(), proc.stdout.decode()
     assert proc.returncode == 0, err
     assert "\r" not in err and "\r" not in out and "Traceback" not in err
@@ -128,6 +134,6 @@ def test_json_summary_on_stdout(tmp_path: Path) -> None:
             proc = subprocess.run(_cmd(cfg, "--json"), capture_output=True, env=_env(),
                                   cwd=tmp_path, timeout=30.0)
         finally:
-            feeder.halt.set()
+            feeder.stop()
     summary = json.loads(proc.stdout)
     assert summary["vehicle"] == "rover" and summary["runtime"]["stopped_by"] == "duration"
