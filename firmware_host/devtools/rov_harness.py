@@ -71,6 +71,17 @@ GOALS: dict[str, tuple[str, float]] = {
     "long.drift_delay_s": ("then a 20 deg drift confirmed within (s)", 5.0),
 }
 INF = float("inf")
+PLANTS: tuple[Plant, ...] = ("nomoto", "nonlinear")
+
+
+def meets(v: float | None, limit: float) -> bool:
+    """A value within its goal (``None`` and ``inf``: never confirmed, not met)."""
+    return v is not None and v <= limit + 1e-9
+
+
+def label(plant: str, gyro: bool) -> str:
+    """The results' key of a plant/gyro case: ``nomoto/gyro``, ``nonlinear/no gyro``."""
+    return f"{plant}/{'gyro' if gyro else 'no gyro'}"
 
 
 # The heading hold configured for each simulated vehicle, as a field engineer sets it up for
@@ -118,7 +129,7 @@ class Worst:
 
     def add(self, v: float, where: str) -> None:
         self.runs += 1
-        if v > self.limit + 1e-9:
+        if not meets(v, self.limit):
             self.over += 1
         if v > self.value:
             self.value, self.where = v, where
@@ -295,20 +306,15 @@ def run_all(
 ) -> dict[str, dict[str, dict[str, Any]]]:
     """Both plants, with and without the gyro: ``{"nomoto/gyro": {...}, ...}``."""
     out: dict[str, dict[str, dict[str, Any]]] = {}
-    for plant in ("nomoto", "nonlinear"):
+    for plant in PLANTS:
         for gyro in (True, False):
-            out[f"{plant}/{'gyro' if gyro else 'no gyro'}"] = measure(
-                cfg, plant, seeds, gyro=gyro, long_s=long_s)
+            out[label(plant, gyro)] = measure(cfg, plant, seeds, gyro=gyro, long_s=long_s)
     return out
 
 
 def verdict(res: dict[str, dict[str, Any]]) -> dict[str, bool]:
     """Which goals the worst seed meets (``None`` worst = infinite = not met)."""
-    out = {}
-    for k, r in res.items():
-        v = r["worst"]
-        out[k] = v is not None and v <= GOALS[k][1] + 1e-9
-    return out
+    return {k: meets(r["worst"], GOALS[k][1]) for k, r in res.items()}
 
 
 def _table(results: dict[str, dict[str, dict[str, Any]]]) -> tables.Table:
@@ -327,7 +333,7 @@ def _table(results: dict[str, dict[str, dict[str, Any]]]) -> tables.Table:
                 cells.append("–")
                 continue
             v = r["worst"]
-            ok = v is not None and v <= limit + 1e-9
+            ok = meets(v, limit)
             shown = "never" if v is None else f"{v:.2f}".rstrip("0").rstrip(".")
             n = f" ({r['over']} of {r['runs']} runs)" if not ok and r.get("over") else ""
             cells.append(f"{shown} {'ok' if ok else 'FAIL'}{n}")
@@ -343,7 +349,6 @@ def table(results: dict[str, dict[str, dict[str, Any]]]) -> str:
 # --------------------------------------------------------------------------- CLI
 
 SCENARIOS: tuple[str, ...] = ("step", "ramp", "ramp_slow", "stuck", "spike", "burst", "long")
-PLANTS: tuple[Plant, ...] = ("nomoto", "nonlinear")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -375,12 +380,11 @@ def run(args: argparse.Namespace) -> int:
     with Progress(len(cases) * len(args.seeds), "rov harness", unit="seed") as bar:
         try:
             for plant, gyro in cases:
-                label = f"{plant}/{'gyro' if gyro else 'no gyro'}"
-                parts = []
+                key = label(plant, gyro)
                 for seed in args.seeds:  # one seed at a time: progress, and ^C keeps them
-                    parts.append(measure(cfg, plant, (seed,), gyro=gyro, long_s=args.long_s,
-                                         which=args.scenarios))
-                    out[label] = merge(parts)
+                    one = measure(cfg, plant, (seed,), gyro=gyro, long_s=args.long_s,
+                                  which=args.scenarios)
+                    out[key] = merge([out[key], one]) if key in out else one
                     bar.step()
         except KeyboardInterrupt:  # ^C: what was measured is reported, marked partial
             partial = True
