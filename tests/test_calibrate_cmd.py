@@ -1,19 +1,24 @@
 """``fdi-bridge calibrate``: the drift test calibrated once on a clean recording (issue 13).
 
 A generated clean drive of one receiver is recorded (capture) and calibrated; the written
-configuration loads, carries the σ (the harness's ``--offline-calibration`` finds the same),
+configuration loads, carries the σ and the measured Doppler lag (the harness's
+``--offline-calibration`` finds the same; the lag is also checked on exact drives),
 and on a later drive of the same receiver finds a ramp that begins in the first minutes
 sooner than the wide starting σ do. Bad input is a clear error naming the file."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
 from firmware_host import cli
 from firmware_host.devtools import rover_harness as H
-from firmware_host.devtools.rover_sim import write_run
+from firmware_host.devtools.rover_sim import draw_field_model, write_run
+from firmware_host.rover.calibration import LAG_RAMP_SIGMAS, LAG_SD_FLOOR_S, estimate_lag
 from firmware_host.runtime.config import load_config
 
 
@@ -49,6 +54,46 @@ def test_calibrate_writes_a_config_with_the_receiver_s_sigma(
     assert default.drift_floor_frac == 0.2 and "drift_floor_frac = 0.6667" in printed
     assert d.drift_calibrate_s == default.drift_calibrate_s == 300.0
     assert d.drift_horizons_s == default.drift_horizons_s and d.gate_m == default.gate_m
+    # The Doppler's lag is measured on the drive (this receiver's is drawn 0.05-0.3 s), and
+    # written with the σ that were calibrated with it.
+    true_lag = draw_field_model("dgps", 903).lag_s
+    assert abs(d.drift_lag_s - true_lag) <= 0.03, (d.drift_lag_s, true_lag)
+    assert d.drift_lag_sd_s == LAG_SD_FLOOR_S < default.drift_lag_sd_s
+    assert (d.drift_lag_s, d.drift_lag_sd_s) == (ref.rover.detector.drift_lag_s,
+                                                 ref.rover.detector.drift_lag_sd_s)
+    assert f"drift_lag_s = {d.drift_lag_s:g}" in printed and "Doppler lag " in printed
+    # With the lag measured, the ramp's 10 s flag at the warning's level (the σ are tighter).
+    assert d.ramp_sigmas == LAG_RAMP_SIGMAS > default.ramp_sigmas
+    assert f"ramp_sigmas = {LAG_RAMP_SIGMAS:g}" in printed
+
+
+def _records(lag_s: float, *, turn: bool, rate_hz: float = 10.0, seconds: float = 300.0
+             ) -> list[dict[str, Any]]:
+    """A tractor on a circle of 20 m at 2 m/s (or a straight line) whose Doppler is the true
+    velocity ``lag_s`` ago, with 1 cm of seeded noise on the position, as pipeline records."""
+    rng = np.random.default_rng(7)
+    out = []
+    w = 2.0 / 20.0 if turn else 0.0
+    for k in range(round(seconds * rate_hz)):
+        t = k / rate_hz
+        if turn:
+            e, n = 20.0 * math.sin(w * t), 20.0 * (1.0 - math.cos(w * t))
+        else:
+            e, n = 0.0, 2.0 * t
+        c = math.degrees(w * (t - lag_s))  # heading from north... of the lagged velocity
+        course = (90.0 - c) % 360.0 if turn else 0.0
+        out.append({"utc": 36000.0 + t, "e": e + float(rng.normal(0, 0.01)),
+                    "n": n + float(rng.normal(0, 0.01)), "speed": 2.0, "course": course})
+    return out
+
+
+@pytest.mark.parametrize("lag_s", [0.0, 0.12, 0.35])
+def test_the_doppler_lag_is_measured_where_the_drive_turns(lag_s: float) -> None:
+    est = estimate_lag([_records(lag_s, turn=True)])
+    assert est is not None and est.pairs > 1000
+    assert est.lag_s == pytest.approx(lag_s, abs=0.01)
+    assert est.sd_s == LAG_SD_FLOOR_S  # a standard error far under the floor
+    assert estimate_lag([_records(lag_s, turn=False)]) is None  # a straight drive: no evidence
 
 
 def test_a_calibrated_receiver_finds_an_early_ramp_sooner(tmp_path: Path) -> None:

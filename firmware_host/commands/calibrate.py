@@ -4,9 +4,12 @@ By default the drift test (``fdi/drift.py``) learns the receiver's noise over it
 ``drift_calibrate_s`` (300 s) of every start and uses the wide ``drift_sigma_m`` until then,
 so a slow drift that begins in those minutes is found late. This command calibrates a receiver
 once, on recordings of clean drives (``fdi-bridge record``, or a plain NMEA log), the way an
-autopilot keeps its compass calibration: it prints σ per horizon and the ``drift_sigma_m``
-line to paste under ``[rover.detector]`` (1.5 × σ, never wider than before:
-:data:`firmware_host.rover.calibration.START_FACTOR`), and ``--out FILE`` writes the whole
+autopilot keeps its compass calibration: it measures the receiver's Doppler lag where the
+drives turn (``drift_lag_s``, with ``drift_lag_sd_s`` = 0.05 s instead of 0.15 ± 0.15 s, and
+the ramp's 10 s flag at 4.5 σ of the tighter σ instead of 4), prints
+σ per horizon and the lines to paste under ``[rover.detector]`` (``drift_sigma_m`` = 1.5 × σ,
+never wider than before: :data:`firmware_host.rover.calibration.START_FACTOR`, and the lag),
+and ``--out FILE`` writes the whole
 configuration with it. The test starts from these instead of the wide ones and still
 calibrates on the day's first ``drift_calibrate_s`` (the sky and the multipath are the day's); set
 ``drift_calibrate_s = 0`` to keep them for good. Record at the rate the receiver will run at,
@@ -21,13 +24,13 @@ import dataclasses
 from pathlib import Path
 
 from fdi.errors import FdiBridgeError, UsageError
+from fdi.rover import RoverDetectorParams
 from firmware_host.commands.checks import input_file_arg, output_file_arg
 from firmware_host.commands.config_cmd import effective_toml
 from firmware_host.commands.replay import load_input
 from firmware_host.devtools.eval import run_ours
 from firmware_host.rover.calibration import (
     START_FACTOR,
-    START_FLOOR_FRAC,
     calibrate_records,
     calibrated_detector,
     starting_sigma,
@@ -44,10 +47,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write that configuration with the calibration to this TOML file")
 
 
-def detector_lines(start: tuple[float, ...]) -> list[str]:
+def detector_lines(start: tuple[float, ...], det: RoverDetectorParams) -> list[str]:
+    """The lines to paste under ``[rover.detector]``: what calibration changed in ``det``."""
     return ["[rover.detector]",
             "drift_sigma_m = [" + ", ".join(f"{s:g}" for s in start) + "]",
-            f"drift_floor_frac = {START_FLOOR_FRAC:g}"]
+            f"drift_floor_frac = {det.drift_floor_frac:g}",
+            f"drift_lag_s = {det.drift_lag_s:g}",
+            f"drift_lag_sd_s = {det.drift_lag_sd_s:g}",
+            f"ramp_sigmas = {det.ramp_sigmas:g}"]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,12 +72,20 @@ def run(args: argparse.Namespace) -> int:
                                  f"receiver is expected)")
     try:
         cal = calibrate_records(runs, d.drift_horizons_s, d.drift_lag_s,
-                                margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h)
+                                margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h,
+                                lag_sd_s=d.drift_lag_sd_s)
     except ValueError as err:
         raise FdiBridgeError(f"cannot calibrate on {', '.join(map(str, args.logs))}: {err}; "
                              f"record a longer drive at a steady run of fixes") from None
     print(f"{len(args.logs)} recording(s), {cal.chains} stretch(es) with an unbroken Doppler "
           f"chain, {cal.seconds:.0f} s of fixes")
+    if cal.lag is not None:
+        print(f"Doppler lag {cal.lag_s:g} s (standard error {cal.lag.se_s:g} s over "
+              f"{cal.lag.pairs} pairs that turn; drift_lag_sd_s {cal.lag_sd_s:g}, was "
+              f"{d.drift_lag_s:g} +- {d.drift_lag_sd_s:g} s)")
+    else:
+        print(f"Doppler lag: the drives do not turn enough to measure it; kept "
+              f"{d.drift_lag_s:g} +- {d.drift_lag_sd_s:g} s")
     start = starting_sigma(cal, d.drift_sigma_m)
     print(f"{'horizon s':>10} {'sigma m':>9} {'start m':>8} {'was m':>7} {'differences':>12}")
     for h, s, st, was, n in zip(cal.horizons_s, cal.sigma_m, start, d.drift_sigma_m,
@@ -81,9 +96,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"(start: {START_FACTOR:g} x sigma, never wider than was; the drift test starts "
           f"there and {then})")
     print()
-    print("\n".join(detector_lines(start)))
+    det = calibrated_detector(d, cal)
+    print("\n".join(detector_lines(start, det)))
     if args.out:
-        det = calibrated_detector(d, cal)
         out_bf = dataclasses.replace(
             bf, name=f"{cfg.name}-calibrated",
             description=(f"{cfg.name} with the drift test calibrated by fdi-bridge calibrate "

@@ -269,7 +269,8 @@ def offline_calibrated(cfg: BridgeConfig, model: str, seed: int, rate_hz: float,
     d = cfg.rover.detector
     clean = clean_drive(model, seed + CALIBRATION_SEED_OFFSET, seed, rate_hz, duration_s)
     cal = calibrate_records([replay(cfg, clean)[0]], d.drift_horizons_s, d.drift_lag_s,
-                            margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h)
+                            margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h,
+                            lag_sd_s=d.drift_lag_sd_s)
     det = calibrated_detector(d, cal)
     return dataclasses.replace(cfg, rover=dataclasses.replace(cfg.rover, detector=det))
 
@@ -431,7 +432,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--offline-calibration", action="store_true",
                         help="calibrate each receiver's drift test first on a clean drive of "
                              "its own (as fdi-bridge calibrate): it starts from 1.5 x those "
-                             "sigma instead of the wide drift_sigma_m")
+                             "sigma instead of the wide drift_sigma_m, with the Doppler lag "
+                             "measured there")
 
 
 def run(args: argparse.Namespace) -> int:
