@@ -80,8 +80,8 @@ def _records(lag_s: float, *, turn: bool, rate_hz: float = 10.0, seconds: float 
             e, n = 20.0 * math.sin(w * t), 20.0 * (1.0 - math.cos(w * t))
         else:
             e, n = 0.0, 2.0 * t
-        c = math.degrees(w * (t - lag_s))  # heading from north... of the lagged velocity
-        course = (90.0 - c) % 360.0 if turn else 0.0
+        # Course over ground (clockwise from north) of the velocity lag_s ago: 90° − ω(t − δ).
+        course = (90.0 - math.degrees(w * (t - lag_s))) % 360.0 if turn else 0.0
         out.append({"utc": 36000.0 + t, "e": e + float(rng.normal(0, 0.01)),
                     "n": n + float(rng.normal(0, 0.01)), "speed": 2.0, "course": course})
     return out

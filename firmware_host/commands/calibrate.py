@@ -33,7 +33,6 @@ from firmware_host.rover.calibration import (
     START_FACTOR,
     calibrate_records,
     calibrated_detector,
-    starting_sigma,
 )
 from firmware_host.runtime.config import bridge_config, load_bridge_file
 
@@ -47,10 +46,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write that configuration with the calibration to this TOML file")
 
 
-def detector_lines(start: tuple[float, ...], det: RoverDetectorParams) -> list[str]:
+def detector_lines(det: RoverDetectorParams) -> list[str]:
     """The lines to paste under ``[rover.detector]``: what calibration changed in ``det``."""
     return ["[rover.detector]",
-            "drift_sigma_m = [" + ", ".join(f"{s:g}" for s in start) + "]",
+            "drift_sigma_m = [" + ", ".join(f"{s:g}" for s in det.drift_sigma_m) + "]",
             f"drift_floor_frac = {det.drift_floor_frac:g}",
             f"drift_lag_s = {det.drift_lag_s:g}",
             f"drift_lag_sd_s = {det.drift_lag_sd_s:g}",
@@ -72,8 +71,8 @@ def run(args: argparse.Namespace) -> int:
                                  f"receiver is expected)")
     try:
         cal = calibrate_records(runs, d.drift_horizons_s, d.drift_lag_s,
-                                margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h,
-                                lag_sd_s=d.drift_lag_sd_s)
+                                d.drift_lag_sd_s, margin=d.drift_cal_k,
+                                margin_min_h=d.drift_cal_min_h)
     except ValueError as err:
         raise FdiBridgeError(f"cannot calibrate on {', '.join(map(str, args.logs))}: {err}; "
                              f"record a longer drive at a steady run of fixes") from None
@@ -86,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"Doppler lag: the drives do not turn enough to measure it; kept "
               f"{d.drift_lag_s:g} +- {d.drift_lag_sd_s:g} s")
-    start = starting_sigma(cal, d.drift_sigma_m)
+    det = calibrated_detector(d, cal)
+    start = det.drift_sigma_m  # starting_sigma: START_FACTOR x sigma, never wider than was
     print(f"{'horizon s':>10} {'sigma m':>9} {'start m':>8} {'was m':>7} {'differences':>12}")
     for h, s, st, was, n in zip(cal.horizons_s, cal.sigma_m, start, d.drift_sigma_m,
                                 cal.independent, strict=True):
@@ -96,8 +96,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"(start: {START_FACTOR:g} x sigma, never wider than was; the drift test starts "
           f"there and {then})")
     print()
-    det = calibrated_detector(d, cal)
-    print("\n".join(detector_lines(start, det)))
+    print("\n".join(detector_lines(det)))
     if args.out:
         out_bf = dataclasses.replace(
             bf, name=f"{cfg.name}-calibrated",

@@ -269,8 +269,8 @@ def offline_calibrated(cfg: BridgeConfig, model: str, seed: int, rate_hz: float,
     d = cfg.rover.detector
     clean = clean_drive(model, seed + CALIBRATION_SEED_OFFSET, seed, rate_hz, duration_s)
     cal = calibrate_records([replay(cfg, clean)[0]], d.drift_horizons_s, d.drift_lag_s,
-                            margin=d.drift_cal_k, margin_min_h=d.drift_cal_min_h,
-                            lag_sd_s=d.drift_lag_sd_s)
+                            d.drift_lag_sd_s, margin=d.drift_cal_k,
+                            margin_min_h=d.drift_cal_min_h)
     det = calibrated_detector(d, cal)
     return dataclasses.replace(cfg, rover=dataclasses.replace(cfg.rover, detector=det))
 

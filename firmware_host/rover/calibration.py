@@ -145,9 +145,10 @@ def estimate_lag(runs: Sequence[Sequence[dict[str, Any]]]) -> LagEstimate | None
         return lag, math.sqrt(rss / max(1, 2 * len(pairs) - 1) / sxx)
 
     lag, _ = fit(xs)
-    res = sorted(abs(c - lag * a) for a, b, y, z in xs for a, c in ((a, y), (b, z)))
-    keep_m = 4.0 * 1.4826 * res[len(res) // 2]
-    kept = [x for x in xs if abs(x[2] - lag * x[0]) <= keep_m and abs(x[3] - lag * x[1]) <= keep_m]
+    res = [(abs(y - lag * a), abs(z - lag * b)) for a, b, y, z in xs]  # per axis
+    per_axis = sorted(r for pair in res for r in pair)
+    keep_m = 4.0 * 1.4826 * per_axis[len(per_axis) // 2]
+    kept = [x for x, r in zip(xs, res, strict=True) if max(r) <= keep_m]
     if len(kept) >= 20:
         xs = kept
     lag, se = fit(xs)
@@ -157,17 +158,17 @@ def estimate_lag(runs: Sequence[Sequence[dict[str, Any]]]) -> LagEstimate | None
 
 
 def calibrate_records(runs: Sequence[Sequence[dict[str, Any]]], horizons_s: Sequence[float],
-                      lag_s: float, margin: float = 0.0, margin_min_h: float = 0.0,
-                      lag_sd_s: float = 0.0, estimate: bool = True) -> Calibration:
+                      lag_s: float, lag_sd_s: float, margin: float = 0.0,
+                      margin_min_h: float = 0.0) -> Calibration:
     """σ per horizon over the pipeline records of one receiver's recordings (``runs``).
 
-    With ``estimate``, the Doppler's lag is estimated first (:func:`estimate_lag`) and the σ
-    are those of (D1) with it; where the drives do not turn enough for an estimate, and
-    without ``estimate``, ``lag_s`` and ``lag_sd_s`` (the configured ones) are kept.
+    The Doppler's lag is estimated first (:func:`estimate_lag`) and the σ are those of (D1)
+    with it; where the drives do not turn enough for an estimate, ``lag_s`` and ``lag_sd_s``
+    (the configured ones) are kept.
     Chains shorter than twice the longest horizon are not used; :class:`ValueError` when none
     is long enough. ``margin``/``margin_min_h``: (D8) with n_H the independent H-long
     differences of all the chains used."""
-    lag = estimate_lag(runs) if estimate else None
+    lag = estimate_lag(runs)
     if lag is not None:
         lag_s, lag_sd_s = lag.lag_s, lag.sd_s
     need = 2.0 * max(horizons_s)
