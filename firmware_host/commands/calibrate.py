@@ -5,7 +5,7 @@ By default the drift test (``fdi/drift.py``) learns the receiver's noise over it
 so a slow drift that begins in those minutes is found late. This command calibrates a receiver
 once, on recordings of clean drives (``fdi-bridge record``, or a plain NMEA log), the way an
 autopilot keeps its compass calibration: it measures the receiver's Doppler lag where the
-drives turn (``drift_lag_s``, with ``drift_lag_sd_s`` = 0.05 s instead of 0.15 ± 0.15 s, and
+drives turn (``drift_lag_s``, with ``drift_lag_sd_s`` 0.05 s or more instead of 0.15 ± 0.15 s, and
 the ramp's 10 s flag at 4.5 σ of the tighter σ instead of 4), prints
 σ per horizon and the lines to paste under ``[rover.detector]`` (``drift_sigma_m`` = 1.5 × σ,
 never wider than before: :data:`firmware_host.rover.calibration.START_FACTOR`, and the lag),

@@ -13,7 +13,8 @@ The recordings also measure the receiver's Doppler lag behind its position, δ o
 (:func:`estimate_lag`, eq. L1; a receiver that filters its velocity reports it late): the
 configuration's 0.15 ± 0.15 s covers every receiver but widens σ by up to 0.3 m in a headland
 turn, so a ramp that begins in one is seen late; with δ measured (to about 0.01 s),
-``drift_lag_sd_s`` becomes :data:`LAG_SD_FLOOR_S`.
+``drift_lag_sd_s`` becomes :data:`LAG_SD_K` of its standard errors, never below
+:data:`LAG_SD_FLOOR_S`.
 
 The recordings are replayed through the rover pipeline of the configuration (its parser, its
 local frame, its Doppler integration); the Doppler-free value (D1), with the measured lag, is
