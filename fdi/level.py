@@ -30,7 +30,11 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
   slow fault the fixes must have *stepped* there (by half the old track's distance from that
   level or more, at most ``level_lag_s`` before) or stay there, consistent with their own
   Doppler, for ``level_lag_s``: a ramp still running passes, for a second or two, where some
-  older level of a wandering DGPS error happens to be;
+  older level of a wandering DGPS error happens to be. Fixes that drifted there must also
+  *stay still* over that lag, within ``level_still_sigmas`` of the drift σ of where they
+  arrived (not ``exit_sigmas``): a 0.1 m/s ramp moves 0.6-1 m in 10 s, under 3 σ(10 s) of a
+  Gauss-Markov receiver but over 2 σ, and where the older levels are spread (a DGPS error
+  that wanders by 1 m over minutes) it is near one of them all the while;
 * in a hold on a slow fault, the fixes are right again when they step back towards the old
   track and stay consistent with their own Doppler for L: their distance from it falls by
   more than half within L, by more than ``exit_sigmas`` of the 1 s σ (a drift ends at once;
@@ -92,6 +96,9 @@ class HoldParams:
     output_s: float
     max_s: float
     level_lag_s: float = 0.0  # a slow hold's "new_level" lag (0: exit_lag_s, as an abrupt one)
+    # ... over which fixes that drifted to the older level stay within this many σ of where
+    # they arrived (0: exit_sigmas)
+    level_still_sigmas: float = 0.0
 
     @property
     def side_m(self) -> float:
@@ -242,8 +249,14 @@ class LevelHold:
                     break
         # How long the new fixes have sat at an older level, consistent with their own Doppler
         # since (within exit_sigmas of the drift σ of where they were then).
+        # Fixes that drifted there (no step of theirs in the last level_lag_s) must stay
+        # still, within level_still_sigmas (a running ramp moves on).
+        drifted = (self.slow and not self.frozen and p.level_lag_s > 0.0
+                   and (last_step is None or t - last_step[0] > p.level_lag_s + 1e-9))
+        k_still = (p.level_still_sigmas if drifted and p.level_still_sigmas > 0.0
+                   else p.exit_sigmas)
         if math.isnan(at_old) or not self_ok or (self._old_since is not None and math.hypot(
-                b[0] - self._old_b[0], b[1] - self._old_b[1]) > p.exit_sigmas * sigma_at(
+                b[0] - self._old_b[0], b[1] - self._old_b[1]) > k_still * sigma_at(
                 max(t - self._old_since, 1e-3), p.horizons_s, p.sigma_m)):
             self._old_since = None
         if self._old_since is None and not math.isnan(at_old) and self_ok:

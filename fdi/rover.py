@@ -174,6 +174,9 @@ class RoverDetectorParams:
     # A slow hold's (a drift) "new_level": the new fixes at an older level this long (0: as
     # an abrupt one's, hold_exit_s).
     hold_level_s: float = field(default=10.0, metadata={"ge": 0.0})
+    # ... over which fixes that *drifted* to that level stay within this many σ of where they
+    # arrived (0: hold_exit_sigmas); a ramp still running moves on (fdi/level.py).
+    hold_still_sigmas: float = field(default=2.0, metadata={"ge": 0.0})
     hold_output_s: float = field(default=10.0, metadata={"ge": 0.0})  # then alarm, no output
     hold_max_s: float = field(default=120.0, metadata={"gt": 0.0})  # then the receiver again
     # An abrupt step the track went on to accept (a multipath step) is remembered this long:
@@ -254,6 +257,8 @@ class RoverIsolator:
         self._up_seen = False
         self._consec = 0
         self._stepped_back = False  # this run of replacements began with a step back
+        self._back_t: float | None = None  # ... to the older level of this time
+        self._hold_back_t: float | None = None  # the hold began after that step back
         # Accepted fixes (east, north) with the Doppler displacement at each, last `window`.
         # ... and the Doppler velocity at each (for the lag's share, with the drift test).
         self._acc_hist: deque[tuple[float, float, float, float, float, float]] = deque(maxlen=n)
@@ -312,7 +317,8 @@ class RoverIsolator:
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
         return HoldParams(p.drift_horizons_s, sigma_m, p.drift_lag_s, p.drift_lag_sd_s,
                           p.hold_exit_sigmas, p.hold_side_sigmas, p.hold_exit_s,
-                          p.hold_output_s, p.hold_max_s, p.hold_level_s)
+                          p.hold_output_s, p.hold_max_s, p.hold_level_s,
+                          p.hold_still_sigmas)
 
     def _make_drift(self, p: RoverDetectorParams) -> None:
         if p.runs_drift_test:
@@ -638,7 +644,7 @@ class RoverIsolator:
                 and not quality
                 and not stale_fault
                 and ((self._stepped_back and raw_consistent)
-                     or self._back_at_old_level(fix.t_s, b) is not None))
+                     or self._note_back(self._back_at_old_level(fix.t_s, b))))
         # The end of a remembered step (a multipath step the track went on to accept): the
         # fixes step back to the level before it. Passed on at once (flagged, as a step back);
         # once they stay there (_step_end) the receiver is right again.
@@ -824,6 +830,7 @@ class RoverIsolator:
         self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow,
                                prefer_raw=self._stepped_back, frozen=self._stale_run > 0)
         self._hold_reason = reason
+        self._hold_back_t = self._back_t if self._stepped_back else None
         self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
         return True
 
@@ -858,6 +865,12 @@ class RoverIsolator:
             elif hs.action == "new_level":
                 # The old track was the faulty side: its references go, the older levels stay.
                 drift.forget_after(hold.matched_t)
+            elif hs.action == "exit" and self._hold_back_t is not None:
+                # The hold began after the fixes stepped back to an older level, and they
+                # agree with the old track again: the references since that level may carry a
+                # slow fault whose end the step was (a 0.03 m/s ramp of 56 s, under what the
+                # test finds; kept, they held the next 7 clean epochs: dgps 1 Hz seed 8004).
+                drift.forget_after(self._hold_back_t)
             elif hs.action in ("ended", "consistent"):
                 # A slow fault ended: the references near its start may carry part of it.
                 drift.reset_short()
@@ -902,6 +915,12 @@ class RoverIsolator:
         if self._steps:
             self._track_at(b)
         return self._accept(z, t, reason)
+
+    def _note_back(self, t_o: float | None) -> bool:
+        """Keep the older level a step back returned to (:meth:`_back_at_old_level`), for a
+        hold that follows; True if there is one."""
+        self._back_t = t_o
+        return t_o is not None
 
     def _note_step(self, t_s: float, b: tuple[float, float], gate_h: float) -> None:
         """Remember the step that starts this run of faults, if it is one: the fix against

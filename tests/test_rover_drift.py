@@ -212,6 +212,24 @@ def test_a_slow_hold_does_not_take_a_running_ramp_for_an_older_level() -> None:
     assert "new_level" not in _hold_run(held, ramp, 100.0, 0.1)
 
 
+
+def test_a_slow_hold_does_not_take_a_slow_ramp_that_lingers_near_an_older_level() -> None:
+    """A 0.04 m/s ramp (10 Hz) that spends 25 s within a third of the old track's distance
+    of the level of 60 s ago, moving 0.4 m in 10 s: under 3 σ(10 s) (0.48 m), so with
+    exit_sigmas as the stillness bound the hold takes it for the new level after 10 s; with
+    level_still_sigmas = 2 (0.32 m) it does not. Fixes that sit still there are taken."""
+    ramp = [(1.0 + 0.004 * j, 0.0) for j in range(250)]
+    loose = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
+    acts = _hold_run(loose, ramp, 100.0, 0.1)
+    assert "new_level" in acts and acts.index("new_level") <= 102
+    still = replace(HP_LEVEL, level_still_sigmas=2.0)
+    held = LevelHold(still, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
+    assert "new_level" not in _hold_run(held, ramp, 100.0, 0.1)
+    sitting = LevelHold(still, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
+    acts = _hold_run(sitting, [(1.45, 0.0)] * 150, 100.0, 0.1)
+    assert "new_level" in acts and 99 <= acts.index("new_level") <= 102
+
+
 def test_a_slow_hold_takes_fixes_that_stepped_to_an_older_level_at_once() -> None:
     """The end of a fault: the fixes step from the old track to the older level (the
     caller's last step of the fixes, here as the hold begins); fixes that drifted there and

@@ -318,3 +318,18 @@ def test_a_fix_that_passes_during_a_step_back_does_not_end_its_confirmation() ->
                                                                 step.after_raw_rms_m)
     end = [e["reason"] for e in eps[4888:4920]]
     assert "step_end" in end and not any("hold" in r for r in end), end
+
+
+def test_a_hold_after_a_step_back_forgets_the_missed_ramp_s_references() -> None:
+    """dgps 1 Hz seed 8004 (a seed set no choice had looked at), the default: a 0.03 m/s ramp
+    (235-291 s, under what the bullets ask for) passed unflagged, and its end stepped back
+    1.6 m; the hold after the step back ended (the fixes agreed with the old track within
+    3 σ) with the ramp's epochs still references of the drift test, so the clean fixes 11 s
+    on were held again as a drift, 11 epochs flagged (1.96 % of the run's clean epochs). A
+    hold that began after a step back to an older level forgets the references since that
+    level when it ends (fdi/rover.py, _hold_step)."""
+    eps, truth = replay(load_config("rover"), scenario("dgps", 8004, 1.0))
+    after = [e for e in eps if 36298.0 <= e["utc"] % 86400 < 36330.0]
+    assert after and not any(e["fault"] for e in after), [
+        (e["utc"] % 86400, e["reason"]) for e in after if e["fault"]]
+    assert measure(eps, truth).clean_far_flagged == 0
