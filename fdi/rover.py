@@ -257,7 +257,7 @@ class RoverIsolator:
         self._up_seen = False
         self._consec = 0
         self._stepped_back = False  # this run of replacements began with a step back
-        self._back_t: float | None = None  # ... to the older level of this time
+        self._back_t: float | None = None  # ... to the older level of this time (or None)
         self._hold_back_t: float | None = None  # the hold began after that step back
         # Accepted fixes (east, north) with the Doppler displacement at each, last `window`.
         # ... and the Doppler velocity at each (for the lag's share, with the drift test).
@@ -639,12 +639,15 @@ class RoverIsolator:
         # while the state goes on as for a replacement, so a jump is told apart at the next
         # epoch and a step that stays goes to the hold, whose "new_level" ends it.
         # A drift fault that stepped since the previous epoch (not a ramp) counts too.
-        back = (b is not None and drift is not None
+        back = False
+        back_level: float | None = None  # the older level it stepped back to
+        if (b is not None and drift is not None
                 and (abrupt or (drift_fault and self._is_step(fix.t_s, b, prev_b, prev_bt)))
-                and not quality
-                and not stale_fault
-                and ((self._stepped_back and raw_consistent)
-                     or self._note_back(self._back_at_old_level(fix.t_s, b))))
+                and not quality and not stale_fault):
+            back = self._stepped_back and raw_consistent
+            if not back:
+                back_level = self._back_at_old_level(fix.t_s, b)
+                back = back_level is not None
         # The end of a remembered step (a multipath step the track went on to accept): the
         # fixes step back to the level before it. Passed on at once (flagged, as a step back);
         # once they stay there (_step_end) the receiver is right again.
@@ -673,6 +676,8 @@ class RoverIsolator:
             f = p.replaced_r_factor
             self.kf.update(t.pred, (r[0] * f, r[1] * f, r[2] * f))
             if back:
+                if not self._stepped_back:  # the run's first step back: a hold after it
+                    self._back_t = back_level  # forgets the references since that level
                 self._stepped_back = True
                 return self._replace(z, t, "+".join(reasons) + "+step_back")
             return self._replace(t.pred, t, "+".join(reasons))
@@ -915,12 +920,6 @@ class RoverIsolator:
         if self._steps:
             self._track_at(b)
         return self._accept(z, t, reason)
-
-    def _note_back(self, t_o: float | None) -> bool:
-        """Keep the older level a step back returned to (:meth:`_back_at_old_level`), for a
-        hold that follows; True if there is one."""
-        self._back_t = t_o
-        return t_o is not None
 
     def _note_step(self, t_s: float, b: tuple[float, float], gate_h: float) -> None:
         """Remember the step that starts this run of faults, if it is one: the fix against

@@ -212,7 +212,6 @@ def test_a_slow_hold_does_not_take_a_running_ramp_for_an_older_level() -> None:
     assert "new_level" not in _hold_run(held, ramp, 100.0, 0.1)
 
 
-
 def test_a_slow_hold_does_not_take_a_slow_ramp_that_lingers_near_an_older_level() -> None:
     """A 0.04 m/s ramp (10 Hz) that spends 25 s within a third of the old track's distance
     of the level of 60 s ago, moving 0.4 m in 10 s: under 3 σ(10 s) (0.48 m), so with
