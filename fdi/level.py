@@ -27,14 +27,14 @@ and decides with the Doppler evidence over a short fixed lag L (seconds, not epo
   and the ratio carries the decision). That is the end of a slow fault the
   drift test missed (the old track is the faulty side), told apart from a multipath step
   (the new fixes are the faulty side: the old track is at the older level). In a hold on a
-  slow fault the fixes must have *stepped* there (by half the old track's distance from that
-  level or more, at most ``level_lag_s`` before) or stay there, consistent with their own
-  Doppler, for ``level_lag_s``: a ramp still running passes, for a second or two, where some
-  older level of a wandering DGPS error happens to be. Fixes that drifted there must also
-  *stay still* over that lag, within ``level_still_sigmas`` of the drift σ of where they
-  arrived (not ``exit_sigmas``): a 0.1 m/s ramp moves 0.6-1 m in 10 s, under 3 σ(10 s) of a
-  Gauss-Markov receiver but over 2 σ, and where the older levels are spread (a DGPS error
-  that wanders by 1 m over minutes) it is near one of them all the while;
+  slow fault the fixes must have *stepped* there: by half the old track's distance from that
+  level or more, at most ``level_lag_s`` before (the short lag), or by less and then stay
+  there, consistent with their own Doppler, for ``level_lag_s`` (a ramp still running passes,
+  for a second or two, where some older level of a wandering DGPS error happens to be).
+  Fixes that *drifted* there (no step of theirs within ``level_lag_s`` before they arrived)
+  never end a slow hold as a new level: a slow ramp lingers near older levels of an error
+  that wanders over metres, and the new level forgets every reference since the older one.
+  They are passed on (``raw``, below) while they sit there;
 * in a hold on a slow fault, the fixes are right again when they step back towards the old
   track and stay consistent with their own Doppler for L: their distance from it falls by
   more than half within L, by more than ``exit_sigmas`` of the 1 s σ (a drift ends at once;
@@ -96,9 +96,6 @@ class HoldParams:
     output_s: float
     max_s: float
     level_lag_s: float = 0.0  # a slow hold's "new_level" lag (0: exit_lag_s, as an abrupt one)
-    # ... over which fixes that drifted to the older level stay within this many σ of where
-    # they arrived (0: exit_sigmas)
-    level_still_sigmas: float = 0.0
 
     @property
     def side_m(self) -> float:
@@ -249,31 +246,33 @@ class LevelHold:
                     break
         # How long the new fixes have sat at an older level, consistent with their own Doppler
         # since (within exit_sigmas of the drift σ of where they were then).
-        # Fixes that drifted there (no step of theirs in the last level_lag_s) must stay
-        # still, within level_still_sigmas (a running ramp moves on).
-        drifted = (self.slow and not self.frozen and p.level_lag_s > 0.0
-                   and (last_step is None or t - last_step[0] > p.level_lag_s + 1e-9))
-        k_still = (p.level_still_sigmas if drifted and p.level_still_sigmas > 0.0
-                   else p.exit_sigmas)
         if math.isnan(at_old) or not self_ok or (self._old_since is not None and math.hypot(
-                b[0] - self._old_b[0], b[1] - self._old_b[1]) > k_still * sigma_at(
+                b[0] - self._old_b[0], b[1] - self._old_b[1]) > p.exit_sigmas * sigma_at(
                 max(t - self._old_since, 1e-3), p.horizons_s, p.sigma_m)):
             self._old_since = None
         if self._old_since is None and not math.isnan(at_old) and self_ok:
             self._old_since, self._old_b = t, b
-        # A slow hold whose fixes *drifted* to the older level asks for level_lag_s of it: a
-        # ramp that is still running sits, for a second or two, where some older level of a
-        # wandering DGPS error happens to be (the ramp then ran on unflagged, and the next
-        # hold anchored inside it). Fixes that *stepped* (``last_step``, the caller's last
+        # In a hold on a slow fault, fixes that *stepped* (``last_step``, the caller's last
         # step of b between two epochs: (t, m)) by half the old track's distance from that
         # level or more, at most level_lag_s before they arrived there, are a fault's end:
-        # the short lag, as before.
+        # the short lag. A smaller step asks for level_lag_s there: a ramp still running
+        # sits, for a second or two, where some older level of a wandering DGPS error happens
+        # to be (the ramp then ran on unflagged, and the next hold anchored inside it).
+        # Fixes that *drifted* there (no step of theirs within level_lag_s before they
+        # arrived) never end the hold as a new level: a slow ramp lingers near older levels
+        # of an error that wanders over metres, and taking it forgets every reference since
+        # that level (`coarse` 1 Hz seed 10001: a 0.063 m/s ramp taken at 1047 s for the
+        # level of 751 s, 256 s before the anchor; its end 13 s later was replaced by the
+        # ramp's track, 1.55 m worse than the receiver). They are passed on (``raw``) while
+        # they sit there; the hold ends on a step, on consistency (``consistent``) or at
+        # ``max_s``.
         need = 0.0
         if (self.slow and not self.frozen and p.level_lag_s > 0.0
-                and self._old_since is not None
-                and (last_step is None or self._old_since - last_step[0] > p.level_lag_s + 1e-9
-                     or last_step[1] < 0.5 * e_old)):
-            need = p.level_lag_s
+                and self._old_since is not None):
+            if last_step is None or self._old_since - last_step[0] > p.level_lag_s + 1e-9:
+                need = math.inf
+            elif last_step[1] < 0.5 * e_old:
+                need = p.level_lag_s
         if (not math.isnan(at_old) and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
                 and t - rec[0][0] >= p.exit_lag_s - 1e-9
                 and self._old_since is not None and t - self._old_since >= need - 1e-9):

@@ -171,12 +171,10 @@ class RoverDetectorParams:
     hold_exit_sigmas: float = field(default=3.0, metadata={"gt": 0.0})
     hold_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
     hold_exit_s: float = field(default=1.0, metadata={"ge": 0.0})  # the short fixed lag
-    # A slow hold's (a drift) "new_level": the new fixes at an older level this long (0: as
-    # an abrupt one's, hold_exit_s).
+    # A slow hold's (a drift) "new_level": fixes that stepped to an older level by less than
+    # half the old track's distance from it sit there this long (0: as an abrupt one's,
+    # hold_exit_s; with it, fixes that drifted there never end the hold: fdi/level.py).
     hold_level_s: float = field(default=10.0, metadata={"ge": 0.0})
-    # ... over which fixes that *drifted* to that level stay within this many σ of where they
-    # arrived (0: hold_exit_sigmas); a ramp still running moves on (fdi/level.py).
-    hold_still_sigmas: float = field(default=2.0, metadata={"ge": 0.0})
     hold_output_s: float = field(default=10.0, metadata={"ge": 0.0})  # then alarm, no output
     hold_max_s: float = field(default=120.0, metadata={"gt": 0.0})  # then the receiver again
     # An abrupt step the track went on to accept (a multipath step) is remembered this long:
@@ -321,8 +319,7 @@ class RoverIsolator:
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
         return HoldParams(p.drift_horizons_s, sigma_m, p.drift_lag_s, p.drift_lag_sd_s,
                           p.hold_exit_sigmas, p.hold_side_sigmas, p.hold_exit_s,
-                          p.hold_output_s, p.hold_max_s, p.hold_level_s,
-                          p.hold_still_sigmas)
+                          p.hold_output_s, p.hold_max_s, p.hold_level_s)
 
     def _make_drift(self, p: RoverDetectorParams) -> None:
         if p.runs_drift_test:

@@ -214,34 +214,38 @@ def test_a_slow_hold_does_not_take_a_running_ramp_for_an_older_level() -> None:
 
 def test_a_slow_hold_does_not_take_a_slow_ramp_that_lingers_near_an_older_level() -> None:
     """A 0.04 m/s ramp (10 Hz) that spends 25 s within a third of the old track's distance
-    of the level of 60 s ago, moving 0.4 m in 10 s: under 3 σ(10 s) (0.48 m), so with
-    exit_sigmas as the stillness bound the hold takes it for the new level after 10 s; with
-    level_still_sigmas = 2 (0.32 m) it does not. Fixes that sit still there are taken."""
+    of the level of 60 s ago, moving 0.4 m in 10 s (under 3 σ(10 s), 0.48 m): with the short
+    lag for every arrival (level_lag_s = 0) the hold takes it for the new level at once; with
+    level_lag_s it drifted there and never does, and its fixes are passed on meanwhile."""
     ramp = [(1.0 + 0.004 * j, 0.0) for j in range(250)]
-    loose = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
-    acts = _hold_run(loose, ramp, 100.0, 0.1)
-    assert "new_level" in acts and acts.index("new_level") <= 102
-    still = replace(HP_LEVEL, level_still_sigmas=2.0)
-    held = LevelHold(still, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
-    assert "new_level" not in _hold_run(held, ramp, 100.0, 0.1)
-    sitting = LevelHold(still, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
-    acts = _hold_run(sitting, [(1.45, 0.0)] * 150, 100.0, 0.1)
-    assert "new_level" in acts and 99 <= acts.index("new_level") <= 102
+    short = LevelHold(HP, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
+    acts = _hold_run(short, ramp, 100.0, 0.1)
+    assert "new_level" in acts and acts.index("new_level") <= 12
+    held = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0), old=[(40.0, (1.5, 0.0))])
+    acts = _hold_run(held, ramp, 100.0, 0.1)
+    assert "new_level" not in acts and acts.count("raw") >= 200
 
 
-def test_a_slow_hold_takes_fixes_that_stepped_to_an_older_level_at_once() -> None:
+def test_a_slow_hold_takes_fixes_that_stepped_to_an_older_level() -> None:
     """The end of a fault: the fixes step from the old track to the older level (the
-    caller's last step of the fixes, here as the hold begins); fixes that drifted there and
-    stay are taken after the lag."""
+    caller's last step of the fixes, here as the hold begins) by half the track's distance
+    from it or more: taken at once; by less: taken after level_lag_s there. Fixes that
+    drifted there and stay are passed on, flagged, and end the hold only when they have been
+    consistent with their own Doppler for 30 s."""
     stepped = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0),
                         old=[(40.0, (1.5, 0.0))])
     acts = _hold_run(stepped, [(1.45, 0.0)] * 150, 100.0, 0.1, last_step=(100.0, 1.45))
     assert "new_level" in acts and acts.index("new_level") <= 12
-    drifted = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0),
-                        old=[(40.0, (1.5, 0.0))])
-    acts = _hold_run(drifted, [(1.45, 0.0)] * 150, 100.0, 0.1)
+    small = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0),
+                      old=[(40.0, (1.5, 0.0))])
+    acts = _hold_run(small, [(1.45, 0.0)] * 150, 100.0, 0.1, last_step=(100.0, 0.5))
     assert "new_level" in acts and 99 <= acts.index("new_level") <= 102
     assert set(acts[:99]) == {"raw"}  # meanwhile the receiver's fix is passed on, flagged
+    drifted = LevelHold(HP_LEVEL, 100.0, 99.0, (0.0, 0.0), (1.0, 0.0),
+                        old=[(40.0, (1.5, 0.0))])
+    acts = _hold_run(drifted, [(1.45, 0.0)] * 400, 100.0, 0.1)
+    assert "new_level" not in acts and "consistent" in acts
+    assert 299 <= acts.index("consistent") <= 302 and set(acts[:299]) == {"raw"}
 
 
 def test_hold_keeps_the_old_track_through_a_multipath_step() -> None:

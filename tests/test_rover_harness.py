@@ -360,3 +360,24 @@ def test_a_clean_fix_after_a_burst_is_not_judged_by_the_grey_window_s_own_predic
     off = dataclasses.replace(cfg, rover=dataclasses.replace(cfg.rover, detector=det))
     ev, (fix,) = burst(off)
     assert ev.after_out_rms_m > ev.after_raw_rms_m + 0.05 and fix["reason"] == "grey"
+
+
+def test_a_slow_hold_does_not_take_a_drifted_ramp_for_a_level_minutes_old() -> None:
+    """coarse 1 Hz seed 10001 (a seed set no choice had looked at), the default: a 0.063 m/s
+    ramp (1004-1060 s) was caught at 1036 s; its fixes, which had drifted (no step), sat near
+    the level of 751 s (256 s before the hold's anchor) of a receiver error that wanders over
+    metres, and the hold took them for the new level at 1047 s, forgetting every reference
+    since 751 s. The ramp then ran on unflagged, and its end (1060 s, a step back of 1.9 m
+    with no older level left to match) was replaced by the ramp's track: 2.48 m against
+    0.93 m raw over the 10 s after it, 2 clean epochs flagged. Fixes that drifted to an
+    older level no longer end a slow hold (fdi/level.py)."""
+    eps, truth = replay(load_config("rover"), scenario("coarse", 10001, 1.0))
+    m = measure(eps, truth)
+    ramp = next(e for e in m.events if e.kind == "ramp"
+                and abs(e.start_s % 86400 - 37004.0) < 0.5)
+    assert ramp.detected
+    assert ramp.after_out_rms_m <= ramp.after_raw_rms_m + 1e-9, (ramp.after_out_rms_m,
+                                                                ramp.after_raw_rms_m)
+    during = [e["reason"] for e in eps if 37004.0 <= e["utc"] % 86400 < 37060.0]
+    assert not any("new_level" in r for r in during), during
+    assert m.clean_far_flagged == 0, m.clean_far_flagged
