@@ -248,6 +248,16 @@ def test_replay_of_a_field_model_run_is_deterministic() -> None:
     assert all(math.isfinite(e["kf_e"]) for e in a if e["kf_e"] is not None)
 
 
+def _event_not_worse(events: Any, kind: str, start_s: float, tol: float = 0.05) -> Any:
+    """The event of ``kind`` starting at ``start_s`` (seconds of day): detected, and the
+    output's RMS over the 10 s after it at most the receiver's."""
+    ev = next(e for e in events if e.kind == kind and abs(e.start_s % 86400 - start_s) < tol)
+    assert ev.detected
+    assert ev.after_out_rms_m <= ev.after_raw_rms_m + 1e-9, (kind, start_s, ev.after_out_rms_m,
+                                                            ev.after_raw_rms_m)
+    return ev
+
+
 def test_a_step_back_that_ends_in_an_alarm_keeps_the_levels_it_came_back_to() -> None:
     """multipath 10 Hz seed 602: a missed 0.024 m/s ramp ends by stepping back (remembered as
     a step); a multipath step 36 s later lands at the ramp's last level, is taken as that
@@ -256,12 +266,7 @@ def test_a_step_back_that_ends_in_an_alarm_keeps_the_levels_it_came_back_to() ->
     levels, the receiver's return to the truth 23 s later was held as a fault, 1.38 m RMS
     against 0.20 m raw; the alarm keeps the levels (rebased) and the return is passed on."""
     eps, truth = replay(load_config("rover"), scenario("multipath", 602, 10.0))
-    m = measure(eps, truth)
-    step = next(e for e in m.events if e.kind == "multipath"
-                and abs(e.start_s % 86400 - 36389.9) < 0.05)
-    assert step.detected
-    assert step.after_out_rms_m <= step.after_raw_rms_m + 1e-9, (step.after_out_rms_m,
-                                                                 step.after_raw_rms_m)
+    _event_not_worse(measure(eps, truth).events, "multipath", 36389.9)
 
 
 def test_a_step_whose_end_passed_as_good_is_forgotten() -> None:
@@ -275,12 +280,7 @@ def test_a_step_whose_end_passed_as_good_is_forgotten() -> None:
     for rate, start in ((1.0, 36200.0), (10.0, 36146.4)):
         cfg = offline_calibrated(load_config("rover"), "multipath", 2001, rate)
         eps, truth = replay(cfg, scenario("multipath", 2001, rate))
-        m = measure(eps, truth)
-        step = next(e for e in m.events if e.kind == "multipath"
-                    and abs(e.start_s % 86400 - start) < 0.5)
-        assert step.detected
-        assert step.after_out_rms_m <= step.after_raw_rms_m + 1e-9, (
-            rate, step.after_out_rms_m, step.after_raw_rms_m)
+        _event_not_worse(measure(eps, truth).events, "multipath", start, 0.5)
 
 
 def test_a_burst_s_self_fed_predictions_do_not_replace_the_clean_fixes_after_it() -> None:
@@ -293,11 +293,8 @@ def test_a_burst_s_self_fed_predictions_do_not_replace_the_clean_fixes_after_it(
     (fdi/rover.py, _window_append)."""
     sc = scenario("coarse", 3001, 1.0)
     eps, truth = replay(load_config("rover"), sc)
-    burst = next(e for e in measure(eps, truth).events
-                 if e.kind == "burst" and abs(e.start_s % 86400 - 36079.0) < 0.5)
-    assert burst.detected and burst.caught == burst.faulty == 4
-    assert burst.after_out_rms_m <= burst.after_raw_rms_m + 1e-9, (burst.after_out_rms_m,
-                                                                   burst.after_raw_rms_m)
+    burst = _event_not_worse(measure(eps, truth).events, "burst", 36079.0, 0.5)
+    assert burst.caught == burst.faulty == 4
     after = [(e["action"], e["reason"]) for e in eps[83:95]]
     assert after == [("accept", "")] * 12, after
 
@@ -312,11 +309,7 @@ def test_a_fix_that_passes_during_a_step_back_does_not_end_its_confirmation() ->
     0.16 m raw over the 10 s after the step). A fix that passes while a step back is being
     confirmed is now part of it (fdi/rover.py, the accept path)."""
     eps, truth = replay(load_config("rover"), scenario("multipath", 3003, 10.0))
-    step = next(e for e in measure(eps, truth).events
-                if e.kind == "multipath" and abs(e.start_s % 86400 - 36462.7) < 0.05)
-    assert step.detected
-    assert step.after_out_rms_m <= step.after_raw_rms_m + 1e-9, (step.after_out_rms_m,
-                                                                step.after_raw_rms_m)
+    _event_not_worse(measure(eps, truth).events, "multipath", 36462.7)
     end = [e["reason"] for e in eps[4888:4920]]
     assert "step_end" in end and not any("hold" in r for r in end), end
 
@@ -373,11 +366,7 @@ def test_a_slow_hold_does_not_take_a_drifted_ramp_for_a_level_minutes_old() -> N
     older level no longer end a slow hold (fdi/level.py)."""
     eps, truth = replay(load_config("rover"), scenario("coarse", 10001, 1.0))
     m = measure(eps, truth)
-    ramp = next(e for e in m.events if e.kind == "ramp"
-                and abs(e.start_s % 86400 - 37004.0) < 0.5)
-    assert ramp.detected
-    assert ramp.after_out_rms_m <= ramp.after_raw_rms_m + 1e-9, (ramp.after_out_rms_m,
-                                                                ramp.after_raw_rms_m)
+    _event_not_worse(m.events, "ramp", 37004.0, 0.5)
     during = [e["reason"] for e in eps if 37004.0 <= e["utc"] % 86400 < 37060.0]
     assert not any("new_level" in r for r in during), during
     assert m.clean_far_flagged == 0, m.clean_far_flagged
