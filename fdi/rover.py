@@ -260,7 +260,6 @@ class RoverIsolator:
         self._consec = 0
         self._stepped_back = False  # this run of replacements began with a step back
         self._back_t: float | None = None  # ... to the older level of this time (or None)
-        self._hold_back_t: float | None = None  # the hold began after that step back
         # Accepted fixes (east, north) with the Doppler displacement at each, last `window`.
         # ... and the Doppler velocity at each (for the lag's share, with the drift test).
         self._acc_hist: deque[tuple[float, float, float, float, float, float]] = deque(maxlen=n)
@@ -677,19 +676,19 @@ class RoverIsolator:
             f = p.replaced_r_factor
             self.kf.update(t.pred, (r[0] * f, r[1] * f, r[2] * f))
             # (self._fed counts this epoch's prediction, just appended: 3 = two before it.)
-            if (not back and p.grey_fed_sigmas > 0.0 and self._fed >= 3 and grey_fault
-                    and not (chi2_fault or doppler_fault or drift_fault or quality)
+            if (not back and p.grey_fed_sigmas > 0.0 and self._fed >= 3
+                    and reasons == ["grey"]
                     and dres is not None and dres.g <= p.grey_fed_sigmas):
                 # Only the grey test, whose window has fed on two or more of its own
                 # predictions: from the second on each extrapolated the one before, so the
                 # prediction runs on past the receiver's level (0.3-0.5 m in 3-4 epochs at
-                # 1 Hz after a burst) and is no fair test. The fix, which the chi-square,
-                # Doppler and drift tests pass, is passed on (flagged, as a step back is);
-                # the state goes on as for a replacement, so a fault that happens to pass
-                # those tests costs this epoch the raw fix, never more (`dgps` 1 Hz seed
-                # 9005: the first clean fix after a 4-epoch burst was replaced 0.93 m off
-                # against 0.25 m raw).
-                return self._replace(z, t, "+".join(reasons) + "+grey_fed")
+                # 1 Hz after a burst) and is no fair test. The fix, which every other test
+                # passes (chi-square, Doppler, drift, frozen, quality), is passed on (flagged,
+                # as a step back is); the state goes on as for a replacement, so a fault that
+                # happens to pass those tests costs this epoch the raw fix, never more (`dgps`
+                # 1 Hz seed 9005: the first clean fix after a 4-epoch burst was replaced
+                # 0.93 m off against 0.25 m raw).
+                return self._replace(z, t, "grey+grey_fed")
             if back:
                 if not self._stepped_back:  # the run's first step back: a hold after it
                     self._back_t = back_level  # forgets the references since that level
@@ -850,7 +849,6 @@ class RoverIsolator:
         self._hold = LevelHold(hp, t0, a_t, a_b, a_v, stale_m, old, slow,
                                prefer_raw=self._stepped_back, frozen=self._stale_run > 0)
         self._hold_reason = reason
-        self._hold_back_t = self._back_t if self._stepped_back else None
         self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
         return True
 
@@ -885,12 +883,14 @@ class RoverIsolator:
             elif hs.action == "new_level":
                 # The old track was the faulty side: its references go, the older levels stay.
                 drift.forget_after(hold.matched_t)
-            elif hs.action == "exit" and self._hold_back_t is not None:
+            elif hs.action == "exit" and hold.prefer_raw and self._back_t is not None:
                 # The hold began after the fixes stepped back to an older level, and they
                 # agree with the old track again: the references since that level may carry a
                 # slow fault whose end the step was (a 0.03 m/s ramp of 56 s, under what the
                 # test finds; kept, they held the next 7 clean epochs: dgps 1 Hz seed 8004).
-                drift.forget_after(self._hold_back_t)
+                # (No step back is taken during a hold: _back_t is still the one it began
+                # after.)
+                drift.forget_after(self._back_t)
             elif hs.action in ("ended", "consistent"):
                 # A slow fault ended: the references near its start may carry part of it.
                 drift.reset_short()

@@ -248,10 +248,15 @@ def test_replay_of_a_field_model_run_is_deterministic() -> None:
     assert all(math.isfinite(e["kf_e"]) for e in a if e["kf_e"] is not None)
 
 
+def _event(events: Any, kind: str, start_s: float, tol: float = 0.05) -> Any:
+    """The event of ``kind`` starting at ``start_s`` (seconds of day)."""
+    return next(e for e in events if e.kind == kind and abs(e.start_s % 86400 - start_s) < tol)
+
+
 def _event_not_worse(events: Any, kind: str, start_s: float, tol: float = 0.05) -> Any:
     """The event of ``kind`` starting at ``start_s`` (seconds of day): detected, and the
     output's RMS over the 10 s after it at most the receiver's."""
-    ev = next(e for e in events if e.kind == kind and abs(e.start_s % 86400 - start_s) < tol)
+    ev = _event(events, kind, start_s, tol)
     assert ev.detected
     assert ev.after_out_rms_m <= ev.after_raw_rms_m + 1e-9, (kind, start_s, ev.after_out_rms_m,
                                                             ev.after_raw_rms_m)
@@ -339,8 +344,7 @@ def test_a_clean_fix_after_a_burst_is_not_judged_by_the_grey_window_s_own_predic
     the event is worse than raw again."""
     def burst(cfg: Any) -> tuple[Any, list[dict[str, Any]]]:
         eps, truth = replay(cfg, scenario("dgps", 9005, 1.0))
-        ev = next(e for e in measure(eps, truth).events
-                  if e.kind == "burst" and abs(e.start_s % 86400 - 37141.0) < 0.5)
+        ev = _event(measure(eps, truth).events, "burst", 37141.0, 0.5)
         return ev, [e for e in eps if abs(e["utc"] % 86400 - 37145.0) < 0.01]
 
     cfg = load_config("rover")
