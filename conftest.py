@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import shutil
 import signal
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -16,6 +19,18 @@ def corpus() -> Path:
     if not CORPUS.is_dir():
         pytest.skip(f"shared corpus not found at {CORPUS} (a fresh clone without shared/)")
     return CORPUS
+
+
+@pytest.fixture
+def key_dir() -> Iterator[Path]:
+    """A private directory for a signing key, outside any git working tree (the router refuses
+    a key inside one, and pytest's own tmp_path follows TMPDIR, which may be in a checkout):
+    under /tmp, and removed after the test, so no key is left behind."""
+    d = Path(tempfile.mkdtemp(prefix="fdi-key-", dir="/tmp"))
+    try:
+        yield d
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -615,14 +615,13 @@ PASSPHRASE = "fdiBridgeTest42"  # MAVProxy's `signing key/setup` takes one word 
 @pytest.mark.skipif(
     not MAVPROXY.exists(), reason="MAVProxy is not installed (pip install MAVProxy)"
 )
-def test_documented_mavproxy_signing_commands_set_a_parameter(tmp_path: Path) -> None:
+def test_documented_mavproxy_signing_commands_set_a_parameter(tmp_path: Path,
+                                                          key_dir: Path) -> None:
     """docs/mavlink.md's recipe: the key file from ``sha256(passphrase)``, MAVProxy's
     ``signing key PASSPHRASE``; MAVProxy's signed PARAM_SET is accepted on a signing link."""
     import hashlib
     import subprocess
 
-    key_dir = Path("/tmp") / f"fdi-mavproxy-key-{os.getpid()}"
-    key_dir.mkdir(exist_ok=True)
     key_file = key_dir / "signing.key"
     # The documented command: printf '%s' PASSPHRASE | sha256sum | cut -d' ' -f1 > FILE
     out = subprocess.run(f"printf '%s' '{PASSPHRASE}' | sha256sum | cut -d' ' -f1",

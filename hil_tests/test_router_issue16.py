@@ -32,10 +32,8 @@ def _wait(cond: Callable[[], bool], what: str, deadline_s: float = 5.0) -> None:
         time.sleep(0.002)  # the router runs in its thread; bounded by the deadline
 
 
-def _key_file(tmp_path: Path) -> Path:
-    d = Path("/tmp") / f"fdi-key-{os.getpid()}-{tmp_path.name}"  # outside any git tree
-    d.mkdir(exist_ok=True)
-    p = d / "signing.key"
+def _key_file(key_dir: Path) -> Path:
+    p = key_dir / "signing.key"
     p.write_text(KEY.hex())
     os.chmod(p, stat.S_IRUSR | stat.S_IWUSR)
     return p
@@ -169,8 +167,9 @@ def _param_store(tmp_path: Path) -> ParamStore:
     return params
 
 
-def test_signing_window_and_replay_after_restart(tmp_path: Path) -> None:  # item 9
-    key_file = _key_file(tmp_path)
+def test_signing_window_and_replay_after_restart(tmp_path: Path,
+                                                key_dir: Path) -> None:  # item 9
+    key_file = _key_file(key_dir)
     gcs_cfg = EndpointConfig("udpin:127.0.0.1:0", signing=True)
     params = _param_store(tmp_path)
     r = _router(tmp_path, gcs=gcs_cfg, params=params, signing_key_file=str(key_file))
@@ -200,8 +199,9 @@ def test_signing_window_and_replay_after_restart(tmp_path: Path) -> None:  # ite
         gcs.close()
 
 
-def test_signing_link_forwards_only_signed_packets_to_the_vehicle(tmp_path: Path) -> None:
-    key_file = _key_file(tmp_path)  # item 10
+def test_signing_link_forwards_only_signed_packets_to_the_vehicle(tmp_path: Path,
+                                                                   key_dir: Path) -> None:
+    key_file = _key_file(key_dir)  # item 10
     r = _router(tmp_path, gcs=EndpointConfig("udpin:127.0.0.1:0", signing=True),
                 signing_key_file=str(key_file))
     ap, bad, good = _Peer(1, 1), _Peer(255, 190), _Peer(254, 190, KEY, link_id=3)

@@ -105,8 +105,11 @@ def _cfg(strategy: str | None = None) -> BridgeConfig:
 def bench_rover(duration_s: float = 600.0, rate_hz: float = 10.0) -> dict[str, Any]:
     """Per-epoch time per strategy and replay throughput, on a generated run."""
     tmp = Path(tempfile.mkdtemp(prefix="fdi-bench-"))
-    write_run(RoverScenario(rate_hz=rate_hz, duration_s=duration_s, seed=7), tmp)
-    inp = ReplayInput(list(load_input(tmp / "rover.nmea").chunks))  # in memory: pipeline alone
+    try:
+        write_run(RoverScenario(rate_hz=rate_hz, duration_s=duration_s, seed=7), tmp)
+        inp = ReplayInput(list(load_input(tmp / "rover.nmea").chunks))  # in memory from here
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)  # a bench run leaves nothing in /tmp
     out: dict[str, Any] = {"epochs": int(duration_s * rate_hz), "rate_hz": rate_hz}
     per: dict[str, Any] = {}
     for strat in STRATEGIES:
@@ -234,7 +237,8 @@ def bench_loop(rate_hz: float, duration_s: float) -> dict[str, Any]:
     n = max(1, round(duration_s * rate_hz))
     stop = threading.Event()
     with PtyPair(baudrate=115200) as pin:
-        out_link = Path(tempfile.mkdtemp(prefix="fdi-bench-")) / "gps-out"
+        link_dir = Path(tempfile.mkdtemp(prefix="fdi-bench-"))
+        out_link = link_dir / "gps-out"
         sink = NmeaSink(f"pty:{out_link}", 115200)
         out_pty = sink.writer.pty
         assert out_pty is not None
@@ -285,6 +289,7 @@ def bench_loop(rate_hz: float, duration_s: float) -> dict[str, Any]:
             port.close()
             sink.close()
             os.close(out_fd)
+            shutil.rmtree(link_dir, ignore_errors=True)
     s = stats.summary()
     return {"rate_hz": rate_hz, "duration_s": duration_s, "steps": s["steps"],
             "overruns": s["overruns"], "epochs": pipe.epochs,
