@@ -106,6 +106,10 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
         "firmware_host.devtools.rover_harness",
         "rover done-means: a preset over every error model x seed x rate (issue 13)",
     ),
+    "ramp-oracle": (
+        "firmware_host.devtools.ramp_oracle",
+        "rover: the most any detector can find of a slow ramp in time, per receiver",
+    ),
     "rov": ("firmware_host.rov.app", "ROV compass faults and fault-tolerant heading hold"),
     "rov-harness": (
         "firmware_host.devtools.rov_harness",
@@ -159,6 +163,7 @@ EXAMPLES: dict[str, str] = {
     "sim": "fdi-bridge sim rover --duration 60 --out run",
     "sim rover": "fdi-bridge sim rover --duration 60 --kinds jump,ramp --out run",
     "sim rover-harness": "fdi-bridge sim rover-harness --seeds 1,2 --rates 10 --duration 600",
+    "sim ramp-oracle": "fdi-bridge sim ramp-oracle --seeds 1-3 --models gm,coarse",
     "sim rov": "fdi-bridge sim rov --fault drift:30@70 --out rov-run",
     "sim rov-harness": "fdi-bridge sim rov-harness --seeds 1-3 --scenarios step,burst",
     "sim insgnss": "fdi-bridge sim insgnss --scenario paper-single --out ins-run",

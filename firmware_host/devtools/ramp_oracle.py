@@ -1,0 +1,350 @@
+"""The most any detector can find of a slow ramp in time: an oracle bound (issue 13).
+
+``fdi-bridge sim ramp-oracle [--harness OUT.json] [--seeds 1-5] [--rates 1] [--models gm,coarse]``
+
+Issue 13 asks for ramps of 0.1 m/s found within 10 s and 0.05 m/s within 30 s, with at most
+0.1 % of clean epochs flagged. Whether that can be done depends on the receiver: a ramp is
+seen only against the change of the receiver's own error over the same seconds. This module
+measures, per receiver, how well the best test there is could do it. (``tools/ramp_bound.py``
+scores one 10 s window with its threshold set on the runs it scores: what that test finds.
+This bounds every test from above.)
+
+**The observable** is the drift test's own (D1 of :mod:`fdi.drift`): the Doppler-free value
+b(t) = fix − the displacement integrated from the receiver's own speed and course, on a
+clean drive of the same generator receiver (another error realisation, path and Doppler
+noise: ``seed + BOUND_SEED_OFFSET``; :func:`~firmware_host.devtools.rover_harness.clean_drive`),
+through the pipeline (``doppler_free`` of :mod:`firmware_host.rover.calibration`, the
+Doppler's lag estimated there as ``fdi-bridge calibrate`` does).
+
+**The oracle** is told the ramp's start t0, its direction and the increments' autocovariance
+γ(k) of b (pooled over both axes); at the deadline t0 + T it makes one Neyman-Pearson test
+(the matched filter, optimal for a known signal in Gaussian noise) on the increments of
+b over [t0 − H, t0 + T]: s_k = r·dt after t0 and 0 before, C = γ(|i − j|),
+
+    d'² = sᵀ C⁻¹ s,        P_D ≤ Φ(d' − z_α),        z_α = Φ⁻¹(1 − α),  α = 0.001
+
+A real detector knows neither the start nor the direction, and tests every epoch, so it needs
+a higher threshold than this oracle's single one-sided test at α: Φ(d' − z_α) is an upper
+bound on the chance of finding that ramp in time at 0.1 % false alarms, for Gaussian
+errors. A second column tells the oracle the start but not the direction (the matched
+filter on both axes against χ²₂, :func:`p_detect_2d`): nearer what a detector can do, still
+above it. The ``multipath`` model is not Gaussian (its steps inflate γ and make the bound
+pessimistic) and is not offered.
+
+With ``--harness`` (a ``fdi-bridge sim rover-harness --json`` file), every ramp the bullets
+ask for in it is given its d' from its own receiver and rate, and the table puts the
+number the oracle could expect to find in time (Σ P_D) beside the number the preset found.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fdi.errors import UsageError
+from firmware_host.commands import tables
+from firmware_host.commands.checks import (
+    choice_list,
+    input_file_arg,
+    output_file_arg,
+    positive_float,
+    positive_float_list,
+    seed_list,
+)
+from firmware_host.commands.progress import Progress
+from firmware_host.devtools.rover_harness import REPORT_SEEDS, clean_drive, replay
+from firmware_host.devtools.rover_sim import RoverScenario
+from firmware_host.rover.calibration import doppler_free, estimate_lag
+from firmware_host.runtime.config import load_config
+
+#: Error models with Gaussian errors (see the module doc for ``multipath``).
+BOUND_MODELS: tuple[str, ...] = ("gm", "dgps", "coarse")
+#: The clean drive of a receiver is seed + this (the harness's runs and its offline
+#: calibration use seed and seed + 100 000).
+BOUND_SEED_OFFSET = 500_000
+#: The issue's ramp bullets: (rate m/s, deadline s).
+BULLETS: tuple[tuple[float, float], ...] = ((0.1, 10.0), (0.05, 30.0))
+#: The drive's length: long enough for γ at lags up to H + 30 s.
+DRIVE_S = {1.0: 3600.0}
+DRIVE_S_DEFAULT = 1200.0
+#: Ramps that start this soon are before the online calibration (``drift_calibrate_s``).
+CALIBRATION_S = 300.0
+#: Where the generator's runs start (seconds of day).
+START_UTC_S = RoverScenario.start_utc_s
+
+
+def phi(x: float) -> float:
+    """The standard normal distribution function."""
+    return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
+
+
+def z_alpha(alpha: float) -> float:
+    """Φ⁻¹(1 − α), by bisection (no SciPy)."""
+    lo, hi = 0.0, 40.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if 1.0 - phi(mid) > alpha:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def p_detect_2d(d: float, alpha: float) -> float:
+    """P_D of the oracle that is not told the ramp's direction: the matched filter on both
+    axes, ‖(d + z₁, z₂)‖² against χ²₂'s 1 − α quantile, −2 ln α (z₁, z₂ standard normal),
+    integrated over z₂ on a fine grid."""
+    r2 = -2.0 * math.log(alpha)
+    z2 = np.linspace(-8.0, 8.0, 4001)
+    w = np.exp(-0.5 * z2**2) / math.sqrt(2.0 * math.pi) * (z2[1] - z2[0])
+    rest = r2 - z2**2
+    p = np.ones_like(z2)  # |z2| beyond the radius: detected whatever z1
+    inside = rest > 0.0
+    q = np.sqrt(rest[inside])
+    p[inside] = np.array([1.0 - phi(x - d) + phi(-x - d) for x in q])
+    return float(np.sum(p * w))
+
+
+def increment_acov(chains: Sequence[Sequence[tuple[float, float, float]]],
+                   max_lag: int) -> np.ndarray:
+    """γ(0..max_lag) of the increments of b, both axes pooled (each chain's mean increment
+    removed; chains shorter than 5 x max_lag are left out)."""
+    g = np.zeros(max_lag + 1)
+    n = 0
+    for ch in chains:
+        a = np.asarray(ch, dtype=float)
+        if len(a) < 5 * max_lag:
+            continue
+        for col in (1, 2):
+            x = np.diff(a[:, col])
+            x = x - x.mean()
+            for k in range(max_lag + 1):
+                g[k] += float(np.dot(x[:len(x) - k], x[k:])) * len(x) / (len(x) - k)
+            n += len(x)
+    if n == 0:
+        raise ValueError(f"no Doppler chain longer than {5 * max_lag} epochs")
+    return g / n
+
+
+def d_prime(gamma: np.ndarray, rate_hz: float, ramp_mps: float, deadline_s: float,
+            history_s: float) -> float:
+    """d' of the matched filter for a ramp of ``ramp_mps`` tested at ``deadline_s`` after its
+    start, on the increments over the ``history_s`` before it and the ``deadline_s`` after."""
+    n = round((history_s + deadline_s) * rate_hz)
+    if n > len(gamma):
+        raise ValueError(f"γ has {len(gamma)} lags; {n} are needed")
+    idx = np.arange(n)
+    cov = gamma[np.abs(idx[:, None] - idx[None, :])]
+    t_end = (idx + 1 - round(history_s * rate_hz)) / rate_hz  # each increment's end time
+    s = np.where(t_end > 0.0, ramp_mps / rate_hz, 0.0)
+    return math.sqrt(float(s @ np.linalg.solve(cov, s)))
+
+
+@dataclass
+class Receiver:
+    """One generator receiver at one rate: γ of its Doppler-free increments."""
+
+    model: str
+    seed: int
+    rate_hz: float
+    gamma: np.ndarray
+    lag_s: float
+
+
+def receiver(cfg: Any, model: str, seed: int, rate_hz: float, history_s: float) -> Receiver:
+    """γ of the receiver ``seed`` of ``model`` at ``rate_hz``, from its clean drive."""
+    drive = clean_drive(model, seed + BOUND_SEED_OFFSET, seed, rate_hz,
+                        DRIVE_S.get(rate_hz, DRIVE_S_DEFAULT))
+    records = replay(cfg, drive)[0]
+    lag = estimate_lag([records])
+    lag_s = cfg.rover.detector.drift_lag_s if lag is None else lag.lag_s
+    max_lag = round((history_s + max(d for _, d in BULLETS)) * rate_hz) + 1
+    return Receiver(model, seed, rate_hz, increment_acov(doppler_free(records, lag_s), max_lag),
+                    lag_s)
+
+
+@dataclass
+class Row:
+    """Ramps of one model, rate, bullet and side of the calibration."""
+
+    model: str
+    rate_hz: float
+    deadline_s: float
+    precal: bool
+    ramps: int = 0
+    found: int = 0
+    oracle: float = 0.0
+    oracle_2d: float = 0.0
+    d: list[float] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"model": self.model, "rate_hz": self.rate_hz, "deadline_s": self.deadline_s,
+                "before_calibration": self.precal, "ramps": self.ramps,
+                "found_in_time": self.found, "oracle_at_most": self.oracle,
+                "oracle_2d_at_most": self.oracle_2d,
+                "d_min": min(self.d), "d_median": float(np.median(self.d))}
+
+
+def load_harness(path: str) -> dict[str, Any]:
+    """A ``fdi-bridge sim rover-harness --json`` file, checked for what :func:`harness_rows`
+    reads; anything else is a :class:`UsageError` naming the file and what was found."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise UsageError(f"--harness: expected a `fdi-bridge sim rover-harness --json` file, "
+                         f"{path} could not be read as JSON ({exc})") from None
+    runs = doc.get("runs") if isinstance(doc, dict) else None
+    keys = ("model", "seed", "rate_hz", "events")
+    ev_keys = ("kind", "rate_mps", "start_s", "delay_s")
+    if not isinstance(runs, list) or not all(
+            isinstance(r, dict) and all(k in r for k in keys)
+            and isinstance(r["events"], list)
+            and all(isinstance(e, dict) and all(k in e for k in ev_keys) for e in r["events"])
+            for r in runs):
+        raise UsageError(f"--harness: expected a `fdi-bridge sim rover-harness --json` file "
+                         f"(runs with {', '.join(keys)}; events with {', '.join(ev_keys)}), "
+                         f"found {path} without them")
+    return doc
+
+
+def harness_rows(doc: dict[str, Any], get: Any, alpha: float, history_s: float) -> list[Row]:
+    """Every ramp the bullets ask for in a harness JSON ``doc``: the preset's result beside the
+    oracle's expectation, per model, rate, bullet and side of the calibration. ``get(model,
+    seed, rate)`` gives the :class:`Receiver`."""
+    z = z_alpha(alpha)
+    rows: dict[tuple[str, float, float, bool], Row] = {}
+    for run in doc["runs"]:
+        if run["model"] not in BOUND_MODELS:
+            continue
+        rec: Receiver | None = None
+        for e in run["events"]:
+            if e["kind"] != "ramp" or e["rate_mps"] < BULLETS[-1][0]:
+                continue
+            deadline = next(d for r, d in BULLETS if e["rate_mps"] >= r)
+            rec = rec or get(run["model"], run["seed"], run["rate_hz"])
+            d = d_prime(rec.gamma, run["rate_hz"], e["rate_mps"], deadline, history_s)
+            t0 = e["start_s"] % 86400.0 - START_UTC_S  # seconds into the run
+            key = (run["model"], run["rate_hz"], deadline, t0 < CALIBRATION_S)
+            row = rows.setdefault(key, Row(*key))
+            row.ramps += 1
+            row.found += e["delay_s"] is not None and e["delay_s"] <= deadline
+            row.oracle += phi(d - z)
+            row.oracle_2d += p_detect_2d(d, alpha)
+            row.d.append(d)
+    return [rows[k] for k in sorted(rows)]
+
+
+def edge_rows(recs: Sequence[Receiver], alpha: float, history_s: float) -> list[dict[str, Any]]:
+    """Per receiver, d' and the oracle's P_D at each bullet's slowest ramp."""
+    z = z_alpha(alpha)
+    out = []
+    for rec in recs:
+        row: dict[str, Any] = {"model": rec.model, "seed": rec.seed, "rate_hz": rec.rate_hz,
+                               "lag_s": rec.lag_s}
+        for r, dl in BULLETS:
+            d = d_prime(rec.gamma, rec.rate_hz, r, dl, history_s)
+            row[f"d_{r:g}_{dl:g}"] = d
+            row[f"p_{r:g}_{dl:g}"] = phi(d - z)
+            row[f"p2_{r:g}_{dl:g}"] = p_detect_2d(d, alpha)
+        out.append(row)
+    return out
+
+
+def edge_table(rows: Sequence[dict[str, Any]]) -> tables.Table:
+    t = tables.Table(["model", "seed", "Hz", "lag (s)"]
+                     + [h for r, dl in BULLETS
+                        for h in (f"d' {r:g} m/s in {dl:g} s", "oracle P_D",
+                                  "direction unknown")])
+    for row in rows:
+        cells: list[Any] = [row["model"], row["seed"], f"{row['rate_hz']:g}",
+                            f"{row['lag_s']:.2f}"]
+        for r, dl in BULLETS:
+            cells += [f"{row[f'd_{r:g}_{dl:g}']:.2f}", f"{row[f'p_{r:g}_{dl:g}']:.3f}",
+                      f"{row[f'p2_{r:g}_{dl:g}']:.3f}"]
+        t.add(*cells)
+    return t
+
+
+def harness_table(rows: Sequence[Row]) -> tables.Table:
+    t = tables.Table(["model", "Hz", "bullet", "calibration", "ramps", "found in time",
+                      "oracle at most", "direction unknown", "d' min", "d' median"])
+    for row in rows:
+        bullet = next(f"{r:g} m/s in {dl:g} s" for r, dl in BULLETS if dl == row.deadline_s)
+        t.add(row.model, f"{row.rate_hz:g}", bullet, "before" if row.precal else "after",
+              row.ramps, row.found, f"{row.oracle:.1f}", f"{row.oracle_2d:.1f}",
+              f"{min(row.d):.2f}",
+              f"{float(np.median(row.d)):.2f}")
+    return t
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", default="rover", help="config file or preset name")
+    parser.add_argument("--harness", type=input_file_arg, default=None,
+                        help="a `fdi-bridge sim rover-harness --json` file: the oracle's "
+                             "expectation beside the preset's result for each of its ramps")
+    parser.add_argument("--seeds", type=seed_list,
+                        default=",".join(str(s) for s in REPORT_SEEDS),
+                        help="receivers (without --harness), like 1-5 or 1,3")
+    parser.add_argument("--models", type=choice_list(BOUND_MODELS, "models"),
+                        default=",".join(BOUND_MODELS),
+                        help="error models, comma separated (multipath is not Gaussian: "
+                             "not offered)")
+    parser.add_argument("--rates", type=positive_float_list, default="1",
+                        help="fix rates in Hz, comma separated (without --harness)")
+    parser.add_argument("--alpha", type=positive_float, default=0.001,
+                        help="the oracle's false-alarm probability (the bullet's 0.1 %%)")
+    parser.add_argument("--history", type=positive_float, default=30.0,
+                        help="seconds of clean fixes before the ramp the oracle uses")
+    parser.add_argument("--json", default=None, type=output_file_arg,
+                        help="also write every number to this JSON file")
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)
+    cfg = load_config(args.config)
+    t0 = time.perf_counter()
+    cache: dict[tuple[str, int, float], Receiver] = {}
+
+    def get(model: str, seed: int, rate_hz: float) -> Receiver:
+        key = (model, 0 if model == "gm" else seed, rate_hz)  # gm: one receiver (all seeds)
+        if key not in cache:
+            cache[key] = receiver(cfg, model, seed, rate_hz, args.history)
+        return cache[key]
+
+    doc: dict[str, Any] = {"config": cfg.name, "alpha": args.alpha, "history_s": args.history}
+    if args.harness is not None:
+        hdoc = load_harness(args.harness)
+        rows = harness_rows(hdoc, get, args.alpha, args.history)
+        print(harness_table(rows).console())
+        doc["harness"] = str(args.harness)
+        doc["rows"] = [r.as_dict() for r in rows]
+    else:
+        todo = list(dict.fromkeys((m, 0 if m == "gm" else s, r) for m in args.models
+                                  for s in args.seeds for r in args.rates))
+        with Progress(len(todo), "ramp oracle", unit="receiver") as bar:
+            recs = []
+            for m, s, r in todo:
+                recs.append(get(m, s or args.seeds[0], r))
+                bar.step()
+        erows = edge_rows(recs, args.alpha, args.history)
+        print(edge_table(erows).console())
+        doc["receivers"] = erows
+    print(f"\n{len(cache)} receivers in {time.perf_counter() - t0:.1f} s (config {cfg.name}); "
+          f"oracle: start, direction and error covariance known, one test at alpha "
+          f"{args.alpha:g}: an upper bound")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(doc, f, indent=1)
+    return 0
