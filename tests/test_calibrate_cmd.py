@@ -159,3 +159,35 @@ def test_an_output_that_cannot_be_written_is_a_clear_error(
     err = capsys.readouterr().err
     assert "mine.toml: cannot write the configuration: No space left on device" in err
     assert "Traceback" not in err
+
+
+def _slow_drift_line(capsys: pytest.CaptureFixture[str], cap: Path) -> str:
+    assert cli.main(["calibrate", str(cap)]) == 0
+    return next(ln for ln in capsys.readouterr().out.splitlines()
+                if ln.startswith("slow drifts"))
+
+
+def _p(line: str, bullet: str) -> tuple[float, float]:
+    """The two probabilities printed for ``bullet`` (like '0.1 m/s within 10 s')."""
+    part = line.split(bullet + ": at most ")[1]
+    told, rest = part.split(" (direction unknown ", 1)
+    return float(told), float(rest.split(")")[0])
+
+
+def test_calibrate_bounds_what_a_test_could_find_of_a_slow_drift(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The receiver's own recordings say how small a drift any test could find in time
+    (firmware_host/devtools/ramp_oracle.py): on the `gm` receiver (a 60 s Gauss-Markov
+    error) at 1 Hz a 0.1 m/s ramp within 10 s is not certain even for the oracle; on a
+    `dgps` receiver at 5 Hz it is. A recording too short for the bound says so, and the
+    calibration is still made."""
+    gm = _slow_drift_line(capsys, _drive(tmp_path, "gm", seed=100_001, receiver=1,
+                                         duration_s=600.0, rate_hz=1.0, model="gm"))
+    told, unknown = _p(gm, "0.1 m/s within 10 s")
+    assert 0.5 < unknown < told < 0.95, gm
+    dgps = _slow_drift_line(capsys, _drive(tmp_path, "dgps", seed=100_903, receiver=903,
+                                           duration_s=600.0))
+    assert _p(dgps, "0.1 m/s within 10 s")[1] >= 0.99, dgps
+    short = _slow_drift_line(capsys, _drive(tmp_path, "short", seed=100_903, receiver=903,
+                                            duration_s=250.0))
+    assert "no unbroken stretch long enough" in short

@@ -39,6 +39,7 @@ number the oracle could expect to find in time (Σ P_D) beside the number the pr
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import logging
 import math
@@ -132,6 +133,29 @@ def increment_acov(chains: Sequence[Sequence[tuple[float, float, float]]],
     if n == 0:
         raise ValueError(f"no Doppler chain longer than {5 * max_lag} epochs")
     return g / n
+
+
+def chain_rate_hz(chains: Sequence[Sequence[tuple[float, float, float]]]) -> float:
+    """The fix rate of Doppler-free chains: 1 / the median interval between fixes."""
+    dts = [b[0] - a[0] for ch in chains for a, b in itertools.pairwise(ch)]
+    if not dts:
+        raise ValueError("no two fixes in a row")
+    return 1.0 / float(np.median(dts))
+
+
+def bullet_bounds(chains: Sequence[Sequence[tuple[float, float, float]]], alpha: float = 0.001,
+                  history_s: float = 30.0) -> list[tuple[float, float, float, float, float]]:
+    """For a receiver's Doppler-free chains: per ramp bullet (rate m/s, deadline s), d' and
+    the oracle's P_D told the direction and not told it. :class:`ValueError` when no chain is
+    long enough for γ (5 x (history + 30 s) of fixes)."""
+    rate = chain_rate_hz(chains)
+    gamma = increment_acov(chains, round((history_s + max(d for _, d in BULLETS)) * rate) + 1)
+    z = z_alpha(alpha)
+    out = []
+    for r, dl in BULLETS:
+        d = d_prime(gamma, rate, r, dl, history_s)
+        out.append((r, dl, d, phi(d - z), p_detect_2d(d, alpha)))
+    return out
 
 
 def d_prime(gamma: np.ndarray, rate_hz: float, ramp_mps: float, deadline_s: float,
