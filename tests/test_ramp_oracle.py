@@ -144,3 +144,11 @@ def test_a_file_that_is_not_a_harness_file_is_a_clear_error(tmp_path: Path,
     assert proc.returncode == 2, (proc.returncode, proc.stderr)
     assert "--harness: expected a `fdi-bridge sim rover-harness --json` file" in proc.stderr
     assert str(bad) in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_a_recording_that_does_not_move_gives_no_bound() -> None:
+    """A receiver at rest that repeats one position (the Doppler-free value never moves) has
+    no noise to bound against: a ValueError that calibrate prints, not a division by zero."""
+    chain = [(float(k), 1.0, 2.0) for k in range(400)]
+    with pytest.raises(ValueError, match="does not move"):
+        rb.bullet_bounds([chain])

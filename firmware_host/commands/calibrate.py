@@ -71,9 +71,10 @@ def ramp_bound_line(runs: list[list[dict[str, Any]]], lag_s: float) -> str:
     chains = [ch for records in runs for ch in doppler_free(records, lag_s)]
     try:
         bounds = bullet_bounds(chains)
-    except ValueError:
-        return ("slow drifts: the recordings have no unbroken stretch long enough (5 min at "
-                "1 Hz, 5 x 60 s of fixes) to bound what a test could find on this receiver")
+    except ValueError as err:
+        return (f"slow drifts: no bound on what a test could find on this receiver from these "
+                f"recordings ({err}; an unbroken stretch of 5 x 60 s of fixes at a steady "
+                f"rate is needed)")
     parts = [f"{r:g} m/s within {dl:g} s: at most {p:.2f} (direction unknown {p2:.2f})"
              for r, dl, _, p, p2 in bounds]
     return ("slow drifts on this receiver, the chance the best possible test finds them in "

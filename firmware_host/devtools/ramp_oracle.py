@@ -150,10 +150,17 @@ def bullet_bounds(chains: Sequence[Sequence[tuple[float, float, float]]], alpha:
     long enough for γ (5 x (history + 30 s) of fixes)."""
     rate = chain_rate_hz(chains)
     gamma = increment_acov(chains, round((history_s + max(d for _, d in BULLETS)) * rate) + 1)
+    if not (np.all(np.isfinite(gamma)) and gamma[0] > 0.0):
+        raise ValueError("the Doppler-free value does not move between fixes")
     z = z_alpha(alpha)
     out = []
     for r, dl in BULLETS:
-        d = d_prime(gamma, rate, r, dl, history_s)
+        try:
+            d = d_prime(gamma, rate, r, dl, history_s)
+        except np.linalg.LinAlgError:  # a recording whose increments are not full rank
+            raise ValueError("the increments' covariance is singular") from None
+        if not math.isfinite(d):
+            raise ValueError("the increments' covariance is not positive definite")
         out.append((r, dl, d, phi(d - z), p_detect_2d(d, alpha)))
     return out
 
