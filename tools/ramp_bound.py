@@ -9,6 +9,10 @@ That is the test the bullet asks for at its best: one horizon, the ramp's own le
 threshold set on the very data it is scored on (a per-epoch false-alarm rate of 0.1 % on the
 worst seed). Whatever it misses, a test on b at 0.1 % cannot find within 10 s.
 
+This is what one window finds. ``fdi-bridge sim ramp-oracle``
+(``firmware_host/devtools/ramp_oracle.py``) bounds every test from above instead: the matched
+filter, told the ramp's start, on each receiver's calibrated noise.
+
     .venv/bin/python tools/ramp_bound.py --seeds 1,2,3,4,5        # about 1 min on 2 cores
 """
 
