@@ -1,4 +1,5 @@
-"""The oracle bound on slow-ramp detection (firmware_host/devtools/ramp_oracle.py)."""
+"""The oracle bound on slow-ramp detection: its math (firmware_host/rover/drift_bound.py) and
+the command on the generator's receivers (firmware_host/devtools/ramp_oracle.py)."""
 
 from __future__ import annotations
 
@@ -13,13 +14,14 @@ import numpy as np
 import pytest
 
 from firmware_host.devtools import ramp_oracle as rb
+from firmware_host.rover import drift_bound as db
 from firmware_host.runtime.config import load_config
 
 
 def test_z_alpha_is_the_normal_quantile() -> None:
-    assert rb.z_alpha(0.001) == pytest.approx(3.090232, abs=1e-5)
-    assert rb.z_alpha(0.5) == pytest.approx(0.0, abs=1e-6)
-    assert rb.phi(rb.z_alpha(0.025)) == pytest.approx(0.975, abs=1e-9)
+    assert db.z_alpha(0.001) == pytest.approx(3.090232, abs=1e-5)
+    assert db.z_alpha(0.05) == pytest.approx(1.644854, abs=1e-5)
+    assert db.phi(db.z_alpha(0.025)) == pytest.approx(0.975, abs=1e-9)
 
 
 def test_the_oracle_without_the_direction_against_a_seeded_monte_carlo() -> None:
@@ -27,11 +29,11 @@ def test_the_oracle_without_the_direction_against_a_seeded_monte_carlo() -> None
     where d is large, and within 0.005 of 200 000 seeded draws."""
     rng = np.random.default_rng(20261204)
     z = rng.normal(size=(200_000, 2))
-    assert rb.p_detect_2d(0.0, 0.001) == pytest.approx(0.001, rel=1e-3)
+    assert db.p_detect_2d(0.0, 0.001) == pytest.approx(0.001, rel=1e-3)
     for d in (2.0, 4.48, 6.0):
         mc = float(np.mean((z[:, 0] + d) ** 2 + z[:, 1] ** 2 > -2.0 * math.log(0.001)))
-        assert rb.p_detect_2d(d, 0.001) == pytest.approx(mc, abs=0.005)
-        assert rb.p_detect_2d(d, 0.001) < rb.phi(d - rb.z_alpha(0.001))
+        assert db.p_detect_2d(d, 0.001) == pytest.approx(mc, abs=0.005)
+        assert db.p_detect_2d(d, 0.001) < db.phi(d - db.z_alpha(0.001))
 
 
 @pytest.mark.parametrize("rate_hz", [1.0, 10.0])
@@ -41,9 +43,9 @@ def test_d_prime_on_white_increments_is_the_closed_form(rate_hz: float) -> None:
     s2 = 0.04
     gamma = np.zeros(round(60 * rate_hz) + 2)
     gamma[0] = s2
-    d = rb.d_prime(gamma, rate_hz, 0.1, 10.0, 30.0)
+    d = db.d_prime(gamma, rate_hz, 0.1, 10.0, 30.0)
     assert d == pytest.approx(math.sqrt(10.0 * 0.01 / (rate_hz * s2)), rel=1e-9)
-    assert rb.d_prime(gamma, rate_hz, 0.2, 10.0, 30.0) == pytest.approx(2 * d, rel=1e-9)
+    assert db.d_prime(gamma, rate_hz, 0.2, 10.0, 30.0) == pytest.approx(2 * d, rel=1e-9)
 
 
 def test_increment_autocovariance_of_a_seeded_random_walk() -> None:
@@ -51,11 +53,11 @@ def test_increment_autocovariance_of_a_seeded_random_walk() -> None:
     steps = rng.normal(0.0, 0.1, size=(20000, 2))
     b = np.cumsum(steps, axis=0)
     chain = [(float(k), float(e), float(n)) for k, (e, n) in enumerate(b)]
-    g = rb.increment_acov([chain], 5)
+    g = db.increment_acov([chain], 5)
     assert g[0] == pytest.approx(0.01, rel=0.03)
     assert all(abs(x) < 0.001 for x in g[1:])
     with pytest.raises(ValueError, match="no Doppler chain"):
-        rb.increment_acov([chain[:10]], 5)
+        db.increment_acov([chain[:10]], 5)
 
 
 def test_d_prime_on_a_gauss_markov_error_grows_with_the_deadline() -> None:
@@ -73,8 +75,8 @@ def test_d_prime_on_a_gauss_markov_error_grows_with_the_deadline() -> None:
         g[k] = 2 * cov_gm(k) - cov_gm(k - 1) - cov_gm(k + 1)
     g[0] += 2 * s_w**2
     g[1] -= s_w**2
-    d10 = rb.d_prime(g, 1.0, 0.1, 10.0, 30.0)
-    d30 = rb.d_prime(g, 1.0, 0.1, 30.0, 30.0)
+    d10 = db.d_prime(g, 1.0, 0.1, 10.0, 30.0)
+    d30 = db.d_prime(g, 1.0, 0.1, 30.0, 30.0)
     assert 0.0 < d10 < d30 < d10 * math.sqrt(3.0) * 1.5
 
 
@@ -85,9 +87,9 @@ def test_the_gm_receiver_at_1_hz_cannot_have_every_slow_ramp_in_time() -> None:
     any detector held to 0.1 % of clean epochs flagged. A ramp three times as fast is certain."""
     cfg = load_config("rover")
     rec = rb.receiver(cfg, "gm", 1, 1.0, 30.0)
-    z = rb.z_alpha(0.001)
-    p_slow = rb.phi(rb.d_prime(rec.gamma, 1.0, 0.1, 10.0, 30.0) - z)
-    p_fast = rb.phi(rb.d_prime(rec.gamma, 1.0, 0.3, 10.0, 30.0) - z)
+    z = db.z_alpha(0.001)
+    p_slow = db.phi(db.d_prime(rec.gamma, 1.0, 0.1, 10.0, 30.0) - z)
+    p_fast = db.phi(db.d_prime(rec.gamma, 1.0, 0.3, 10.0, 30.0) - z)
     assert 0.5 < p_slow < 0.95, p_slow
     assert p_fast > 0.999, p_fast
 
@@ -116,8 +118,8 @@ def test_harness_rows_put_the_oracle_beside_the_preset() -> None:
     assert got == {(10.0, True): (1, 1), (10.0, False): (1, 0), (30.0, False): (1, 0)}
     d = math.sqrt(10.0 * 0.01 / 0.01)  # 0.1 m/s, white increments of 0.01 m²
     pre = next(r for r in rows if r.precal)
-    assert pre.oracle == pytest.approx(rb.phi(d - rb.z_alpha(0.001)))
-    assert pre.oracle_2d == pytest.approx(rb.p_detect_2d(d, 0.001))
+    assert pre.oracle == pytest.approx(db.phi(d - db.z_alpha(0.001)))
+    assert pre.oracle_2d == pytest.approx(db.p_detect_2d(d, 0.001))
 
 
 def test_the_command_writes_its_numbers(tmp_path: Path) -> None:
@@ -151,4 +153,4 @@ def test_a_recording_that_does_not_move_gives_no_bound() -> None:
     no noise to bound against: a ValueError that calibrate prints, not a division by zero."""
     chain = [(float(k), 1.0, 2.0) for k in range(400)]
     with pytest.raises(ValueError, match="does not move"):
-        rb.bullet_bounds([chain])
+        db.bullet_bounds([chain])

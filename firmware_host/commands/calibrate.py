@@ -17,7 +17,7 @@ for at least twice the longest horizon (200 s with the defaults) with speed and 
 every fix; several recordings are better than one (the largest σ is kept).
 
 It also says how small a slow drift could be found on this receiver at all: the chance that
-the best possible test (:mod:`firmware_host.devtools.ramp_oracle`, told when the drift
+the best possible test (:mod:`firmware_host.rover.drift_bound`, told when the drift
 starts) finds 0.1 m/s within 10 s and 0.05 m/s within 30 s at 0.1 % false alarms, from the
 same recordings (an unbroken stretch of 5 minutes or more is needed for it).
 """
@@ -35,13 +35,13 @@ from firmware_host.commands.checks import input_file_arg, output_file_arg
 from firmware_host.commands.config_cmd import effective_toml
 from firmware_host.commands.replay import load_input
 from firmware_host.devtools.eval import run_ours
-from firmware_host.devtools.ramp_oracle import bullet_bounds
 from firmware_host.rover.calibration import (
     START_FACTOR,
     calibrate_records,
     calibrated_detector,
     doppler_free,
 )
+from firmware_host.rover.drift_bound import bullet_bounds
 from firmware_host.runtime.config import bridge_config, load_bridge_file
 
 
@@ -66,7 +66,7 @@ def detector_lines(det: RoverDetectorParams) -> list[str]:
 
 def ramp_bound_line(runs: list[list[dict[str, Any]]], lag_s: float) -> str:
     """What the best possible test could find of a slow drift on this receiver (issue 13's ramp
-    bullets; :mod:`firmware_host.devtools.ramp_oracle`): an upper bound, at 0.1 % false
+    bullets; :mod:`firmware_host.rover.drift_bound`): an upper bound, at 0.1 % false
     alarms, from the same recordings."""
     chains = [ch for records in runs for ch in doppler_free(records, lag_s)]
     try:

@@ -16,19 +16,9 @@ noise: ``seed + BOUND_SEED_OFFSET``; :func:`~firmware_host.devtools.rover_harnes
 through the pipeline (``doppler_free`` of :mod:`firmware_host.rover.calibration`, the
 Doppler's lag estimated there as ``fdi-bridge calibrate`` does).
 
-**The oracle** is told the ramp's start t0, its direction and the increments' autocovariance
-γ(k) of b (pooled over both axes); at the deadline t0 + T it makes one Neyman-Pearson test
-(the matched filter, optimal for a known signal in Gaussian noise) on the increments of
-b over [t0 − H, t0 + T]: s_k = r·dt after t0 and 0 before, C = γ(|i − j|),
-
-    d'² = sᵀ C⁻¹ s,        P_D ≤ Φ(d' − z_α),        z_α = Φ⁻¹(1 − α),  α = 0.001
-
-A real detector knows neither the start nor the direction, and tests every epoch, so it needs
-a higher threshold than this oracle's single one-sided test at α: Φ(d' − z_α) is an upper
-bound on the chance of finding that ramp in time at 0.1 % false alarms, for Gaussian
-errors. A second column tells the oracle the start but not the direction (the matched
-filter on both axes against χ²₂, :func:`p_detect_2d`): nearer what a detector can do, still
-above it. The ``multipath`` model is not Gaussian (its steps inflate γ and make the bound
+**The oracle** and its two columns (told the direction, and not) are
+:mod:`firmware_host.rover.drift_bound`'s, which ``fdi-bridge calibrate`` uses on a receiver's
+own recordings. The ``multipath`` model is not Gaussian (its steps inflate γ and make the bound
 pessimistic) and is not offered.
 
 With ``--harness`` (a ``fdi-bridge sim rover-harness --json`` file), every ramp the bullets
@@ -39,10 +29,8 @@ number the oracle could expect to find in time (Σ P_D) beside the number the pr
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import logging
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -64,6 +52,16 @@ from firmware_host.commands.progress import Progress
 from firmware_host.devtools.rover_harness import REPORT_SEEDS, clean_drive, replay
 from firmware_host.devtools.rover_sim import RoverScenario
 from firmware_host.rover.calibration import doppler_free, estimate_lag
+from firmware_host.rover.drift_bound import (
+    BULLETS,
+    bounds_from_gamma,
+    d_prime,
+    gamma_lags,
+    increment_acov,
+    p_detect_2d,
+    phi,
+    z_alpha,
+)
 from firmware_host.runtime.config import load_config
 
 #: Error models with Gaussian errors (see the module doc for ``multipath``).
@@ -71,8 +69,6 @@ BOUND_MODELS: tuple[str, ...] = ("gm", "dgps", "coarse")
 #: The clean drive of a receiver is seed + this (the harness's runs and its offline
 #: calibration use seed and seed + 100 000).
 BOUND_SEED_OFFSET = 500_000
-#: The issue's ramp bullets: (rate m/s, deadline s).
-BULLETS: tuple[tuple[float, float], ...] = ((0.1, 10.0), (0.05, 30.0))
 #: The drive's length: long enough for γ at lags up to H + 30 s.
 DRIVE_S = {1.0: 3600.0}
 DRIVE_S_DEFAULT = 1200.0
@@ -80,103 +76,6 @@ DRIVE_S_DEFAULT = 1200.0
 CALIBRATION_S = 300.0
 #: Where the generator's runs start (seconds of day).
 START_UTC_S = RoverScenario.start_utc_s
-
-
-def phi(x: float) -> float:
-    """The standard normal distribution function."""
-    return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
-
-
-def z_alpha(alpha: float) -> float:
-    """Φ⁻¹(1 − α), by bisection (no SciPy)."""
-    lo, hi = 0.0, 40.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if 1.0 - phi(mid) > alpha:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-def p_detect_2d(d: float, alpha: float) -> float:
-    """P_D of the oracle that is not told the ramp's direction: the matched filter on both
-    axes, ‖(d + z₁, z₂)‖² against χ²₂'s 1 − α quantile, −2 ln α (z₁, z₂ standard normal),
-    integrated over z₂ on a fine grid."""
-    r2 = -2.0 * math.log(alpha)
-    z2 = np.linspace(-8.0, 8.0, 4001)
-    w = np.exp(-0.5 * z2**2) / math.sqrt(2.0 * math.pi) * (z2[1] - z2[0])
-    rest = r2 - z2**2
-    p = np.ones_like(z2)  # |z2| beyond the radius: detected whatever z1
-    inside = rest > 0.0
-    q = np.sqrt(rest[inside])
-    p[inside] = np.array([1.0 - phi(x - d) + phi(-x - d) for x in q])
-    return float(np.sum(p * w))
-
-
-def increment_acov(chains: Sequence[Sequence[tuple[float, float, float]]],
-                   max_lag: int) -> np.ndarray:
-    """γ(0..max_lag) of the increments of b, both axes pooled (each chain's mean increment
-    removed; chains shorter than 5 x max_lag are left out)."""
-    g = np.zeros(max_lag + 1)
-    n = 0
-    for ch in chains:
-        a = np.asarray(ch, dtype=float)
-        if len(a) < 5 * max_lag:
-            continue
-        for col in (1, 2):
-            x = np.diff(a[:, col])
-            x = x - x.mean()
-            for k in range(max_lag + 1):
-                g[k] += float(np.dot(x[:len(x) - k], x[k:])) * len(x) / (len(x) - k)
-            n += len(x)
-    if n == 0:
-        raise ValueError(f"no Doppler chain longer than {5 * max_lag} epochs")
-    return g / n
-
-
-def chain_rate_hz(chains: Sequence[Sequence[tuple[float, float, float]]]) -> float:
-    """The fix rate of Doppler-free chains: 1 / the median interval between fixes."""
-    dts = [b[0] - a[0] for ch in chains for a, b in itertools.pairwise(ch)]
-    if not dts:
-        raise ValueError("no two fixes in a row")
-    return 1.0 / float(np.median(dts))
-
-
-def bullet_bounds(chains: Sequence[Sequence[tuple[float, float, float]]], alpha: float = 0.001,
-                  history_s: float = 30.0) -> list[tuple[float, float, float, float, float]]:
-    """For a receiver's Doppler-free chains: per ramp bullet (rate m/s, deadline s), d' and
-    the oracle's P_D told the direction and not told it. :class:`ValueError` when no chain is
-    long enough for γ (5 x (history + 30 s) of fixes)."""
-    rate = chain_rate_hz(chains)
-    gamma = increment_acov(chains, round((history_s + max(d for _, d in BULLETS)) * rate) + 1)
-    if not (np.all(np.isfinite(gamma)) and gamma[0] > 0.0):
-        raise ValueError("the Doppler-free value does not move between fixes")
-    z = z_alpha(alpha)
-    out = []
-    for r, dl in BULLETS:
-        try:
-            d = d_prime(gamma, rate, r, dl, history_s)
-        except np.linalg.LinAlgError:  # a recording whose increments are not full rank
-            raise ValueError("the increments' covariance is singular") from None
-        if not math.isfinite(d):
-            raise ValueError("the increments' covariance is not positive definite")
-        out.append((r, dl, d, phi(d - z), p_detect_2d(d, alpha)))
-    return out
-
-
-def d_prime(gamma: np.ndarray, rate_hz: float, ramp_mps: float, deadline_s: float,
-            history_s: float) -> float:
-    """d' of the matched filter for a ramp of ``ramp_mps`` tested at ``deadline_s`` after its
-    start, on the increments over the ``history_s`` before it and the ``deadline_s`` after."""
-    n = round((history_s + deadline_s) * rate_hz)
-    if n > len(gamma):
-        raise ValueError(f"γ has {len(gamma)} lags; {n} are needed")
-    idx = np.arange(n)
-    cov = gamma[np.abs(idx[:, None] - idx[None, :])]
-    t_end = (idx + 1 - round(history_s * rate_hz)) / rate_hz  # each increment's end time
-    s = np.where(t_end > 0.0, ramp_mps / rate_hz, 0.0)
-    return math.sqrt(float(s @ np.linalg.solve(cov, s)))
 
 
 @dataclass
@@ -197,9 +96,8 @@ def receiver(cfg: Any, model: str, seed: int, rate_hz: float, history_s: float) 
     records = replay(cfg, drive)[0]
     lag = estimate_lag([records])
     lag_s = cfg.rover.detector.drift_lag_s if lag is None else lag.lag_s
-    max_lag = round((history_s + max(d for _, d in BULLETS)) * rate_hz) + 1
-    return Receiver(model, seed, rate_hz, increment_acov(doppler_free(records, lag_s), max_lag),
-                    lag_s)
+    return Receiver(model, seed, rate_hz, increment_acov(doppler_free(records, lag_s),
+                                                         gamma_lags(rate_hz, history_s)), lag_s)
 
 
 @dataclass
@@ -276,16 +174,14 @@ def harness_rows(doc: dict[str, Any], get: Any, alpha: float, history_s: float) 
 
 def edge_rows(recs: Sequence[Receiver], alpha: float, history_s: float) -> list[dict[str, Any]]:
     """Per receiver, d' and the oracle's P_D at each bullet's slowest ramp."""
-    z = z_alpha(alpha)
     out = []
     for rec in recs:
         row: dict[str, Any] = {"model": rec.model, "seed": rec.seed, "rate_hz": rec.rate_hz,
                                "lag_s": rec.lag_s}
-        for r, dl in BULLETS:
-            d = d_prime(rec.gamma, rec.rate_hz, r, dl, history_s)
+        for r, dl, d, p, p2 in bounds_from_gamma(rec.gamma, rec.rate_hz, alpha, history_s):
             row[f"d_{r:g}_{dl:g}"] = d
-            row[f"p_{r:g}_{dl:g}"] = phi(d - z)
-            row[f"p2_{r:g}_{dl:g}"] = p_detect_2d(d, alpha)
+            row[f"p_{r:g}_{dl:g}"] = p
+            row[f"p2_{r:g}_{dl:g}"] = p2
         out.append(row)
     return out
 
