@@ -1095,17 +1095,23 @@ class RoverIsolator:
         track left the level by at least ``hold_side_sigmas`` x σ(30 s) (fdi/level.py's
         ``new_level``; 1 x passed the end of two small missed ramps on, but also the 3 epochs
         of a 1.69 m burst before the calibration: docs/evaluation.md, fourth pass), and the
-        fix is within half that departure of it and within
-        ``hold_exit_sigmas`` of the drift σ at the level's age. It only chooses what is passed
-        on (the caller's state goes on as for a replacement), so a jump that happens to land
-        there costs that epoch the raw fix, never more."""
+        fix is within :data:`BACK_AT_OLD_FRAC` of that departure of it and within
+        ``hold_exit_sigmas`` of the drift σ at the level's age. The σ are the drift test's
+        :attr:`~fdi.drift.DriftTest.working_sigmas`: while it calibrates, from its provisional
+        σ on (D7), those instead of the wide configured ones, whose σ(30 s) of 0.9 m asked a
+        missed ramp for 1.8 m before its end was seen as a return (`dgps` 1 Hz seed 9001: a
+        0.039 m/s ramp's 1.4 m step back at 134 s held, 1.86 against 0.21 m raw; 1.5 x instead
+        of 2 x passed ramps' first fixes on at their start: docs/evaluation.md, fifteenth
+        pass). It only chooses what is passed on (the caller's state goes on as for a
+        replacement), so a jump that happens to land there costs that epoch the raw fix,
+        never more."""
         drift, hp = self._drift, self._hold_p
         assert drift is not None and hp is not None
         ref = drift.at_or_before(t_s)
         if ref is None:
             return None
         r_t, (re_, rn), _ = ref
-        sig = drift.sigmas
+        sig = drift.working_sigmas
         s_side = hp.side_sigmas * sigma_at(30.0, hp.horizons_s, sig)
         for t_o, (oe, on) in drift.levels_between(r_t - LEVEL_KEEP_S, r_t - 20.0):
             e_track = math.hypot(re_ - oe, rn - on)

@@ -374,3 +374,34 @@ def test_a_slow_hold_does_not_take_a_drifted_ramp_for_a_level_minutes_old() -> N
     during = [e["reason"] for e in eps if 37004.0 <= e["utc"] % 86400 < 37060.0]
     assert not any("new_level" in r for r in during), during
     assert m.clean_far_flagged == 0, m.clean_far_flagged
+
+
+def test_a_missed_ramp_s_end_before_the_calibration_is_judged_with_the_provisional_sigma(
+) -> None:
+    """dgps 1 Hz seed 9001, the default: a 0.039 m/s ramp (88-134 s, under what the bullets
+    ask for) passed unflagged, and at its end the fixes stepped back 1.4 m to the level before
+    it. That was after the drift test's provisional σ (120 s) but before its calibration
+    (300 s), and the step back's older-level test measured the track's departure against the
+    configured σ(30 s) of 0.9 m (1.8 m asked): the return was replaced by the ramp's track
+    and then held, 1.86 against 0.21 m raw over the 10 s after. The test now uses the
+    provisional σ (fdi/drift.py, working_sigmas); without one (``drift_precal_s = 0``) the
+    event is worse than raw again."""
+    def ramp(cfg: Any) -> tuple[Any, dict[str, Any]]:
+        eps, truth = replay(cfg, scenario("dgps", 9001, 1.0))
+        ev = _event(measure(eps, truth).events, "ramp", 36088.0, 0.5)
+        (end,) = [e for e in eps if abs(e["utc"] % 86400 - 36134.0) < 0.01]
+        return ev, end
+
+    cfg = load_config("rover")
+    ev, end = ramp(cfg)
+    assert not ev.detected  # under the bullets: nothing is asked of the ramp itself
+    assert ev.after_out_rms_m <= ev.after_raw_rms_m + 1e-9, (ev.after_out_rms_m,
+                                                             ev.after_raw_rms_m)
+    assert end["fault"] and "step_back" in end["reason"], end["reason"]
+    assert abs(end["lat"] - end["raw_lat"]) < 1e-9 and abs(end["lon"] - end["raw_lon"]) < 1e-9
+    det = dataclasses.replace(cfg.rover.detector, drift_precal_s=0.0)
+    off = dataclasses.replace(cfg, rover=dataclasses.replace(cfg.rover, detector=det))
+    ev, end = ramp(off)
+    assert ev.after_out_rms_m > ev.after_raw_rms_m + 0.5, (ev.after_out_rms_m,
+                                                           ev.after_raw_rms_m)
+    assert "step_back" not in end["reason"], end["reason"]
