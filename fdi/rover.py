@@ -80,6 +80,13 @@ DOPPLER_PRIOR_N = 5
 # Epochs (beyond hold_exit_s) a step back to the level before a remembered step must stay
 # before the receiver is restarted on: more than a 2-epoch burst that happens to reverse it.
 STEP_END_EPOCHS = 3
+# No slow fault moves the Doppler-free value faster than this (m/s; the ramps of issue 13 run
+# at 0.02-0.3 m/s): a drift fault whose value stepped since the previous epoch by more than
+# this rate plus hold_exit_sigmas of the drift σ over the interval is a step, and its hold an
+# abrupt one (`multipath` 5 Hz seed 12004: a 0.7 m multipath step's end that only the drift
+# and Doppler tests flagged was held as a slow fault, 20 s of track and alarm, 48 clean epochs
+# flagged; docs/evaluation.md, fifteenth pass).
+SLOW_MAX_MPS = 1.0
 _new = tuple.__new__
 
 
@@ -641,8 +648,10 @@ class RoverIsolator:
         # A drift fault that stepped since the previous epoch (not a ramp) counts too.
         back = False
         back_level: float | None = None  # the older level it stepped back to
+        stepped = (drift_fault and b is not None and drift is not None
+                   and self._is_step(fix.t_s, b, prev_b, prev_bt))
         if (b is not None and drift is not None
-                and (abrupt or (drift_fault and self._is_step(fix.t_s, b, prev_b, prev_bt)))
+                and (abrupt or stepped)
                 and not quality and not stale_fault):
             back = self._stepped_back and raw_consistent
             if not back:
@@ -666,8 +675,11 @@ class RoverIsolator:
                      or self._consec >= p.max_consecutive)
                 and self._enter_hold(
                     fix.t_s, dres if drift_fault else None, "+".join(reasons),
-                    slow=stale_fault or (drift_fault and not abrupt and dres is not None
-                                         and dres.horizon_s > 1.0))):
+                    slow=stale_fault or (
+                        drift_fault and not abrupt and dres is not None
+                        and dres.horizon_s > 1.0
+                        and not (stepped and self._is_step(fix.t_s, b, prev_b, prev_bt,
+                                                           SLOW_MAX_MPS))))):
             return self._hold_step(fix, z, r, d, v, b, stale, dt, t)
         # Isolation: replace the faulty fix by its prediction before the filter update (with
         # R inflated by replaced_r_factor: a prediction is not a measurement).
@@ -1032,16 +1044,19 @@ class RoverIsolator:
             drift.set_quantum(max(q[0], q[1]))
 
     def _is_step(self, t_s: float, b: tuple[float, float],
-                 prev: tuple[float, float] | None, prev_t: float) -> bool:
+                 prev: tuple[float, float] | None, prev_t: float,
+                 rate_mps: float = 0.0) -> bool:
         """Did the fix's Doppler-free value step from the previous epoch's (``prev`` at
-        ``prev_t``) by more than ``hold_exit_sigmas`` of the drift σ over the interval? (A ramp
-        moves a little every epoch.)"""
+        ``prev_t``) by more than ``hold_exit_sigmas`` of the drift σ over the interval (and,
+        with ``rate_mps``, that rate times the interval more)? (A ramp moves a little every
+        epoch.)"""
         drift = self._drift
         assert drift is not None
         if prev is None:
             return False
-        return math.hypot(b[0] - prev[0], b[1] - prev[1]) > self.p.hold_exit_sigmas * sigma_at(
-            t_s - prev_t, drift.horizons, drift.sigmas)
+        dt = t_s - prev_t
+        return math.hypot(b[0] - prev[0], b[1] - prev[1]) > rate_mps * dt + (
+            self.p.hold_exit_sigmas * sigma_at(dt, drift.horizons, drift.sigmas))
 
     def _near(self, b: tuple[float, float], b0: tuple[float, float], age: float) -> bool:
         """``b`` within ``hold_exit_sigmas`` of the drift σ at ``age`` (s) of ``b0``: still
