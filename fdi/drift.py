@@ -48,12 +48,13 @@ capped by (D5) (:func:`concave_cap`), and is frozen for good. Until then, with
 with k = ``precal_factor`` the margin for a short sample (from 120 s of fixes σ(10 s) came
 out up to 1.71 × below the 300 s value on 120 runs of ``sim rover-harness``, σ(100 s) 2.18 ×).
 It only ever tightens the configured σ, and it is used for the watched horizon's statistic
-(``g_watch``, a flag) and for one choice of what is passed on (:attr:`DriftTest.working_sigmas`:
-the isolator's step back to an older level, ``fdi/rover.py``); the tests that hold a fix or keep
-it out of the references keep the configured σ, so the calibration's sample is what it would
-have been (used everywhere, the provisional σ kept long excursions out of it and σ(100 s) came
-out 15 % lower; used for the hold too, the ends of two missed ramps on `multipath` seeds 6002
-and 10001 came out worse than the receiver: docs/evaluation.md, fifteenth pass).
+(``g_watch``, a flag) and for the isolator's step back to an older level
+(:attr:`DriftTest.working_sigmas`, ``fdi/rover.py``: what is passed on when the fixes return,
+and where a hold after it starts from); the tests that flag a fix, hold it or keep it out of
+the references keep the configured σ, so the calibration's sample is what it would have been
+(used everywhere, the provisional σ kept long excursions out of it and σ(100 s) came out 15 %
+lower; used for the hold too, four events on `multipath` seeds 6002 and 10001 came out
+further from the truth than the receiver by more: docs/evaluation.md, fifteenth pass).
 
 The calibration proper is a sample too: over 300 s there are about 2·(300 − H)/H independent
 H-long differences (two axes), 58 at 10 s but 18 at 30 s and 4 at 100 s, and a median of 18
@@ -275,10 +276,11 @@ class DriftTest:
 
     @property
     def working_sigmas(self) -> tuple[float, ...]:
-        """The σ a choice of what is passed on may use: the provisional σ (D7, with the
-        quantum's share D6) while calibrating, once it exists; else :attr:`sigmas`. Never
-        wider than :attr:`sigmas` (D7 only tightens the configured σ). Nothing that decides
-        what becomes a reference may use it (the calibration's sample, above)."""
+        """The σ of the isolator's step back to an older level: the provisional σ (D7, with
+        the quantum's share D6) while calibrating, once it exists; else :attr:`sigmas`. Never
+        wider than :attr:`sigmas` (D7 only tightens the configured σ). The tests that flag a
+        fix, hold it or keep it out of the references use :attr:`sigmas` (the calibration's
+        sample, above)."""
         prov = self._prov
         if prov is None:
             return self.sigmas
