@@ -138,7 +138,8 @@ class RoverDetectorParams:
     drift_sigma_m: tuple[float, ...] = (0.3, 0.4, 0.6, 0.9, 1.4)
     drift_calibrate_s: float = field(default=300.0, metadata={"ge": 0.0})  # 0: as configured
     # A provisional calibration after drift_precal_s (0: none): the same robust estimate x
-    # drift_prefactor, never wider than drift_sigma_m, until the calibration proper.
+    # drift_prefactor, never wider than drift_sigma_m, until the calibration proper; estimated
+    # again every 10 s, the factor shrinking as 1 + (f - 1) x sqrt(drift_precal_s / elapsed).
     drift_precal_s: float = field(default=120.0, metadata={"ge": 0.0})
     drift_prefactor: float = field(default=2.0, metadata={"ge": 1.0})
     # The calibration at start never goes below this fraction of drift_sigma_m: 0.2 for the

@@ -136,8 +136,8 @@ def test_the_long_horizons_carry_the_calibration_s_own_uncertainty() -> None:
 
 def test_a_provisional_calibration_sharpens_the_watched_horizon_only() -> None:
     """After precal_s the watched horizon's statistic uses the same robust estimate x
-    precal_factor (never wider than configured); the σ that hold or withhold fixes stay as
-    configured until the calibration proper at calibrate_s."""
+    precal_factor (never wider than configured; at precal_s itself exactly that); the σ that
+    hold or withhold fixes stay as configured until the calibration proper at calibrate_s."""
     rng = np.random.default_rng(5)
     dt = 0.2
     err = _walk(rng, 2000, dt, tau=60.0, sigma=0.2)
@@ -149,24 +149,51 @@ def test_a_provisional_calibration_sharpens_the_watched_horizon_only() -> None:
     for k in range(2000):
         t = k * dt
         b = (err[k, 0], err[k, 1])
-        if t in (100.0, 150.0, 250.0):  # a 0.5 m step against the references 10 s before
+        if k in (500, 601, 750, 1250):  # a 0.5 m step against the references 10 s before
             step = (b[0] + 0.5, b[1])
             r, r_off = test.test(t, step, (0.0, 0.0)), off.test(t, step, (0.0, 0.0))
             assert r.g == pytest.approx(r_off.g)  # the tests that hold fixes: unchanged
             if t < 120.0:
                 assert r.g_watch == pytest.approx(r_off.g_watch)
-            else:  # 2 x the 120 s calibration's σ(10 s), itself under 0.5
+            else:  # sharpened: at most 2 x a calibration's σ(10 s), itself under 0.5
+                assert r.g_watch > 2.0 * r_off.g_watch
+            if k == 601:  # the first provisional σ: 2 x the 120 s calibration's σ(10 s)
                 ref = test.at_or_before(t - 10.0)
                 assert ref is not None
                 size = math.hypot(step[0] - ref[1][0], step[1] - ref[1][1])
                 assert r.g_watch == pytest.approx(size / (2.0 * plain.sigmas[2]), rel=0.01)
-                assert r.g_watch > 2.0 * r_off.g_watch
         for d in (test, plain, off):
             d.commit(t, b, (0.0, 0.0))
         if t < 299.0:
             assert test.sigmas == configured and not test.calibrated
     assert plain.calibrated and plain.sigmas[2] < 0.5
     assert test.calibrated and test.sigmas == off.sigmas  # the same sample, the same σ
+
+
+def test_the_provisional_calibration_s_margin_shrinks_as_its_sample_grows() -> None:
+    """(D7) is estimated again every PRECAL_EVERY_S on every difference collected so far,
+    its factor 1 + (k0 - 1)·sqrt(precal_s / T) after T seconds: 2.0 at 120 s, about 1.63
+    near 300 s; dropped at the calibration proper."""
+    rng = np.random.default_rng(9)
+    dt = 0.2
+    err = _walk(rng, 1600, dt, tau=60.0, sigma=0.2)
+    test = DriftTest(H[:4], (1.0,) * 4, 0.0, calibrate_s=300.0, floor_frac=0.02,
+                     watch_s=10.0, precal_s=120.0, precal_factor=2.0)
+    seen: list[tuple[float, float]] = []  # (seconds collected, factor) at each estimate
+    prov = None
+    for k in range(1600):
+        test.commit(k * dt, (err[k, 0], err[k, 1]), (0.0, 0.0))
+        if test._prov is not prov and test._prov is not None:
+            prov = test._prov
+            # the same sample at factor 1: the ratio is the factor (nothing here is capped
+            # by the configured σ or the floor, and D5 scales with it)
+            unit = test._estimate(1.0, provisional=True)
+            seen.append((k * dt, prov[2] / unit[2]))
+    assert test.calibrated and test._prov is None
+    assert len(seen) >= 17 and seen[0][0] == pytest.approx(120.0)
+    for t, factor in seen:
+        assert factor == pytest.approx(1.0 + math.sqrt(120.0 / t), rel=1e-9), (t, factor)
+    assert seen[0][1] == pytest.approx(2.0) and seen[-1][1] < 1.65
 
 
 HP = HoldParams(H, SIG, 0.0, 0.0, exit_sigmas=3.0, side_sigmas=2.0, exit_lag_s=1.0,
