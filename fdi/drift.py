@@ -187,10 +187,11 @@ class DriftTest:
         self.margin_min_h = margin_min_h
         self.calibrated = calibrate_s <= 0.0
         self._cal_until: float | None = None
+        # Per horizon, the differences collected since the last estimate (_cal) and those
+        # before it, sorted (_cal_sorted): each estimate sorts only the new ones and merges
+        # (Timsort merges two sorted runs in one linear pass). Sorting all of them every
+        # PRECAL_EVERY_S cost 7 % of the throughput at 10 Hz (bench --only against).
         self._cal: list[array[float]] = [array("d") for _ in self.horizons]
-        # The differences estimated on so far, sorted (each estimate sorts only the new ones
-        # and merges: Timsort merges two sorted runs in one linear pass). Sorting all of them
-        # every PRECAL_EVERY_S cost 7 % of the throughput at 10 Hz (bench --only against).
         self._cal_sorted: list[list[float]] = [[] for _ in self.horizons]
 
     def reset(self) -> None:
@@ -255,12 +256,12 @@ class DriftTest:
         return concave_cap(self.horizons, out)
 
     def _sorted_cal(self, j: int) -> list[float]:
-        """The differences collected at horizon ``j``, ascending."""
-        done = self._cal_sorted[j]
-        new = self._cal[j][len(done):]
+        """Every difference collected at horizon ``j``, ascending."""
+        new = self._cal[j]
         if new:
-            done = self._cal_sorted[j] = sorted(done + sorted(new))
-        return done
+            self._cal_sorted[j] = sorted(self._cal_sorted[j] + sorted(new))
+            del new[:]
+        return self._cal_sorted[j]
 
     def _calibrate_step(self, t: float, b: tuple[float, float]) -> None:
         if self._cal_until is None:
@@ -308,8 +309,7 @@ class DriftTest:
         if prov is None:
             return self.sigmas
         qv = self.quantum * self.quantum / 6.0
-        return tuple(min(s, math.sqrt(w * w + qv)) for w, s in zip(prov, self.sigmas,
-                                                                   strict=True))
+        return tuple(math.sqrt(w * w + qv) for w in prov)
 
     def forget_after(self, t: float) -> None:
         """Drop the references newer than ``t`` (a fault may have been building since)."""

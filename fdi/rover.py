@@ -649,10 +649,8 @@ class RoverIsolator:
         # A drift fault that stepped since the previous epoch (not a ramp) counts too.
         back = False
         back_level: float | None = None  # the older level it stepped back to
-        stepped = (drift_fault and b is not None and drift is not None
-                   and self._is_step(fix.t_s, b, prev_b, prev_bt))
         if (b is not None and drift is not None
-                and (abrupt or stepped)
+                and (abrupt or (drift_fault and self._is_step(fix.t_s, b, prev_b, prev_bt)))
                 and not quality and not stale_fault):
             back = self._stepped_back and raw_consistent
             if not back:
@@ -679,8 +677,7 @@ class RoverIsolator:
                     slow=stale_fault or (
                         drift_fault and not abrupt and dres is not None
                         and dres.horizon_s > 1.0
-                        and not (stepped and self._is_step(fix.t_s, b, prev_b, prev_bt,
-                                                           SLOW_MAX_MPS))))):
+                        and not self._is_step(fix.t_s, b, prev_b, prev_bt, SLOW_MAX_MPS)))):
             return self._hold_step(fix, z, r, d, v, b, stale, dt, t)
         # Isolation: replace the faulty fix by its prediction before the filter update (with
         # R inflated by replaced_r_factor: a prediction is not a measurement).
