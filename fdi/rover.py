@@ -667,7 +667,7 @@ class RoverIsolator:
                 if self._step_end(fix.t_s, b, rev):
                     return self._resume(fix, z, r, d, v, b, t, "step_end")
                 back = True
-            elif self._consec == 0 and (abrupt or drift_fault):
+            elif self._consec == 0 and (abrupt or drift_fault or doppler_fault):
                 self._note_step(fix.t_s, b, gate_h)
         if (b is not None and v is not None and drift is not None and not quality
                 and rev is None and (stale_fault or (drift_fault and not abrupt and not back)
@@ -723,6 +723,13 @@ class RoverIsolator:
         # on: the Doppler chain is intact, so the drift test's levels are kept (rebased) and a
         # later return to them is still known as one (at 10 Hz the 5 replacements are 0.5 s,
         # under the hold_exit_s + STEP_END_EPOCHS a step's end needs).
+        if rev is not None and have_doppler:
+            # The same at the end of a remembered step, whose fixes every step back passed
+            # on: the restart is the alarm's, without withholding them (at 10 Hz the alarm
+            # stopped the output for 0.5 s at such a step's end while the step back was
+            # still being confirmed, hold_exit_s + STEP_END_EPOCHS).
+            self._restart(z, r, keep_levels=True)
+            return self._replace(z, t, "+".join(reasons) + "+step_back")
         return self._raise_alarm(z, r, "+".join(reasons), t, keep_levels=back and have_doppler)
 
     def _step_zones(
