@@ -87,6 +87,12 @@ STEP_END_EPOCHS = 3
 # and Doppler tests flagged was held as a slow fault, 20 s of track and alarm, 48 clean epochs
 # flagged; docs/evaluation.md, fifteenth pass).
 SLOW_MAX_MPS = 1.0
+# A step is the reverse of a remembered one within 0.4 x its size, or within this many σ of
+# the difference of two one-epoch steps (√2 x the calibrated drift σ at its shortest horizon)
+# up to 0.6 x its size, whichever is wider: for small steps the epoch's noise is more than
+# 0.4 x the step (`multipath` 1 Hz seed 9001: a 0.55 m step's end 0.28 m from its reverse was
+# held 8 s as a new fault, 0.23 m worse than raw; docs/evaluation.md, sixteenth pass).
+REVERSAL_FLOOR_SIGMAS = 3.0
 _new = tuple.__new__
 
 
@@ -974,8 +980,10 @@ class RoverIsolator:
 
     def _passed_reversal(self, t_s: float, b: tuple[float, float], dt: float) -> None:
         """A remembered step that ended with no fault to show it: fixes that pass the tests
-        reverse it (this epoch's step from the track within 0.4 x its size, as
-        :meth:`_step_back_to` asks) and stay there, passing, for ``hold_exit_s`` (within
+        reverse it (this epoch's step from the track within 0.4 x its size: not the noise
+        floor :meth:`_step_back_to` adds, with which passing fixes forgot the 0.55 m step of
+        ``multipath`` 1 Hz seed 9001 before its end) and stay there, passing, for
+        ``hold_exit_s`` (within
         ``hold_exit_sigmas`` of the drift σ of where they began). The step is then
         forgotten. Kept, a later step that happened to be its reverse was taken for its end
         (``multipath`` 1 Hz seed 2001, offline-calibrated: a 0.79 m multipath step passed on
@@ -1071,13 +1079,23 @@ class RoverIsolator:
         return math.hypot(b[0] - b0[0], b[1] - b0[1]) <= self.p.hold_exit_sigmas * sigma_at(
             max(age, 1e-3), drift.horizons, drift.sigmas)
 
+    def _reversal_floor(self) -> float:
+        """The noise floor of :meth:`_Step.reversed_by` (m): none until the drift test has
+        calibrated (its configured σ are wide starting values)."""
+        drift = self._drift
+        assert drift is not None
+        if not drift.calibrated:
+            return 0.0
+        return REVERSAL_FLOOR_SIGMAS * math.sqrt(2.0) * drift.sigmas[0]
+
     def _step_back_to(self, t_s: float, b: tuple[float, float]) -> float | None:
         """Is the fix back at the level before a remembered step that the track accepted?
         The time of that step's reference, if so.
 
         The track was seen at the stepped level after it (:meth:`_track_at`: the step was
         accepted, not replaced). Then either this epoch's step from the track is the
-        remembered step reversed, within 0.4 x its size (both steps are measured over an
+        remembered step reversed, within 0.4 x its size or the epoch's noise
+        (:meth:`_reversal_floor`, up to 0.6 x its size; both steps are measured over an
         epoch, so the slow DGPS error between them cancels out); or the track is within half
         the step of the stepped level and the fix is at least 0.6 x the step away from it and
         twice as close to the level before. A jump that happens to land there costs that
@@ -1090,11 +1108,12 @@ class RoverIsolator:
             return None
         r_t, (ce, cn), _ = ref
         je, jn = b[0] - ce, b[1] - cn  # this epoch's step from the track
+        floor = self._reversal_floor()
         for st in reversed(self._steps):
             t0, b0e, b0n, se, sn = st.t0, st.b0e, st.b0n, st.se, st.sn
             if t_s - t0 > self.p.step_pair_s or r_t <= t0 or not st.accepted:
                 continue  # too old, or the track was not seen at the stepped level
-            if st.reversed_by(je, jn):
+            if st.reversed_by(je, jn, floor):
                 return t0  # the reverse of the remembered step (slow drift cancels out)
             size = math.hypot(se, sn)
             if math.hypot(ce - b0e - se, cn - b0n - sn) > 0.5 * size:
@@ -1325,10 +1344,14 @@ class _Step:
     sn: float
     accepted: bool = False  # the track was seen nearer the stepped level (_track_at)
 
-    def reversed_by(self, je: float, jn: float) -> bool:
+    def reversed_by(self, je: float, jn: float, floor: float = 0.0) -> bool:
         """A step from the track of (``je``, ``jn``) is this step reversed, within 0.4 x its
-        size (both are measured over an epoch, so the slow DGPS error between them cancels)."""
-        return math.hypot(je + self.se, jn + self.sn) <= 0.4 * math.hypot(self.se, self.sn)
+        size or ``floor`` (both are measured over an epoch, so the slow DGPS error between
+        them cancels; the epoch's own noise does not), but never 0.6 x its size: a reversal
+        moves at least 0.4 x the step back."""
+        size = math.hypot(self.se, self.sn)
+        return math.hypot(je + self.se, jn + self.sn) <= max(0.4 * size,
+                                                            min(floor, 0.6 * size))
 
 
 @dataclass(slots=True)
