@@ -728,12 +728,10 @@ class RoverIsolator:
         # A run of steps back (the receiver's fixes passed on) that the replacements ran out
         # on: the Doppler chain is intact, so the drift test's levels are kept (rebased) and a
         # later return to them is still known as one (at 10 Hz the 5 replacements are 0.5 s,
-        # under the hold_exit_s + STEP_END_EPOCHS a step's end needs).
+        # under the hold_exit_s + STEP_END_EPOCHS a step's end needs). At the end of a
+        # remembered step (rev) the restart is the same, but the fix every step back passed
+        # on is not withheld by an alarm (it stopped the output for 0.5 s at 10 Hz).
         if rev is not None and have_doppler:
-            # The same at the end of a remembered step, whose fixes every step back passed
-            # on: the restart is the alarm's, without withholding them (at 10 Hz the alarm
-            # stopped the output for 0.5 s at such a step's end while the step back was
-            # still being confirmed, hold_exit_s + STEP_END_EPOCHS).
             self._restart(z, r, keep_levels=True)
             return self._replace(z, t, "+".join(reasons) + "+step_back")
         return self._raise_alarm(z, r, "+".join(reasons), t, keep_levels=back and have_doppler)
@@ -983,11 +981,11 @@ class RoverIsolator:
         reverse it (this epoch's step from the track within 0.4 x its size: not the noise
         floor :meth:`_step_back_to` adds, with which passing fixes forgot the 0.55 m step of
         ``multipath`` 1 Hz seed 9001 before its end) and stay there, passing, for
-        ``hold_exit_s`` (within
-        ``hold_exit_sigmas`` of the drift σ of where they began). The step is then
-        forgotten. Kept, a later step that happened to be its reverse was taken for its end
-        (``multipath`` 1 Hz seed 2001, offline-calibrated: a 0.79 m multipath step passed on
-        as a step back, and its own end held 7 s as a new fault, 0.73 m against 0.22 m raw).
+        ``hold_exit_s`` (within ``hold_exit_sigmas`` of the drift σ of where they began). The
+        step is then forgotten. Kept, a later step that happened to be its reverse was taken
+        for its end (``multipath`` 1 Hz seed 2001, offline-calibrated: a 0.79 m multipath step
+        passed on as a step back, and its own end held 7 s as a new fault, 0.73 m against
+        0.22 m raw).
         Forgotten at the first passing epoch, a step whose end then became a fault was no
         longer matched (the same seed at 10 Hz: 0.31 against 0.29 m raw)."""
         drift, p = self._drift, self.p
