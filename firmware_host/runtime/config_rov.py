@@ -90,6 +90,15 @@ class ArduSubConfig:
         default=5, metadata={"ge": 1, "le": 8, "doc": "rc_override: RCMAP_FORWARD"})
     rc_lateral_channel: int = field(
         default=6, metadata={"ge": 1, "le": 8, "doc": "rc_override: RCMAP_LATERAL"})
+    handback_deg: float = field(
+        default=8.0, metadata={"ge": 0.0, "le": 90.0, "doc": "deg: while the heading is "
+                               "substituted, every other heading the link carries (EKF yaw, "
+                               "AHRS2, the raw compass) this far from the substitute: yaw "
+                               "handed back to the pilot (0: off)"})
+    substitute_max_s: float = field(
+        default=120.0, metadata={"ge": 0.0, "le": 3600.0, "doc": "s: a substitute that is gyro "
+                                 "dead reckoning (no compensated compass) is trusted this "
+                                 "long, then yaw is handed back to the pilot (0: no limit)"})
 
     def __post_init__(self) -> None:
         bad = [m for m in self.modes if m not in ARDUSUB_YAW_MODES]
