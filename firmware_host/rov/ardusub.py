@@ -361,6 +361,7 @@ class RovAutopilotLoop:
         self._dr_s = 0.0
         self.handbacks = 0
         self.handback_reason = ""
+        self._pulled = False  # this fault's other headings left the judged one (see above)
         self._compass_hits = 0
         self.compass_slow_hz: float | None = None  # said once: the compass is too slow
 
@@ -513,12 +514,14 @@ class RovAutopilotLoop:
         self._ahrs2_yaw = self._compass_yaw = None
         return out
 
-    def _supervise(self, dec: HeadingDecision, yaw_att: float | None, dt: float) -> bool:
+    def _supervise(self, dec: HeadingDecision, meas: float | None, yaw_att: float | None,
+                   dt: float) -> bool:
         """A substitute may never steer the vehicle further off than no fault tolerance
         would: while the heading is substituted, it is not trusted (True: hand the yaw back to
         the pilot, latched until the compass is taken back) when every other heading the link
-        carries (at least one, agreeing with each other) is more than ``handback_deg`` from
-        it, or when it has been gyro dead reckoning for ``substitute_max_s`` (its error grows
+        carries and the judged one (not when it is stuck) agree with each other within
+        ``handback_deg`` and are all more than that from it (at least one besides the judged
+        heading), or when it has been gyro dead reckoning for ``substitute_max_s`` (its error grows
         with the gyro's bias and scale errors, and no compass anchors it)."""
         a = self.acfg
         others = self._others(yaw_att)
@@ -529,16 +532,26 @@ class RovAutopilotLoop:
                                             "FDI heading: compass back, steering resumes")
             self._dr_s = 0.0
             self.handback_reason = ""
+            self._pulled = False
             return False
         if self.handback_reason:
             return True
+        if meas is not None and dec.kind != "stuck":
+            # The judged compass votes too, unless it is stuck. A magnetometer fault pulls the
+            # EKF's yaw and AHRS2 towards itself, slowly: once they have disagreed with the
+            # judged compass by half the gate during this fault, their agreement later says
+            # nothing (they may have followed it), and only the time bound is left.
+            if any(abs(wrap180(h - meas)) > 0.5 * a.handback_deg for _, h in others):
+                self._pulled = True
+            others = [] if self._pulled else [*others, (
+                "compass" if self.acfg.heading == "raw_compass" else "EKF yaw", meas)]
         w = self.ctl.heading.witness
         compensated = dec.source == "gyro" and w.fault and w.offset is not None
         self._dr_s = 0.0 if compensated else self._dr_s + dt
         reason = ""
         if a.substitute_max_s > 0.0 and self._dr_s > a.substitute_max_s + 1e-9:
             reason = f"dead reckoning for {self._dr_s:.0f} s"
-        elif a.handback_deg > 0.0 and others:
+        elif a.handback_deg > 0.0 and others and (len(others) > 1 or dec.kind == "stuck"):
             used = dec.heading_used
             offs = [(name, wrap180(h - used)) for name, h in others]
             agree = max(abs(wrap180(h1 - h2)) for _, h1 in others for _, h2 in others)
@@ -610,7 +623,7 @@ class RovAutopilotLoop:
             log.info("pilot yaw centred %.1f s: holding %.1f deg", self.acfg.pilot_release_s,
                      self.ctl.setpoint_deg)
         gate = self._gate()
-        if self._supervise(dec, yaw_att, dt) and gate == STEERING:
+        if self._supervise(dec, meas, yaw_att, dt) and gate == STEERING:
             gate = HANDBACK
         state = "pilot" if gate == STEERING and pilot_yaw else gate
         self._set_state(state)
