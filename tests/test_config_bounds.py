@@ -30,7 +30,8 @@ def _error(table: dict[str, Any]) -> ConfigError:
     with pytest.raises(ConfigError) as info:
         parse_bridge_file(table, "probe.toml")
     err = info.value
-    return err.errors[0] if hasattr(err, "errors") else err  # type: ignore[no-any-return]
+    errors: list[ConfigError] = getattr(err, "errors", [err])
+    return errors[0]
 
 
 @pytest.mark.parametrize(("table", "key"), [
@@ -195,7 +196,7 @@ def test_no_float_takes_a_value_beyond_its_ceiling(value: float) -> None:
 def test_no_positive_float_takes_a_denormal() -> None:
     """A key that must be positive (``gt``, or a floor ``ge`` > 0) refuses 1e-38 and 1e-300."""
     positive = [k for k, m in FLOAT_KEYS
-                if "gt" in m and m["gt"] >= 0.0 or "ge" in m and m["ge"] > 0.0]
+                if ("gt" in m and m["gt"] >= 0.0) or ("ge" in m and m["ge"] > 0.0)]
     assert len(positive) > 80
     assert [(k, v) for k in positive for v in (1e-38, 1e-300) if not _refused(k, v)] == []
 

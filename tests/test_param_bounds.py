@@ -142,6 +142,9 @@ def test_a_refused_set_changes_nothing_and_is_logged(tmp_path: Path,
            "stays in force" in caplog.text
     assert "PARAM_SET FDI_GATE_SIGMAS: expected 0.0 (off) or a number >= 1.0" in caplog.text
     assert store.set("FDI_ALPHA", 0.01) and store.set("FDI_GATE_SIGMAS", 0.0)  # the off value
+    # A bound as a ground station sends it (float32: 0.01 -> 0.0099999998) is the bound.
+    assert store.set("FDI_GATE_M", float(np.float32(0.01))) and store.get("FDI_GATE_M") == 0.01
+    assert not store.set("FDI_GATE_M", float(np.float32(0.0099)))
     assert "FDI_ALPHA = 0.01" in path.read_text() and changes[0] == ("FDI_ALPHA", 0.01)
 
 

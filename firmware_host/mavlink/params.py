@@ -28,6 +28,7 @@ import logging
 import math
 import os
 import re
+import struct
 import tempfile
 import threading
 from collections.abc import Callable, Mapping
@@ -45,6 +46,14 @@ PARAM_ID_MAX = 16
 _NAME = re.compile(r"^[A-Z0-9_]{1,16}$")
 
 OnChange = Callable[[str, float], None]
+
+
+def _float32(value: float) -> float:
+    """``value`` as MAVLink carries it (PARAM_SET.param_value is a float32)."""
+    try:
+        return float(struct.unpack("<f", struct.pack("<f", value))[0])
+    except OverflowError:
+        return math.copysign(math.inf, value)
 
 
 @dataclass(frozen=True)
@@ -276,6 +285,12 @@ class ParamStore:
             if spec is not None and spec.integer and math.isfinite(value):
                 value = float(round(value))
             why = "a known parameter" if spec is None else spec.refusal(value)
+            if why is not None and spec is not None and not spec.integer:
+                # A bound sent by a ground station arrives as its float32 (0.01 ->
+                # 0.0099999998): that is the bound, as the operator typed it.
+                for bound in (spec.min, spec.max):
+                    if math.isfinite(bound) and _float32(bound) == value:
+                        value, why = bound, spec.refusal(bound)
             if why is not None:
                 self.rejected += 1
                 in_force = self._values.get(name)
