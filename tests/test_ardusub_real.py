@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import random
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -246,3 +247,34 @@ def test_no_handback_while_the_compass_is_healthy() -> None:
                          p.send_ahrs2(0.0, 0.0, math.radians(truth + 0.5))])
         assert rec["ardusub"] == STEERING or t < 0.5
     assert loop.handbacks == 0 and len(out.commands) > 590
+
+
+def test_a_false_confirmation_on_a_healthy_compass_is_handed_back() -> None:
+    """The failure of the real ArduSub run, made on purpose: the gyro (ATTITUDE's rate) takes a
+    1 deg/s bias at 60 s while the vehicle holds 150 deg; the witness blames the compass, and
+    its substitute drifts with the gyro. The EKF's yaw (the judged heading) and AHRS2 agree
+    with each other and not with the substitute: the yaw goes back to the pilot before the
+    substitute is 10 deg off."""
+    out = _Out()
+    loop = RovAutopilotLoop(_cfg(heading="attitude", gyro="attitude"), None, output=out)
+    p = mio.MavPacker(1, 1)
+    confirmed_at: float | None = None
+    off = math.inf
+    rng = random.Random(7)
+    for k in range(1500):
+        t = k * 0.2
+        bias = 1.0 if t >= 60.0 else 0.0
+        yaw = 150.0 + rng.gauss(0.0, 0.05)  # a live EKF (an exact repeat is "stuck")
+        rec = loop.step([p.send_vehicle_heartbeat(mio.MAV_TYPE_SUBMARINE,
+                                                  mio.MAV_MODE_FLAG_SAFETY_ARMED, 19),
+                         p.send_attitude(int(t * 1000), 0.0, 0.0, math.radians(yaw),
+                                         (0.0, 0.0, math.radians(bias))),
+                         p.send_ahrs2(0.0, 0.0, math.radians(150.3))])
+        if rec["event"] == "confirmed" and confirmed_at is None:
+            confirmed_at = t
+        if rec["ardusub"] == HANDBACK:
+            off = abs((rec["heading_used"] - 150.0 + 180.0) % 360.0 - 180.0)
+            break
+    assert confirmed_at is not None and confirmed_at > 60.0
+    assert loop.handbacks == 1 and off < 10.0, off
+    assert "EKF yaw" in loop.handback_reason or "AHRS2" in loop.handback_reason
