@@ -143,6 +143,10 @@ def test_full_disk_under_out_and_record_keeps_gps_input_and_exits_0(tmp_path: Pa
         assert summary["runtime"]["stopped_by"] == "SIGTERM"
         assert summary["epochs"] >= n_sent
         epochs_file = summary["epochs_file"]
+        print(f"epochs_file {epochs_file}\nrecorder lost_records "
+              f"{summary['recorder']['lost_records']} write_errors "
+              f"{summary['recorder']['write_errors']}; summary.json "
+              f"{(out / 'summary.json').stat().st_size} bytes")
         assert epochs_file["write_errors"] > 0 and epochs_file["lost_lines"] > 0
         assert epochs_file["outages"] == 1  # full from t_full to the end: one outage
         recorder = summary["recorder"]
