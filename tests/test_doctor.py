@@ -46,9 +46,15 @@ def test_missing_device_and_bad_endpoint_fail(tmp_path: Path,
     assert main(["doctor", "--config", str(cfg)]) == 1
     out = capsys.readouterr().out
     problems = [line for line in out.splitlines() if line.startswith("PROBLEM")]
-    assert len(problems) == 2
-    assert "ttyUSB7 does not exist" in problems[0]
-    assert "notaport" in problems[1]
+    # the endpoint is refused where the file is loaded (issue C), naming the key and the value
+    assert len(problems) == 1
+    assert "rover.output.mavlink_url" in problems[0] and "notaport" in problems[0]
+    cfg = _rover_toml(tmp_path, str(tmp_path / "ttyUSB7"),
+                      '[rover.output]\nmavlink_url = "udpout:127.0.0.1:14550"\n')
+    assert main(["doctor", "--config", str(cfg)]) == 1
+    problems = [line for line in capsys.readouterr().out.splitlines()
+                if line.startswith("PROBLEM")]
+    assert len(problems) == 1 and "ttyUSB7 does not exist" in problems[0]
 
 
 def test_permission_problem_names_the_group() -> None:

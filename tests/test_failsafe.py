@@ -134,14 +134,14 @@ def test_rov_dropout_holds_then_neutral_then_resumes(
     cfg_file.write_text(
         "[rov]\nperiod_s = 0.2\ndropout_hold_s = 1.0\n[rov.link]\nwiring = \"rs232\"\n"
         f"protocol = \"{ROOT / 'config' / 'protocols' / 'outland1000.toml'}\"\n"
-        "[rov.link.port]\nurl = \"sim://rov\"\nbaudrate = 115200\n")
+        "[rov.link.port]\nurl = \"loop://\"\nbaudrate = 115200\n")  # the opener maps it
     seen: list[tuple[float, str, Any]] = []
 
     def on_epoch(rec: dict[str, Any]) -> None:
         seen.append((clock(), rec["action"], server.command))
 
     out = run_rov_bridge(cfg_file, clock=clock, sleep=clock.sleep,
-                         opener=sim_opener({"sim://rov": dev}), max_steps=200,
+                         opener=sim_opener({"loop://": dev}), max_steps=200,
                          on_epoch=on_epoch)
     # Telemetry frames stop during [20, 24) s of the vehicle's time.
     lost = [(t, a) for t, a, _ in seen if a in ("hold", "neutral") and 19.0 < t < 26.0]
