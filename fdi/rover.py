@@ -443,6 +443,16 @@ class RoverIsolator:
     # -------------------------------------------------------------- the step
 
     def step(self, fix: FixInput) -> Decision:
+        last_up = self._last_up
+        d = self._step(fix)
+        if d.action != "accept":
+            # The height a later 2D fix holds is the last one passed on, not a fix the tests
+            # refused (one 2 400 km off is 460 km below the frame's plane: a 2D fix after it
+            # took that height and the grey prediction sent the output to the antipode).
+            self._last_up = last_up
+        return d
+
+    def _step(self, fix: FixInput) -> Decision:
         p = self.p
         gate_h, gate_u = self._gates()
         t = _Tests(gate_h, gate_u, self._doppler_gate())
