@@ -337,7 +337,8 @@ def _float(text: str, name: str) -> float | None:
     if text.strip(_DECIMAL):  # a character other than digits, sign and point
         raise DecodeError("bad_field", f"{name}={text!r}")
     try:
-        return float(text)  # only digits, sign and point: finite, or a ValueError
+        return float(text)  # only digits, sign and point: a number (over 308 digits, inf:
+        # the ranges refuse it; MAX_LINE keeps a field far shorter), or a ValueError
     except ValueError as err:
         raise DecodeError("bad_field", f"{name}={text!r}") from err
 
