@@ -393,7 +393,7 @@ class DriftTest:
                     g_watch = sqrt((re * re + rn * rn) / (
                         sw * sw + self.quantum * self.quantum / 6.0 + dv * dv))
             found.append((g, h, i))
-        if not found:
+        if not found or g_max != g_max:  # g_max NaN: a value not finite reached (D2), no test
             return NO_TEST
         # The statistic is the maximum (D4); the reference reported with it is the *oldest*
         # one whose statistic is within 0.6 of it: a slow fault is seen about as strongly at

@@ -94,6 +94,9 @@ SLOW_MAX_MPS = 1.0
 # held 8 s as a new fault, 0.23 m worse than raw; docs/evaluation.md, sixteenth pass).
 REVERSAL_FLOOR_SIGMAS = 3.0
 _new = tuple.__new__
+# A GST σ at or above this is no error estimate (its square would not be a finite float): the
+# configured σ is used instead (`RoverIsolator._r`).
+_SD_MAX = math.sqrt(1.7976931348623157e308)
 
 
 # Bounds of the detector's parameters, in which it works as documented: the loader
@@ -403,7 +406,9 @@ class RoverIsolator:
 
     def _r(self, fix: FixInput) -> tuple[float, float, float]:
         sd = fix.sd_enu_m if self.p.use_gst else None
-        if sd is not None:
+        # A σ whose square is not a finite float (or NaN) is no error estimate: the configured
+        # σ then (the codec refuses such values; this keeps any caller's from overflowing).
+        if sd is not None and sd[0] < _SD_MAX and sd[1] < _SD_MAX and sd[2] < _SD_MAX:
             return (max(sd[0], 0.01) ** 2, max(sd[1], 0.01) ** 2, max(sd[2], 0.01) ** 2)
         s, su = self.p.sigma_m, self.p.sigma_up_m
         return (s * s, s * s, su * su)
@@ -413,6 +418,8 @@ class RoverIsolator:
             return None
         if fix.course_deg is None:
             return (0.0, 0.0) if fix.speed_mps < 0.05 else None
+        if not math.isfinite(fix.course_deg):  # no direction (the codec refuses it)
+            return None
         c = math.radians(fix.course_deg)
         return (fix.speed_mps * math.sin(c), fix.speed_mps * math.cos(c))
 
@@ -455,6 +462,16 @@ class RoverIsolator:
     # -------------------------------------------------------------- the step
 
     def step(self, fix: FixInput) -> Decision:
+        last_up = self._last_up
+        d = self._step(fix)
+        if d.action != "accept":
+            # The height a later 2D fix holds is the last one passed on, not a fix the tests
+            # refused (one 2 400 km off is 460 km below the frame's plane: a 2D fix after it
+            # took that height and the grey prediction sent the output to the antipode).
+            self._last_up = last_up
+        return d
+
+    def _step(self, fix: FixInput) -> Decision:
         p = self.p
         gate_h, gate_u = self._gates()
         t = _Tests(gate_h, gate_u, self._doppler_gate())

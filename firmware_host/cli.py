@@ -70,7 +70,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "fuzz": (
         "firmware_host.devtools.fuzz",
-        "seeded mutation fuzzer for the NMEA/Outland/MAVLink input",
+        "seeded mutation fuzzer for the NMEA/Outland/MAVLink input and the whole pipeline",
     ),
     "soak": (
         "firmware_host.devtools.soak",

@@ -17,11 +17,18 @@ Two layers, kept apart (pynmeagps style):
   errors.
 
 Units are in the field names: degrees, metres, metres per second, seconds of day (UTC).
+
+Numbers are taken as NMEA 0183 writes them (``x.x``: decimal digits with an optional sign
+and decimal point) and nothing else: exponent notation (``1e308``), ``nan``, ``inf``, blanks
+and ``_`` (all of which Python's ``float`` takes) are a ``bad_field``, in every numeric field,
+read or not (issue 43: a checksum-valid ``1e308`` reached the detector). Every field the
+bridge reads has a range (the ``MAX_*``/``*_M`` constants below); a field it does not read
+(magnetic variation and course, the GST error ellipse, GSA's satellite numbers, ZDA's local
+zone) is checked for form only: one receiver in the corpus sends magnetic variation 999.9.
 """
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -33,6 +40,19 @@ from fdi.errors import DecodeError
 KNOT_MPS = 1852.0 / 3600.0
 KMH_MPS = 1000.0 / 3600.0
 MAX_LINE = 120  # NMEA 0183 says 82 characters; receivers in the wild send a little more
+
+# The ranges of the numeric fields the bridge reads (a value outside is a ``bad_field``): wide
+# enough for any receiver's real output, narrow enough that no value reaches a math error.
+MAX_SPEED_KN = 1000.0  # the CoCom limit: a civil receiver gives no fix above 1 000 knots
+MAX_SPEED_KMH = MAX_SPEED_KN * 1.852
+MAX_SIGMA_M = 100_000.0  # GST error estimates (rms, sigma lat/lon/alt)
+MAX_DOP = 1000.0  # receivers without a fix send 99.9 or 99.99
+ALT_MIN_M, ALT_MAX_M = -12_000.0, 100_000.0  # below the deepest ocean .. the Karman line
+MAX_GEOID_SEP_M = 200.0  # the geoid is within -107 .. +86 m of the ellipsoid
+MAX_DGPS_AGE_S = 86_400.0
+MAX_STATION_ID = 1023  # GGA's differential station: 0000-1023
+MAX_SATS = 99
+_DECIMAL = "0123456789.+-"  # the characters of an NMEA number (``float`` checks its form)
 
 SUPPORTED = frozenset({"GGA", "RMC", "VTG", "GSA", "GST", "ZDA", "GLL", "HDT", "THS"})
 # Sentences pynmea2 does not know (THS) are split here; so is HDT, to keep the two alike.
@@ -310,31 +330,59 @@ def _xor128(data: bytes) -> int:
 
 
 def _float(text: str, name: str) -> float | None:
+    """A plain decimal number (NMEA's ``x.x``), or None for an empty field; DecodeError for
+    anything else: exponent notation, ``nan``, ``inf``, blanks, ``_`` (module doc)."""
     if text == "":
         return None
+    if text.strip(_DECIMAL):  # a character other than digits, sign and point
+        raise DecodeError("bad_field", f"{name}={text!r}")
     try:
-        value = float(text)
+        return float(text)  # only digits, sign and point: a number (over 308 digits, inf:
+        # the ranges refuse it; MAX_LINE keeps a field far shorter), or a ValueError
     except ValueError as err:
         raise DecodeError("bad_field", f"{name}={text!r}") from err
-    if not math.isfinite(value):
-        raise DecodeError("bad_field", f"{name}={text!r}")
-    return value
 
 
-def _nonneg(text: str, name: str) -> float | None:
+def _ranged(text: str, name: str, lo: float, hi: float) -> float | None:
+    """:func:`_float` within ``[lo, hi]``."""
     value = _float(text, name)
-    if value is not None and value < 0:
+    if value is not None and not lo <= value <= hi:
         raise DecodeError("bad_field", f"{name}={text!r}")
     return value
+
+
+def _nonneg(text: str, name: str, hi: float) -> float | None:
+    """:func:`_float` within ``[0, hi]``, ``-0`` read as 0 (a speed of "-0.000" is not passed
+    on)."""
+    value = _ranged(text, name, 0.0, hi)
+    return None if value is None else value + 0.0  # -0.0 + 0.0 is 0.0; nothing else changes
 
 
 def _int(text: str, name: str) -> int | None:
+    """A plain integer (digits, perhaps a sign), or None for an empty field."""
     if text == "":
         return None
+    if text.strip(_DECIMAL):
+        raise DecodeError("bad_field", f"{name}={text!r}")
     try:
         return int(text)
     except ValueError as err:
         raise DecodeError("bad_field", f"{name}={text!r}") from err
+
+
+def _form(text: str, name: str) -> None:
+    """A field the bridge does not read: a plain decimal number or empty (module doc)."""
+    if text:
+        _float(text, name)
+
+
+def _station(text: str) -> str | None:
+    """GGA's differential station id, kept as text: digits, 0000-1023."""
+    if text == "":
+        return None
+    if not text.isdigit() or int(text) > MAX_STATION_ID:
+        raise DecodeError("bad_field", f"dgps_station={text!r}")
+    return text
 
 
 # The time, date and position conversions are pure and a receiver repeats their fields within
@@ -348,6 +396,9 @@ def _time(text: str) -> float | None:
     if text == "":
         return None
     if len(text) < 6 or not text[:6].isdigit():
+        raise DecodeError("bad_field", f"time={text!r}")
+    frac = text[6:]  # "" or "." and digits (no exponent: "100000.5e-1" is not 10:00:00.05)
+    if frac and not (frac[0] == "." and (len(frac) == 1 or frac[1:].isdigit())):
         raise DecodeError("bad_field", f"time={text!r}")
     hh, mm = int(text[0:2]), int(text[2:4])
     try:
@@ -380,8 +431,9 @@ def _latlon_of(value: str, hemi: str, is_lat: bool) -> float | None:
     if value == "" or hemi == "":
         raise DecodeError("bad_field", f"{name}={value!r},{hemi!r}")
     deg_digits = 2 if is_lat else 3
-    head, _, _ = value.partition(".")
-    if len(head) != deg_digits + 2 or not head.isdigit():
+    head, _, decimals = value.partition(".")
+    if len(head) != deg_digits + 2 or not head.isdigit() or (
+            decimals and not decimals.isdigit()):  # "3201.5e-1" is not 32 deg 0.15'
         raise DecodeError("bad_field", f"{name}={value!r}")
     try:
         degrees = int(value[:deg_digits])
@@ -411,7 +463,8 @@ def _position(lat: str, ns: str, lon: str, ew: str) -> tuple[float | None, float
     The usual ``ddmm.mmmm,N,dddmm.mmmm,E`` is converted here with the same operations as
     :func:`_latlon_of` (tested against it); anything else goes to it."""
     if (lat[4:5] == "." and lon[5:6] == "." and ns in _NS and ew in _EW
-            and lat[:4].isdigit() and lon[:5].isdigit()):
+            and lat[:4].isdigit() and lon[:5].isdigit() and lat[5:].isdigit()
+            and lon[6:].isdigit()):
         try:
             lat_min, lon_min = float(lat[2:]), float(lon[3:])
         except ValueError:
@@ -524,7 +577,6 @@ def _split_pynmea2(line: bytes, text: str, star: int) -> list[str]:
 # the order the fields are checked).
 
 
-_INF = math.inf
 # A message built from the tuple of its fields, in field order: what the NamedTuple's own
 # ``__new__`` does after binding its arguments in Python (the fast paths build three a fix).
 _new = tuple.__new__
@@ -532,25 +584,28 @@ _new = tuple.__new__
 
 def _gga(talker: str, d: list[str], n: int) -> Gga:
     """GGA: the usual sentence converted with the builtins the checked path uses (the same
-    values), everything range-checked at once; anything unusual goes to :func:`_gga_checked`,
-    which raises the first error in field order. So do RMC and VTG."""
+    values), everything checked at once (the numbers' form in one ``strip`` of their joined
+    texts, then the ranges); anything unusual goes to :func:`_gga_checked`, which raises the
+    first error in field order. So do RMC and VTG."""
     if n >= 9:
         try:
-            q, s, h, a, g, age = d[5], d[6], d[7], d[8], d[10], d[12]
-            quality = int(q) if q else 0
-            sats = int(s) if s else None
-            hdop = float(h) if h else None
-            alt = float(a) if a else None
-            sep = float(g) if g else None
-            dage = float(age) if age else None
-            if (0 <= quality <= 9 and (sats is None or 0 <= sats <= 99)
-                    and (hdop is None or 0.0 <= hdop < _INF)
-                    and (alt is None or -_INF < alt < _INF)
-                    and (sep is None or -_INF < sep < _INF)
-                    and (dage is None or 0.0 <= dage < _INF)):
-                lat, lon = _position(d[1], d[2], d[3], d[4])
-                return _new(Gga, (talker, _time(d[0]), lat, lon, quality, sats, hdop, alt, sep,
-                                  dage, d[13] or None))
+            q, s, h, a, g, age, st = d[5], d[6], d[7], d[8], d[10], d[12], d[13]
+            if not "".join((q, s, h, a, g, age)).strip(_DECIMAL):
+                quality = int(q) if q else 0
+                sats = int(s) if s else None
+                hdop = float(h) + 0.0 if h else None
+                alt = float(a) if a else None
+                sep = float(g) if g else None
+                dage = float(age) + 0.0 if age else None
+                if (0 <= quality <= 9 and (sats is None or 0 <= sats <= MAX_SATS)
+                        and (hdop is None or 0.0 <= hdop <= MAX_DOP)
+                        and (alt is None or ALT_MIN_M <= alt <= ALT_MAX_M)
+                        and (sep is None or -MAX_GEOID_SEP_M <= sep <= MAX_GEOID_SEP_M)
+                        and (dage is None or 0.0 <= dage <= MAX_DGPS_AGE_S)
+                        and (not st or (st.isdigit() and (len(st) < 4 or st <= "1023")))):
+                    lat, lon = _position(d[1], d[2], d[3], d[4])
+                    return _new(Gga, (talker, _time(d[0]), lat, lon, quality, sats, hdop, alt,
+                                      sep, dage, st or None))
         except (ValueError, DecodeError):
             pass
     return _gga_checked(talker, d, n)
@@ -565,7 +620,7 @@ def _gga_checked(talker: str, d: list[str], n: int) -> Gga:
     if not 0 <= quality <= 9:
         raise DecodeError("bad_field", f"quality={quality}")
     sats = _int(d[6], "sats")
-    if sats is not None and not 0 <= sats <= 99:
+    if sats is not None and not 0 <= sats <= MAX_SATS:
         raise DecodeError("bad_field", f"sats={sats}")
     return Gga(
         talker,
@@ -574,11 +629,11 @@ def _gga_checked(talker: str, d: list[str], n: int) -> Gga:
         _latlon(d[3], d[4], False),  # lon_deg
         quality,
         sats,  # num_sats
-        _nonneg(d[7], "hdop"),
-        _float(d[8], "alt"),  # alt_msl_m
-        _float(d[10], "geoid_sep"),
-        _nonneg(d[12], "dgps_age"),
-        d[13] or None,  # dgps_station
+        _nonneg(d[7], "hdop", MAX_DOP),
+        _ranged(d[8], "alt", ALT_MIN_M, ALT_MAX_M),  # alt_msl_m
+        _ranged(d[10], "geoid_sep", -MAX_GEOID_SEP_M, MAX_GEOID_SEP_M),
+        _nonneg(d[12], "dgps_age", MAX_DGPS_AGE_S),
+        _station(d[13]),  # dgps_station
     )
 
 
@@ -588,23 +643,26 @@ def _rmc(talker: str, d: list[str], n: int) -> Rmc:
     if n >= 9 and status == "A":
         try:
             mode = d[11] or None
-            sp, co = d[6], d[7]
-            speed_kn = float(sp) if sp else None
-            course = float(co) if co else None
-            if ((speed_kn is None or 0.0 <= speed_kn < _INF)
-                    and (course is None or 0.0 <= course <= 360.0)):
-                lat, lon = _position(d[2], d[3], d[4], d[5])
-                return _new(Rmc, (
-                    talker,
-                    _time(d[0]),
-                    mode != "N",  # valid
-                    lat,
-                    lon,
-                    None if speed_kn is None else speed_kn * KNOT_MPS,
-                    course,
-                    _date(d[8]) if mode != "N" else _safe_date(d[8]),
-                    mode,
-                ))
+            sp, co, mv = d[6], d[7], d[9]
+            if not "".join((sp, co, mv)).strip(_DECIMAL):
+                speed_kn = float(sp) + 0.0 if sp else None
+                course = float(co) + 0.0 if co else None
+                if mv:
+                    float(mv)  # magnetic variation: not read, its form checked
+                if ((speed_kn is None or 0.0 <= speed_kn <= MAX_SPEED_KN)
+                        and (course is None or 0.0 <= course <= 360.0)):
+                    lat, lon = _position(d[2], d[3], d[4], d[5])
+                    return _new(Rmc, (
+                        talker,
+                        _time(d[0]),
+                        mode != "N",  # valid
+                        lat,
+                        lon,
+                        None if speed_kn is None else speed_kn * KNOT_MPS,
+                        course,
+                        _date(d[8]) if mode != "N" else _safe_date(d[8]),
+                        mode,
+                    ))
         except (ValueError, DecodeError):
             pass
     return _rmc_checked(talker, d, n)
@@ -618,10 +676,9 @@ def _rmc_checked(talker: str, d: list[str], n: int) -> Rmc:
         raise DecodeError("bad_field", f"status={status!r}")
     mode = d[11] or None
     valid = status == "A" and mode != "N"
-    speed_kn = _nonneg(d[6], "speed")
-    course = _float(d[7], "course")
-    if course is not None and not 0.0 <= course <= 360.0:
-        raise DecodeError("bad_field", f"course={course}")
+    speed_kn = _nonneg(d[6], "speed", MAX_SPEED_KN)
+    course = _nonneg(d[7], "course", 360.0)
+    _form(d[9], "mag_var")
     try:
         lat = _latlon(d[2], d[3], True)
         lon = _latlon(d[4], d[5], False)
@@ -652,14 +709,16 @@ def _safe_date(text: str) -> tuple[int, int, int] | None:
 def _vtg(talker: str, d: list[str], n: int) -> Vtg:
     """VTG, the usual sentence (course and speed in km/h): see :func:`_gga`."""
     try:
-        c, k, mode = d[0], d[6], d[8] or None
-        if k and mode != "N":
-            course = float(c) if c else None
-            speed_kmh = float(k)
-            kn = d[4]
+        c, cm, kn, k, mode = d[0], d[2], d[4], d[6], d[8] or None
+        if k and mode != "N" and not "".join((c, cm, kn, k)).strip(_DECIMAL):
+            course = float(c) + 0.0 if c else None
+            speed_kmh = float(k) + 0.0
             speed_kn = float(kn) if kn else None  # read and checked, not used
-            if ((course is None or 0.0 <= course <= 360.0) and 0.0 <= speed_kmh < _INF
-                    and (speed_kn is None or 0.0 <= speed_kn < _INF)):
+            if cm:
+                float(cm)  # magnetic course: not read, its form checked
+            if ((course is None or 0.0 <= course <= 360.0)
+                    and 0.0 <= speed_kmh <= MAX_SPEED_KMH
+                    and (speed_kn is None or 0.0 <= speed_kn <= MAX_SPEED_KN)):
                 return _new(Vtg, (talker, course, speed_kmh * KMH_MPS, mode))
     except ValueError:
         pass
@@ -668,11 +727,11 @@ def _vtg(talker: str, d: list[str], n: int) -> Vtg:
 
 def _vtg_checked(talker: str, d: list[str], n: int) -> Vtg:
     # Modern form: course,T,course_m,M,speed_kn,N,speed_kmh,K[,mode]
-    course = _float(d[0], "course")
-    if course is not None and not 0.0 <= course <= 360.0:
-        raise DecodeError("bad_field", f"course={course}")
-    speed_kmh = _nonneg(d[6], "speed_kmh")
-    speed_kn = _nonneg(d[4], "speed_kn")
+    course = _nonneg(d[0], "course", 360.0)
+    _form(d[2], "course_m")
+    speed_kmh = _nonneg(d[6], "speed_kmh", MAX_SPEED_KMH)
+    speed_kn = _nonneg(d[4], "speed_kn", MAX_SPEED_KN)
+    speed: float | None
     if speed_kmh is not None:
         speed = speed_kmh * KMH_MPS
     elif speed_kn is not None:
@@ -689,25 +748,54 @@ def _gsa(talker: str, d: list[str], n: int) -> Gsa:
     if n < 17:
         raise DecodeError("short", f"GSA has {n} fields")
     fix = _int(d[1], "fix_mode")
+    for k in range(2, 14):
+        _int(d[k], "prn")  # the satellites' numbers: not read, their form checked
     return Gsa(
         talker=talker,
         fix_mode=fix,
-        pdop=_nonneg(d[14], "pdop"),
-        hdop=_nonneg(d[15], "hdop"),
-        vdop=_nonneg(d[16], "vdop"),
+        pdop=_nonneg(d[14], "pdop", MAX_DOP),
+        hdop=_nonneg(d[15], "hdop", MAX_DOP),
+        vdop=_nonneg(d[16], "vdop", MAX_DOP),
     )
 
 
 def _gst(talker: str, d: list[str], n: int) -> Gst:
+    """GST, the usual sentence: see :func:`_gga`."""
+    if n >= 8 and not "".join(d[1:8]).strip(_DECIMAL):
+        try:
+            rms, sd_lat, sd_lon, sd_alt = d[1], d[5], d[6], d[7]
+            for k in (2, 3, 4):
+                if d[k]:
+                    float(d[k])  # the error ellipse: not read, its form checked
+            rms_m = float(rms) + 0.0 if rms else None
+            sd_lat_m = float(sd_lat) + 0.0 if sd_lat else None
+            sd_lon_m = float(sd_lon) + 0.0 if sd_lon else None
+            sd_alt_m = float(sd_alt) + 0.0 if sd_alt else None
+            if ((rms_m is None or 0.0 <= rms_m <= MAX_SIGMA_M)
+                    and (sd_lat_m is None or 0.0 <= sd_lat_m <= MAX_SIGMA_M)
+                    and (sd_lon_m is None or 0.0 <= sd_lon_m <= MAX_SIGMA_M)
+                    and (sd_alt_m is None or 0.0 <= sd_alt_m <= MAX_SIGMA_M)):
+                return _new(Gst, (talker, _time(d[0]), rms_m, sd_lat_m, sd_lon_m, sd_alt_m))
+        except (ValueError, DecodeError):
+            pass
+    return _gst_checked(talker, d, n)
+
+
+def _gst_checked(talker: str, d: list[str], n: int) -> Gst:
     if n < 8:
         raise DecodeError("short", f"GST has {n} fields")
+    time_s = _time(d[0])
+    rms_m = _nonneg(d[1], "rms", MAX_SIGMA_M)
+    _form(d[2], "semi_major")  # the error ellipse: not read, its form checked
+    _form(d[3], "semi_minor")
+    _form(d[4], "orientation")
     return Gst(
         talker=talker,
-        time_s=_time(d[0]),
-        rms_m=_nonneg(d[1], "rms"),
-        sd_lat_m=_nonneg(d[5], "sd_lat"),
-        sd_lon_m=_nonneg(d[6], "sd_lon"),
-        sd_alt_m=_nonneg(d[7], "sd_alt"),
+        time_s=time_s,
+        rms_m=rms_m,
+        sd_lat_m=_nonneg(d[5], "sd_lat", MAX_SIGMA_M),
+        sd_lon_m=_nonneg(d[6], "sd_lon", MAX_SIGMA_M),
+        sd_alt_m=_nonneg(d[7], "sd_alt", MAX_SIGMA_M),
     )
 
 
@@ -717,6 +805,9 @@ def _zda(talker: str, d: list[str], n: int) -> Zda:
     day, month, year = _int(d[1], "day"), _int(d[2], "month"), _int(
         d[3], "year"
     )
+    if d[4] or d[5]:  # the local zone: not read, its form checked
+        _int(d[4], "zone_h")
+        _int(d[5], "zone_min")
     date: tuple[int, int, int] | None = None
     if day is not None and month is not None and year is not None:
         if not (1 <= day <= 31 and 1 <= month <= 12 and 1980 <= year <= 2200):
@@ -742,10 +833,7 @@ def _gll(talker: str, d: list[str], n: int) -> Gll:
 
 
 def _heading(text: str) -> float | None:
-    heading = _float(text, "heading")
-    if heading is not None and not 0.0 <= heading <= 360.0:
-        raise DecodeError("bad_field", f"heading={heading}")
-    return heading
+    return _nonneg(text, "heading", 360.0)
 
 
 def _hdt(talker: str, d: list[str], n: int) -> Hdt:
@@ -782,7 +870,7 @@ _DECODERS: dict[str, Callable[[str, list[str], int], NmeaMessage]] = {
     "THS": _ths,
 }
 # The fields each decoder reads: indices below this (a shorter sentence is padded with _PAD).
-_NEED = {"GGA": 14, "RMC": 12, "VTG": 9, "GSA": 17, "GST": 8, "ZDA": 4, "GLL": 7, "HDT": 2,
+_NEED = {"GGA": 14, "RMC": 12, "VTG": 9, "GSA": 17, "GST": 8, "ZDA": 6, "GLL": 7, "HDT": 2,
          "THS": 2}
 
 

@@ -1,8 +1,17 @@
 """``fdi-bridge fuzz --seconds N [--codec nmea|outland|mavlink|capture]``: a seeded mutation fuzzer.
 
-``--codec capture`` damages generated capture files instead (see :class:`CaptureCase`), and
+``--codec capture`` damages generated capture files instead (see :class:`CaptureCase`),
 ``fdi-bridge fuzz --checksums`` measures undetected corrupt Outland frames per checksum
-(:func:`checksum_strength`).
+(:func:`checksum_strength`), and ``fdi-bridge fuzz --pipeline [-n N]`` fuzzes the whole rover
+pipeline (:func:`run_pipeline_fuzz`): sentences of clean generated sessions with their fields
+replaced by ``1e308``, ``nan``, ``inf``, ``-0``, huge and boundary numbers, exponent forms,
+garbage (or cut, shortened, readdressed), their checksums recomputed so that they pass the
+framer, fed to the :class:`~firmware_host.rover.pipeline.RoverPipeline` that ``replay`` feeds,
+with all its outputs (records, corrected NMEA, GPS_INPUT). It counts exceptions (0 expected),
+broken invariants (a record with NaN or Infinity, own NMEA output the codec refuses, an output
+error, a sentence not counted exactly once) and the refused and accepted inputs; before that,
+:func:`field_table` puts each of ``1e308``, ``nan``, ``inf`` in each numeric field of every
+supported sentence once and checks that each is counted as one ``bad_field``.
 
 For each codec, inputs are built from a corpus of valid frames (NMEA sentences from the rover
 generator plus every supported type, Outland telemetry and thruster frames from the protocol
@@ -27,7 +36,9 @@ A failure is an input that breaks one of these; the first few are kept (hex) in 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import io
 import itertools
 import json
 import logging
@@ -35,7 +46,7 @@ import math
 import time
 import traceback
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any, ClassVar
 
 import numpy as np
@@ -505,6 +516,353 @@ def checksum_strength(kinds: tuple[str, ...] = ("xor8", "sum8", "crc16_ccitt_fal
     return out
 
 
+# --------------------------------------------------------------------------- the whole pipeline
+
+# The numeric fields of each sentence (indices of the fields after the address): where the
+# pipeline fuzzer puts its numbers, and the cases of :func:`field_table`.
+NUMERIC_FIELDS: dict[str, tuple[int, ...]] = {
+    "GGA": (0, 1, 3, 5, 6, 7, 8, 10, 12, 13),
+    "RMC": (0, 2, 4, 6, 7, 8, 9),
+    "VTG": (0, 2, 4, 6),
+    "GST": (0, 1, 2, 3, 4, 5, 6, 7),
+    "GSA": tuple(range(1, 17)),
+    "ZDA": (0, 1, 2, 3, 4, 5),
+    "GLL": (0, 2, 4),
+    "HDT": (0,),
+    "THS": (0,),
+}
+NOT_NUMBERS = ("1e308", "nan", "inf")  # issue 43: each, in each numeric field, is rejected
+# What the mutations put into a field: not numbers, numbers Python's float takes and NMEA does
+# not write, extreme and boundary numbers (the ranges of drivers/gps/nmea.py), garbage.
+FIELD_VALUES = (
+    "1e308", "-1e308", "1E308", "1e-308", "5e-324", "1e400", "3.2e1", "1E+2", "0e0",
+    "nan", "NaN", "-nan", "NAN", "inf", "-inf", "+inf", "Infinity", "-Infinity", "INF",
+    "-0", "-0.0", "+0", "0", "0.0", "00000", ".5", "5.", "-.5", "+1",
+    "1" * 60, "9" * 30, "0" * 40 + "1", "99999999999999999999", "-99999999999",
+    "4294967296", "18446744073709551616", "-9223372036854775809", "1." + "9" * 50,
+    "", "x", "1_0", " 1", "1 ", "0x1F", "1.2.3", "--1", ".", "-", "+", "1e", "e5", "N", "A",
+    "360", "360.0", "360.0001", "-0.0001", "1000", "1000.0001", "1852", "1852.01",
+    "100000", "100000.1", "-12000", "-12000.1", "200", "200.1", "-200.1", "86400", "86401",
+    "1023", "1024", "99", "100", "9", "10", "61", "235959.99", "240000", "246000",
+    "9000.0000", "9000.0001", "18000.0000", "18000.0001", "5960.0000", "320510", "000000",
+)
+PIPELINE_CONFIGS: tuple[str | None, ...] = (None, "rover-paper", "rover-three-zone-paper",
+                                            "rover-combined-paper")
+# The clean sessions the mutated sentences are put into: (rate Hz, error model, duration s).
+PIPELINE_SESSIONS = ((10.0, "gm", 120.0), (5.0, "multipath", 120.0), (1.0, "coarse", 300.0))
+
+
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} in a record")
+
+
+class _RecordCheck(io.StringIO):
+    """The pipeline's ``epochs.jsonl``: every line JSON with finite numbers (checked, not
+    kept)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.lines = 0
+        self.bad: list[str] = []
+
+    def write(self, s: str) -> int:
+        self.lines += 1
+        try:
+            json.loads(s, parse_constant=_refuse_constant)
+        except ValueError as err:
+            self.bad.append(f"record: {err}: {s[:200]}")
+        return len(s)
+
+
+class _NmeaEcho:
+    """EpochSink: the corrected NMEA :class:`~firmware_host.rover.outputs.NmeaSink` writes,
+    parsed back by the codec: the bridge's own output must be sentences it accepts."""
+
+    def __init__(self) -> None:
+        from firmware_host.rover.outputs import encode_nmea
+
+        self.encode = encode_nmea
+        self.bad: list[str] = []
+
+    def emit(self, out: Any) -> None:
+        for line in self.encode(out).split(b"\r\n"):
+            if line:
+                try:
+                    parse_sentence(line)
+                except (DecodeError, Ignored) as err:
+                    self.bad.append(f"own NMEA output refused ({err}): {line[:100]!r}")
+
+    def close(self) -> None:
+        pass
+
+
+def _bodies(data: bytes) -> list[str]:
+    """A burst's sentences as bodies (``GPGGA,...``: no ``$``, checksum or line end)."""
+    return [line[1 : line.rindex(b"*")].decode("ascii")
+            for line in data.split(b"\r\n") if line.startswith(b"$") and b"*" in line]
+
+
+def _extras(burst: list[str]) -> dict[str, str]:
+    """The sentences a session does not have (GSA, GLL, HDT, THS), made to fit its burst."""
+    gga = next((b.split(",") for b in burst if b[2:5] == "GGA"), None)
+    out = {"GSA": "GPGSA,A,3,04,05,,09,12,,,24,,,,,2.5,1.3,2.1", "HDT": "GPHDT,123.4,T",
+           "THS": "GPTHS,123.4,A"}
+    if gga is not None and len(gga) > 5:
+        out["GLL"] = f"GPGLL,{gga[2]},{gga[3]},{gga[4]},{gga[5]},{gga[1]},A,D"
+    return out
+
+
+def pipeline_sessions(seed: int = 0) -> list[list[list[str]]]:
+    """The clean sessions (:data:`PIPELINE_SESSIONS`) as bursts of sentence bodies."""
+    out = []
+    for k, (rate, model, duration) in enumerate(PIPELINE_SESSIONS):
+        sc = RoverScenario(rate_hz=rate, duration_s=duration, seed=seed * 7 + k + 1, gst=True,
+                           zda=True, error_model=model)
+        out.append([_bodies(data) for _, data, _ in generate(sc)])
+    return out
+
+
+def field_value(rng: np.random.Generator, old: str) -> str:
+    """A value for a field that held ``old`` (see :data:`FIELD_VALUES`)."""
+    r = rng.random()
+    if r < 0.6:
+        return FIELD_VALUES[int(rng.integers(len(FIELD_VALUES)))]
+    if r < 0.8 and old:  # the field's own value, made into something else
+        k = int(rng.integers(6))
+        if k == 0:
+            return old + ("e0", "E+2", "e-5", "e308")[int(rng.integers(4))]
+        if k == 1:
+            return ("-", "+", " ", "0")[int(rng.integers(4))] + old
+        if k == 2:
+            return old + "0" * int(rng.integers(1, 90))
+        if k == 3:
+            i = int(rng.integers(len(old)))
+            return old[:i] + chr(int(rng.integers(0x20, 0x7F))) + old[i + 1 :]
+        if k == 4:
+            return old[: int(rng.integers(len(old)))]
+        return old + "." + "9" * int(rng.integers(1, 40))
+    x = float(rng.standard_normal()) * 10.0 ** float(rng.uniform(-12.0, 307.0))
+    if rng.random() < 0.5:
+        return repr(x)  # exponent notation where repr uses one (and 'inf')
+    return f"{x:.{int(rng.integers(0, 12))}f}" if abs(x) < 1e60 else repr(int(x))
+
+
+def mutate_sentence(rng: np.random.Generator, body: str) -> str:
+    """One mutation of a sentence's body; its checksum is computed afterwards (the framer
+    and the checksum pass it, the fields are what is tested)."""
+    fields = body.split(",")
+    kind = fields[0][2:]
+    numeric = NUMERIC_FIELDS.get(kind, ())
+    op = rng.random()
+    if op < 0.8:  # one to three fields replaced, numeric ones mostly
+        for _ in range(int(rng.integers(1, 4))):
+            if numeric and rng.random() < 0.85:
+                i = 1 + numeric[int(rng.integers(len(numeric)))]
+            else:
+                i = int(rng.integers(1, max(2, len(fields))))
+            while i >= len(fields):
+                fields.append("")
+            fields[i] = field_value(rng, fields[i])
+    elif op < 0.87 and len(fields) > 1:  # a field deleted or inserted
+        i = int(rng.integers(1, len(fields)))
+        if rng.random() < 0.5:
+            del fields[i]
+        else:
+            fields.insert(i, field_value(rng, fields[i]))
+    elif op < 0.94:  # cut short
+        fields = fields[: int(rng.integers(1, len(fields) + 1))]
+    else:  # another sentence's address on these fields
+        other = tuple(NUMERIC_FIELDS)[int(rng.integers(len(NUMERIC_FIELDS)))]
+        fields[0] = fields[0][:2] + other
+    return ",".join(fields)
+
+
+def _mutated_burst(rng: np.random.Generator, burst: list[str]) -> tuple[bytes, str]:
+    """The burst's bytes with one sentence mutated (sometimes an extra sentence, mutated,
+    put in at a random place), and that sentence."""
+    bodies = list(burst)
+    if rng.random() < 0.15 or not bodies:
+        extras = _extras(burst)
+        kind = tuple(extras)[int(rng.integers(len(extras)))]
+        bodies.insert(int(rng.integers(len(bodies) + 1)), extras[kind])
+        i = bodies.index(extras[kind])
+    else:
+        i = int(rng.integers(len(bodies)))
+    bodies[i] = mutate_sentence(rng, bodies[i])
+    return b"".join(with_checksum(b) for b in bodies), bodies[i]
+
+
+class PipelineCase:
+    """One pipeline as ``replay`` builds it (:class:`~firmware_host.rover.pipeline.RoverPipeline`
+    fed received bytes), with every output: ``epochs.jsonl`` records, the corrected NMEA and
+    GPS_INPUT (encoded by the MAVLink sink, sent nowhere); and the checks on them."""
+
+    def __init__(self, cfg: Any) -> None:
+        from firmware_host.rover.outputs import MavlinkGpsSink
+        from firmware_host.rover.pipeline import RoverPipeline
+        from firmware_host.runtime.mavout import packer_output
+
+        self.records = _RecordCheck()
+        self.echo = _NmeaEcho()
+        self.mav = MavlinkGpsSink(cfg.rover, endpoint=packer_output())
+        self.pipeline = RoverPipeline(cfg.rover, jsonl=self.records, sinks=[self.echo, self.mav],
+                                      ratelog=_QUIET)
+        self.starts = 0  # '$' fed: each starts exactly one line, accepted, rejected or ignored
+
+    def refused(self) -> int:
+        """Sentences refused so far (rejected by the framer or the codec, or ignored)."""
+        st = self.pipeline.stream
+        return sum(st.rejected.values()) + sum(st.ignored.values())
+
+    def feed(self, data: bytes) -> None:
+        self.starts += data.count(b"$")
+        self.pipeline.feed(data)
+
+    def problems(self) -> list[str]:
+        """Broken invariants so far (each reported once)."""
+        out = self.records.bad + self.echo.bad
+        self.records.bad, self.echo.bad = [], []
+        errors = self.pipeline.sink_errors + self.mav.endpoint.counters()["send_errors"]
+        if errors:
+            out.append(f"{errors} output errors")
+            self.pipeline.sink_errors = 0
+            self.mav.endpoint.send_errors = 0  # type: ignore[attr-defined]
+        return out
+
+    def finish(self) -> list[str]:
+        """End of the input: the last epoch, the summary; the checks on both."""
+        self.pipeline.finish()
+        out = self.problems()
+        st = self.pipeline.stream
+        items = st.sentences + self.refused() - st.rejected.get("garbage", 0)
+        if items != self.starts:
+            out.append(f"{self.starts} sentences started, {items} counted")
+        try:
+            json.dumps(self.pipeline.summary(), allow_nan=False)
+        except (TypeError, ValueError) as err:
+            out.append(f"summary: {err}")
+        return out
+
+
+def field_table(seed: int = 0) -> dict[str, str]:
+    """Each of :data:`NOT_NUMBERS` in each numeric field of every supported sentence, one
+    sentence in each epoch of a clean session through the pipeline: the reason it was
+    counted under, ``"accepted"``, or what went wrong (an exception, more than one count)."""
+    from firmware_host.runtime.config import load_config
+
+    bursts = pipeline_sessions(seed)[0]
+    case = PipelineCase(load_config(None))
+    out: dict[str, str] = {}
+    cases = [(k, i, v) for k, idx in NUMERIC_FIELDS.items() for i in idx for v in NOT_NUMBERS]
+    for (kind, i, value), burst in zip(cases, itertools.cycle(bursts), strict=False):
+        bodies = list(burst)
+        pos = next((j for j, b in enumerate(bodies) if b[2:5] == kind), None)
+        if pos is None:
+            bodies.append(_extras(burst)[kind])
+            pos = len(bodies) - 1
+        fields = bodies[pos].split(",")
+        while len(fields) <= i + 1:
+            fields.append("")
+        fields[i + 1] = value
+        bodies[pos] = ",".join(fields)
+        before = Counter(case.pipeline.stream.rejected)
+        key = f"{kind}[{i}]={value}"
+        try:
+            case.feed(b"".join(with_checksum(b) for b in bodies))
+        except Exception as err:
+            out[key] = f"exception {type(err).__name__}: {err}"
+            case = PipelineCase(load_config(None))
+            continue
+        delta = Counter(case.pipeline.stream.rejected)
+        delta.subtract(before)
+        counted = {r: c for r, c in delta.items() if c}
+        if not counted:
+            out[key] = "accepted"
+        elif len(counted) == 1 and sum(counted.values()) == 1:
+            out[key] = next(iter(counted))
+        else:
+            out[key] = f"counted {counted}"
+    problems = case.finish()
+    if problems:
+        out["(invariants)"] = "; ".join(problems[:3])
+    return out
+
+
+def run_pipeline_fuzz(
+    *,
+    seconds: float | None = None,
+    max_inputs: int | None = None,
+    seed: int = 0,
+    keep: int = 5,
+    clock: Callable[[], float] = time.monotonic,
+) -> dict[str, Any]:
+    """Checksum-valid mutated sentences through the whole pipeline (framer, codec, epochs,
+    detector, records, NMEA and MAVLink outputs), one mutated sentence an epoch of a clean
+    session, the configurations of :data:`PIPELINE_CONFIGS` in turn; until ``seconds`` or
+    ``max_inputs``. Reports inputs, exceptions, broken invariants (records, own outputs,
+    counts), and the inputs refused (by reason) and accepted."""
+    from firmware_host.runtime.config import load_config
+
+    rng = np.random.default_rng(seed)
+    sessions = pipeline_sessions(seed)
+    configs = [load_config(name) for name in PIPELINE_CONFIGS]
+    n = exceptions = invariant_failures = refused = 0
+    examples: list[dict[str, str]] = []
+    t0 = clock()
+    block = 0
+
+    def done() -> bool:
+        if max_inputs is not None:
+            return n >= max_inputs
+        return seconds is not None and n % 64 == 0 and clock() - t0 >= seconds
+
+    reasons: Counter[str] = Counter()
+    while not done():
+        cfg = configs[block % len(configs)]
+        bursts = sessions[(block // len(configs)) % len(sessions)]
+        case = PipelineCase(cfg)
+        for burst in bursts:
+            if done():
+                break
+            data, sentence = _mutated_burst(rng, burst)
+            before = case.refused()
+            n += 1
+            try:
+                case.feed(data)
+            except Exception as err:
+                exceptions += 1
+                if len(examples) < keep:
+                    examples.append({"sentence": sentence, "config": str(cfg.name),
+                                     "error": f"{type(err).__name__}: {err}",
+                                     "where": traceback.format_exc(limit=-1).strip()[-300:]})
+                case = PipelineCase(cfg)  # the pipeline's state is unknown: a new one
+                continue
+            refused += case.refused() > before
+            bad = case.problems()
+            if bad:
+                invariant_failures += 1
+                if len(examples) < keep:
+                    examples.append({"sentence": sentence, "config": str(cfg.name),
+                                     "error": "; ".join(bad[:3])})
+        bad = case.finish()
+        if bad:
+            invariant_failures += 1
+            if len(examples) < keep:
+                examples.append({"sentence": "(end of session)", "config": str(cfg.name),
+                                 "error": "; ".join(bad[:3])})
+        st = case.pipeline.stream
+        reasons.update(st.rejected)
+        reasons.update({"ignored_" + k: v for k, v in st.ignored.items()})
+        block += 1
+    elapsed = clock() - t0
+    return {"codec": "pipeline", "seed": seed, "inputs": n, "exceptions": exceptions,
+            "invariant_failures": invariant_failures, "failures": exceptions + invariant_failures,
+            "refused": refused, "accepted": n - refused, "sessions": block,
+            "seconds": round(elapsed, 2),
+            "inputs_per_s": round(n / elapsed) if elapsed > 0 else None,
+            "rejects": dict(sorted(reasons.items())), "examples": examples}
+
+
 # --------------------------------------------------------------------------- the runner
 
 
@@ -575,7 +933,7 @@ def run_fuzz(
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=positive_float, default=60.0,
                         help="time per codec, s")
-    parser.add_argument("--inputs", type=positive_int, default=None,
+    parser.add_argument("-n", "--inputs", type=positive_int, default=None,
                         help="stop after this many inputs per codec (overrides --seconds)")
     parser.add_argument("--codec", choices=CODECS, action="append", default=None,
                         help="codec to fuzz (repeatable; default: all four)")
@@ -584,6 +942,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write the report as JSON to this file")
     parser.add_argument("--json", action="store_true",
                         help="print the reports as JSON (one object per codec) instead of text")
+    parser.add_argument("--pipeline", action="store_true",
+                        help="fuzz the whole pipeline instead: checksum-valid sentences with "
+                             "mutated fields (1e308, nan, inf, -0, huge, garbage, ...) through "
+                             "the framer, codec, epochs, detector and outputs, as replay feeds "
+                             "them; and each of 1e308/nan/inf in each numeric field once")
     parser.add_argument("--checksums", action="store_true",
                         help="measure undetected corrupt Outland frames per checksum instead "
                              "(--inputs per error model, default 200 000)")
@@ -601,6 +964,8 @@ def run(args: argparse.Namespace) -> int:
         if args.out is not None:
             args.out.write_text(json.dumps(rep, indent=2) + "\n")
         return 0
+    if args.pipeline:
+        return _run_pipeline(args)
     reports = []
     for codec in args.codec or CODECS:
         rep = run_fuzz(codec, seconds=None if args.inputs else args.seconds,
@@ -616,3 +981,43 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         args.out.write_text(json.dumps(reports, indent=2) + "\n")
     return 1 if any(r["failures"] for r in reports) else 0
+
+
+def _run_pipeline(args: argparse.Namespace) -> int:
+    """``fuzz --pipeline``: the field table, then the mutations; 1 on any failure."""
+    table = field_table(args.seed)
+    missed = {k: v for k, v in table.items() if v != "bad_field"}
+    with _quiet("fdi_bridge.rover"):  # the alarms a million bad sentences raise
+        rep = run_pipeline_fuzz(seconds=None if args.inputs else args.seconds,
+                                max_inputs=args.inputs, seed=args.seed)
+    rep["fields"] = {"cases": len(table), "rejected_as_bad_field": len(table) - len(missed),
+                     "missed": missed}
+    if args.json:
+        print(json.dumps(rep))
+    else:
+        print(f"fields: {len(table) - len(missed)} of {len(table)} (1e308, nan, inf in each "
+              "numeric field) rejected and counted as bad_field")
+        for key, what in missed.items():
+            print(f"  {key}: {what}")
+        print(f"pipeline: {rep['inputs']} inputs in {rep['seconds']} s "
+              f"({rep['inputs_per_s']}/s), {rep['exceptions']} exceptions, "
+              f"{rep['invariant_failures']} broken invariants; {rep['refused']} refused, "
+              f"{rep['accepted']} accepted")
+        print("  refused by reason: " + ", ".join(f"{k} {v}" for k, v in rep["rejects"].items()))
+        for ex in rep["examples"]:
+            print(f"  {ex['error'][:200]}\n    after {ex['sentence'][:160]!r} ({ex['config']})")
+    if args.out is not None:
+        args.out.write_text(json.dumps(rep, indent=2) + "\n")
+    return 1 if rep["failures"] or missed else 0
+
+
+@contextlib.contextmanager
+def _quiet(name: str) -> Iterator[None]:
+    """Warnings of logger ``name`` off for the block (counted in the report instead)."""
+    logger = logging.getLogger(name)
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
