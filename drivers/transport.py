@@ -11,11 +11,15 @@ pyserial's exceptions are translated into :class:`~fdi.errors.PortError` here, a
 from __future__ import annotations
 
 import errno
+import fcntl
+import struct
+import termios
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Literal, Protocol, cast
 
 import serial
 import serial.rs485
+from serial.urlhandler import protocol_socket
 
 from fdi.errors import PortClosedError, PortError
 
@@ -62,16 +66,19 @@ def open_port(
 ) -> serial.Serial:
     """Open ``settings.url`` with ``serial.serial_for_url``; raise :class:`PortError` on failure."""
     try:
-        port = serial.serial_for_url(
-            settings.url,
-            baudrate=settings.baudrate,
-            bytesize=settings.bytesize,
-            parity=settings.parity,
-            stopbits=settings.stopbits,
-            timeout=settings.timeout_s,
-            write_timeout=write_timeout_s,
-            do_not_open=True,
-        )
+        # socket:// gets its exact in_waiting (_SocketPort), else what serial_for_url picks
+        # (serial_for_url too returns whichever handler class the URL names, typed as Serial)
+        port = (cast(serial.Serial, _SocketPort(None))
+                if settings.url.lower().startswith("socket://")
+                else serial.serial_for_url(settings.url, do_not_open=True))
+        port.baudrate = settings.baudrate
+        port.bytesize = settings.bytesize
+        port.parity = settings.parity
+        port.stopbits = settings.stopbits
+        port.timeout = settings.timeout_s
+        port.write_timeout = write_timeout_s
+        if isinstance(port, _SocketPort):
+            port.port = settings.url  # as serial_for_url does
         if settings.rs485 is not None:
             r = settings.rs485
             port.rs485_mode = serial.rs485.RS485Settings(
@@ -88,21 +95,49 @@ def open_port(
     return port
 
 
+class _SocketPort(protocol_socket.Serial):
+    """pyserial's ``socket://`` port whose ``in_waiting`` counts the bytes the kernel holds
+    (``FIONREAD``), as a serial port's does (``TIOCINQ``): pyserial's own answers 0 or 1
+    (readable or not), so a reader that trusts it takes one byte a call (issue G)."""
+
+    @property
+    def in_waiting(self) -> int:
+        readable = int(super().in_waiting)  # raises PortNotOpenError when closed
+        if not readable:
+            return 0
+        try:
+            held = struct.unpack("i", fcntl.ioctl(self.fileno(), termios.FIONREAD,
+                                                  b"\0\0\0\0"))[0]
+        except OSError:
+            return readable
+        return max(1, int(held))  # readable with nothing held: the peer closed; read says so
+
+
 def read_some(port: Port, size: int = 4096) -> bytes:
-    """Read what is waiting (at least one byte or until the port's timeout).
+    """Read what is there, up to ``size`` bytes: at least one byte, or nothing after the
+    port's timeout.
+
+    ``in_waiting`` is taken as a lower bound, not a count: what arrives is read on while the
+    port says more is waiting, so a URL handler that reports less than it holds is still
+    drained (``socket://`` is given an exact count, above). On a serial device or a pty, whose
+    count is exact, this is the one read of what is waiting it always was.
 
     Raises :class:`PortClosedError` when the far end went away (USB unplugged, pty master
     closed), :class:`PortError` for any other failure.
     """
     try:
         waiting = int(getattr(port, "in_waiting", 0))
-        if waiting:
-            return bytes(port.read(min(size, waiting)))
-        first = bytes(port.read(1))  # blocks up to the port's timeout
-        more = int(getattr(port, "in_waiting", 0)) if first else 0
-        if more:
-            return first + bytes(port.read(min(size - 1, more)))
-        return first
+        # blocks up to the port's timeout when nothing is waiting
+        data = bytes(port.read(min(size, waiting) if waiting else 1))
+        while data and len(data) < size:
+            more = int(getattr(port, "in_waiting", 0))
+            if not more:
+                break
+            chunk = bytes(port.read(min(size - len(data), more)))
+            if not chunk:
+                break
+            data += chunk
+        return data
     except serial.SerialException as err:
         if _looks_closed(err):
             raise PortClosedError(f"{port.port}: closed by the far end: {err}") from err
