@@ -74,15 +74,20 @@ def _check_damage(orig: list[mio.TlogRecord], damaged: bytes, flipped: np.ndarra
 
 
 @pytest.mark.parametrize("where", ["magic", "length", "seq", "msgid", "payload", "crc",
-                                   "t_high", "t_mid"])
+                                   "t_high", "t_mid", "t_16s", "t_2s"])
 def test_one_flip_loses_only_its_record(tmp_path: Path, where: str) -> None:
+    """One flipped byte: every other record comes back whole, and the damaged one is never
+    passed on as a good message with a wrong time (a timestamp 16 s or 2 s off is refused,
+    as its neighbours agree without it)."""
     recs = _synthetic()
     data = bytearray(_tlog(recs))
     k = 19  # a STATUSTEXT (MAVLink 2), away from both ends
     off = sum(8 + len(raw) for _, raw in recs[:k])
-    offset = {"magic": 8, "length": 9, "seq": 12, "msgid": 15, "payload": 20,
-              "crc": 8 + len(recs[k][1]) - 1, "t_high": 0, "t_mid": 4}[where]
-    data[off + offset] ^= 0x40
+    offset, mask = {"magic": (8, 0x40), "length": (9, 0x40), "seq": (12, 0x40),
+                    "msgid": (15, 0x40), "payload": (20, 0x40),
+                    "crc": (8 + len(recs[k][1]) - 1, 0x40), "t_high": (0, 0x40),
+                    "t_mid": (4, 0x40), "t_16s": (4, 0x01), "t_2s": (5, 0x20)}[where]
+    data[off + offset] ^= mask
     path = tmp_path / "one.tlog"
     path.write_bytes(bytes(data))
     got = list(mio.iter_tlog(path))

@@ -776,9 +776,10 @@ def _packet_length(buf: bytes, pos: int) -> int | None:
 
 
 # A tlog's timestamps are the recorder's clock at each packet: they only move forward, in steps
-# of at most a link outage. A candidate record's timestamp is "plausible" within these bounds of
-# the last good one; outside them it is believed only when the next record chains to it (a real
-# outage or a clock step), so a damaged timestamp cannot lose the records after it.
+# of at most a link outage. A timestamp is "plausible" after another within these bounds. A
+# record's own timestamp is judged against both neighbours (see _TlogChecker.time_ok): when the
+# records before and after it agree with each other and not with it, it was damaged; a real
+# outage or clock step moves every later stamp and is believed.
 _TLOG_MAX_STEP_US = 60_000_000  # forward
 _TLOG_MAX_BACK_US = 1_000_000  # backward (a clock slewed back by NTP)
 
@@ -794,9 +795,10 @@ def iter_tlog(path: str | os.PathLike[str]) -> Iterator[TlogRecord]:
       damaged: it becomes one record with ``msg = None`` holding the bytes up to the next
       record that is valid (magic, length, CRC right, and a timestamp plausible after the last
       good one, or chained to the record after it). A truncated final record is one such too;
-    * a record whose packet is valid but whose timestamp is not plausible (and does not chain
-      to the next record) is yielded with ``msg = None``: its bytes are kept, its time is not
-      believed;
+    * a record whose packet is valid but whose timestamp disagrees with both neighbours while
+      they agree with each other (a flipped timestamp byte, beyond the 1 s back / gap + 1 s
+      forward that an intact file may show) is yielded with ``msg = None``: its bytes are
+      kept, its time is not believed;
     * a message id the dialect does not know has no CRC to check: in step with the file it is
       taken when the next record starts where its length says; after damage it is taken only
       when the next record is CRC-valid and chained to it.
@@ -824,7 +826,7 @@ def iter_tlog(path: str | os.PathLike[str]) -> Iterator[TlogRecord]:
         assert length is not None  # a packet that passed its check has one
         raw = data[start : start + length]
         pos = start + length
-        if last_t is None or _plausible(t_us, last_t) or check.chains(start - 8):
+        if check.time_ok(start - 8, last_t):
             last_t = t_us
             yield TlogRecord(t_us, raw, decode_packet(raw))
         else:
@@ -840,13 +842,17 @@ def _resync_tlog(check: _TlogChecker, pos: int, last_t: int | None) -> int:
     record's start) whose packet is valid and whose timestamp is plausible after ``last_t`` or
     chained to the next record's; the file's end when there is none."""
     data = check.data
+    end = len(data)
     i = pos + 8
+    m1 = m2 = i - 1  # the next 0xFE and 0xFD at or after i (end: none), each found once
     while True:
-        m2 = data.find(_MAGIC_V2, i)
-        m1 = data.find(_MAGIC_V1, i)
-        if m2 < 0 and m1 < 0:
-            return len(data)
-        m = m1 if m2 < 0 else m2 if m1 < 0 else min(m1, m2)
+        if m1 < i:
+            m1 = data.find(_MAGIC_V1, i) % (end + 1)  # -1 -> end
+        if m2 < i:
+            m2 = data.find(_MAGIC_V2, i) % (end + 1)
+        m = min(m1, m2)
+        if m >= end:
+            return end
         i = m + 1
         verdict = check.packet(m)
         if verdict is False:
@@ -854,7 +860,7 @@ def _resync_tlog(check: _TlogChecker, pos: int, last_t: int | None) -> int:
         (t_us,) = struct.unpack_from(">Q", data, m - 8)
         if verdict is True and (last_t is None or _plausible(t_us, last_t)):
             return m - 8
-        if check.chains(m - 8, strict=True):
+        if check.chains(m - 8):
             return m - 8
 
 
@@ -878,6 +884,17 @@ class _TlogChecker:
         self.crc = _x25crc
         self.extras = crc_extra_table()
         self.full = payload_length_table()
+        self._verdicts: dict[int, bool | None] = {}  # each packet is checked once
+
+    def packet(self, start: int) -> bool | None:
+        """True: a whole packet whose CRC matches; False: none starts here, it is cut, or its
+        CRC is wrong; None: framed, but its message id is not in the dialect (unchecked)."""
+        if start in self._verdicts:
+            return self._verdicts[start]
+        verdict = self._verdicts[start] = self._check(start)
+        if len(self._verdicts) > 64:
+            self._verdicts.clear()  # only the records around the current one are asked again
+        return verdict
 
     def length(self, start: int) -> int | None:
         """The packet's length from its header; None when no packet starts there or it runs
@@ -885,9 +902,7 @@ class _TlogChecker:
         n = _packet_length(self.data, start)
         return None if n is None or start + n > len(self.data) else n
 
-    def packet(self, start: int) -> bool | None:
-        """True: a whole packet whose CRC matches; False: none starts here, it is cut, or its
-        CRC is wrong; None: framed, but its message id is not in the dialect (unchecked)."""
+    def _check(self, start: int) -> bool | None:
         data = self.data
         n = self.length(start)
         if n is None:
@@ -923,21 +938,41 @@ class _TlogChecker:
         nxt = start + n
         return nxt == len(self.data) or _packet_length(self.data, nxt + 8) is not None
 
-    def chains(self, rec: int, *, strict: bool = False) -> bool:
-        """True when the record after the one at ``rec`` is valid and its timestamp plausible
-        after this one's (``strict``: a CRC-valid packet; else an unchecked one will do, and the
-        file's end counts as a chain)."""
+    def _next_time(self, rec: int) -> int | None:
+        """The timestamp of the record after the one at ``rec`` when its packet is framed and
+        not known bad (CRC-valid or unchecked); None at the file's end or when it is bad."""
+        n = self.length(rec + 8)
+        if n is None:
+            return None
+        nxt = rec + 8 + n
+        if nxt + 8 >= len(self.data) or self.packet(nxt + 8) is False:
+            return None
+        return int(struct.unpack_from(">Q", self.data, nxt)[0])
+
+    def chains(self, rec: int) -> bool:
+        """True when the record after the one at ``rec`` has a CRC-valid packet and a timestamp
+        plausible after this one's."""
         n = self.length(rec + 8)
         if n is None:
             return False
         nxt = rec + 8 + n
-        if nxt == len(self.data):
-            return not strict
-        if nxt + 8 >= len(self.data):
-            return False
-        verdict = self.packet(nxt + 8)
-        if verdict is False or (strict and verdict is None):
+        if nxt + 8 >= len(self.data) or self.packet(nxt + 8) is not True:
             return False
         (t_us,) = struct.unpack_from(">Q", self.data, rec)
         (t_next,) = struct.unpack_from(">Q", self.data, nxt)
         return _plausible(t_next, t_us)
+
+    def time_ok(self, rec: int, last_t: int | None) -> bool:
+        """Whether the timestamp of the (valid) record at ``rec`` is believed, after the last
+        good one ``last_t``: plausible after it and followed plausibly by the next record's;
+        else refused only when those two neighbours agree without it (it alone is off)."""
+        (t_us,) = struct.unpack_from(">Q", self.data, rec)
+        if last_t is None:
+            return True
+        after_last = _plausible(t_us, last_t)
+        t_next = self._next_time(rec)
+        if t_next is None:  # the file's end, or the next record is damaged: no second opinion
+            return after_last
+        if after_last and _plausible(t_next, t_us):
+            return True
+        return not _plausible(t_next, last_t)
