@@ -271,3 +271,26 @@ def test_a_serial_device_held_by_gpsd_is_refused_even_as_root() -> None:
     finally:
         port.close()
     assert not _tty_exclusive(SERIAL_DEVICE)  # and cleared when we let go
+
+
+def test_a_device_that_appears_held_by_another_is_reported_when_the_reason_changes(
+        holder: tuple[PtyPair, subprocess.Popen[str]], tmp_path: Path,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Missing at start (warned once), then plugged in but held by another process: the new
+    reason is warned once too (before: only at debug level), then no more while it lasts."""
+    pty, proc = holder
+    link = tmp_path / "gps0"  # a udev-style link, absent at start
+    now = [100.0]
+    with caplog.at_level(logging.DEBUG, logger="fdi_bridge.port"):
+        port = ResilientPort(SerialSettings(url=str(link), timeout_s=0.0), name="gps",
+                             clock=lambda: now[0], backoff_max_s=0.4)
+        link.symlink_to(pty.slave_path)
+        for _ in range(4):
+            now[0] += 0.5
+            assert not port.service()
+        warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+        assert len(warned) == 2, warned
+        assert "No such file" in warned[0]
+        assert f"in use by pid {proc.pid}" in warned[1]
+        assert port.open_failures == 5
+        port.close()
