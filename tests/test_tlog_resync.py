@@ -6,6 +6,7 @@ value, losing the rest of the file (173 173 of 346 346 records in the issue's ru
 
 from __future__ import annotations
 
+import os
 import struct
 from pathlib import Path
 
@@ -132,11 +133,12 @@ def test_unknown_message_after_damage_is_kept_when_the_next_record_chains(
 
 
 @pytest.mark.skipif(not SMALL_TLOG.exists(), reason=f"corpus capture {SMALL_TLOG} is absent")
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", range(int(os.environ.get("FDI_TLOG_FILES", "3"))))
 def test_hundred_flips_recover_the_intact_records(tmp_path: Path, seed: int) -> None:
-    """The issue's measurement on the ArduSub dive, three of its files (the full 100 files x
-    100 flips was run once: 100 % in every file, nothing invented). At least 99 % of the
-    records no flip touched come back unchanged, and no record is invented."""
+    """The issue's measurement on the ArduSub dive: one byte flipped at 100 seeded places, at
+    least 99 % of the records no flip touched come back unchanged, and no record is invented.
+    Three files by default; ``FDI_TLOG_FILES=100`` runs the issue's 100 (measured: 100 % of
+    the intact records in every file, none invented)."""
     orig = list(mio.iter_tlog(SMALL_TLOG))
     data = SMALL_TLOG.read_bytes()
     rng = np.random.default_rng(seed)
