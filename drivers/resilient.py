@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import stat
 import time
 from collections.abc import Callable
@@ -78,6 +79,7 @@ class ResilientPort:
         self._backoff = backoff_min_s
         self._next_attempt = clock()
         self._down_since: float | None = None
+        self._open_reason = ""  # the last open failure's kind (a new one is logged once)
         self._closed = False
         # Counters.
         self.bytes_rx = 0
@@ -121,11 +123,16 @@ class ResilientPort:
             self._port = self.opener(self.settings)
         except PortError as err:
             self.open_failures += 1
+            reason = re.sub(r"\d+", "#", str(err))  # the kind of failure, not its numbers
             if self.open_attempts == 1 and self.losses == 0:
                 self.log.warning("%s: %s; retrying with backoff up to %.1f s", self.name, err,
                                  self.backoff_max_s)
+            elif self.open_attempts > 1 and reason != self._open_reason:
+                # a new reason (the device is back but another process holds it): say so once
+                self.log.warning("%s: still down: %s", self.name, err)
             else:
                 self.log.debug("%s: still down: %s", self.name, err)
+            self._open_reason = reason
             self._next_attempt = now + self._backoff
             self._backoff = min(2.0 * self._backoff, self.backoff_max_s)
             return False

@@ -21,6 +21,7 @@ opened or written; bad packets are answered with ``None`` (a counted policy, nev
 
 from __future__ import annotations
 
+import binascii
 import contextlib
 import logging
 import math
@@ -779,41 +780,204 @@ def _packet_length(buf: bytes, pos: int) -> int | None:
     return None
 
 
+# A tlog's timestamps are the recorder's clock at each packet: they only move forward, in steps
+# of at most a link outage. A timestamp is "plausible" after another within these bounds. A
+# record's own timestamp is judged against both neighbours (see _TlogChecker.time_ok): when the
+# records before and after it agree with each other and not with it, it was damaged; a real
+# outage or clock step moves every later stamp and is believed.
+_TLOG_MAX_STEP_US = 60_000_000  # forward
+_TLOG_MAX_BACK_US = 1_000_000  # backward (a clock slewed back by NTP)
+
+
 def iter_tlog(path: str | os.PathLike[str]) -> Iterator[TlogRecord]:
     """Iterate over a QGroundControl ``.tlog``: 8-byte big-endian µs, then one packet, repeated.
 
-    Each packet's length comes from its header. A record whose packet does not start with a
-    MAVLink magic byte (a damaged file) becomes one record holding the bytes up to the next
-    position where a plausible timestamp + magic pair starts, with ``msg = None``. A packet
-    whose CRC does not match the dialect is yielded with its bytes and ``msg = None`` (what
-    pymavlink reports as ``BAD_DATA``). A truncated final record is yielded with ``msg = None``.
+    Each packet's length comes from its header and is trusted only when the packet's CRC (with
+    the message's CRC_EXTRA) matches; the records yielded tile the file. Damage is handled as a
+    MAVLink parser handles line noise, then the timestamps are resumed:
+
+    * a record whose packet has no magic byte, a length past the file's end or a wrong CRC is
+      damaged: it becomes one record with ``msg = None`` holding the bytes up to the next
+      record that is valid (magic, length, CRC right, and a timestamp plausible after the last
+      good one, or chained to the record after it). A truncated final record is one such too;
+    * a record whose packet is valid but whose timestamp disagrees with both neighbours while
+      they agree with each other (a flipped timestamp byte, beyond the 1 s back / gap + 1 s
+      forward that an intact file may show) is yielded with ``msg = None``: its bytes are
+      kept, its time is not believed;
+    * a message id the dialect does not know has no CRC to check: in step with the file it is
+      taken when the next record starts where its length says; after damage it is taken only
+      when the next record is CRC-valid and chained to it.
+
+    So one flipped byte anywhere loses at most the record it hit. A packet framed right whose
+    CRC matches only over its zero-padded payload (a sender that cut trailing zeros after
+    computing the CRC, as ArduSub's camera component does) keeps its place and is yielded with
+    ``msg = None``, as pymavlink reports it (``BAD_DATA``).
     """
     data = Path(path).read_bytes()
+    check = _TlogChecker(data)
     pos = 0
     end = len(data)
+    last_t: int | None = None
     while pos + 8 < end:
         (t_us,) = struct.unpack_from(">Q", data, pos)
         start = pos + 8
-        length = _packet_length(data, start)
-        if length is None:
-            nxt = _resync_tlog(data, start + 1, t_us)
+        verdict = check.packet(start)
+        if verdict is False or (verdict is None and not check.next_starts(start)):
+            nxt = _resync_tlog(check, start + 1, last_t)
             yield TlogRecord(t_us, data[start:nxt], None)
             pos = nxt
             continue
+        length = check.length(start)
+        assert length is not None  # a packet that passed its check has one
         raw = data[start : start + length]
         pos = start + length
-        if len(raw) < length:
+        if check.time_ok(start - 8, last_t):
+            last_t = t_us
+            yield TlogRecord(t_us, raw, decode_packet(raw))
+        else:
             yield TlogRecord(t_us, raw, None)
-            break
-        yield TlogRecord(t_us, raw, decode_packet(raw))
 
 
-def _resync_tlog(data: bytes, pos: int, t_us: int) -> int:
-    """First offset >= pos where a timestamp within a day of ``t_us`` precedes a magic byte."""
-    day_us = 86_400 * 1_000_000
-    for i in range(pos, len(data) - 8):
-        if data[i + 8] in (_MAGIC_V1, _MAGIC_V2):
-            (t,) = struct.unpack_from(">Q", data, i)
-            if abs(t - t_us) < day_us:
-                return i
-    return len(data)
+def _plausible(t_us: int, last_us: int) -> bool:
+    return last_us - _TLOG_MAX_BACK_US <= t_us <= last_us + _TLOG_MAX_STEP_US
+
+
+def _resync_tlog(check: _TlogChecker, pos: int, last_t: int | None) -> int:
+    """The first record start at or after ``pos`` (its packet one byte or more past the damaged
+    record's start) whose packet is valid and whose timestamp is plausible after ``last_t`` or
+    chained to the next record's; the file's end when there is none."""
+    data = check.data
+    end = len(data)
+    i = pos + 8
+    m1 = m2 = i - 1  # the next 0xFE and 0xFD at or after i (end: none), each found once
+    while True:
+        if m1 < i:
+            m1 = data.find(_MAGIC_V1, i) % (end + 1)  # -1 -> end
+        if m2 < i:
+            m2 = data.find(_MAGIC_V2, i) % (end + 1)
+        m = min(m1, m2)
+        if m >= end:
+            return end
+        i = m + 1
+        verdict = check.packet(m)
+        if verdict is False:
+            continue
+        (t_us,) = struct.unpack_from(">Q", data, m - 8)
+        if verdict is True and (last_t is None or _plausible(t_us, last_t)):
+            return m - 8
+        if check.chains(m - 8):
+            return m - 8
+
+
+# MAVLink's CRC-16/MCRF4XX, computed in C by binascii.crc_hqx (the bit-reflected CRC-16/XMODEM)
+# on bit-reversed bytes. drivers.mavlink.framer.x25crc is the same function (a test keeps them
+# equal); the framer imports this module, so this one cannot import the framer's.
+_REV8 = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
+
+
+def _x25crc(data: bytes) -> int:
+    c = binascii.crc_hqx(data.translate(_REV8), 0xFFFF)
+    return (_REV8[c & 0xFF] << 8) | _REV8[c >> 8]
+
+
+class _TlogChecker:
+    """Packet checks over a tlog's bytes: CRC with the dialect's CRC_EXTRA (over the padded
+    payload too), and whether two records chain."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        self.crc = _x25crc
+        self.extras = crc_extra_table()
+        self.full = payload_length_table()
+        self._verdicts: dict[int, bool | None] = {}  # each packet is checked once
+
+    def packet(self, start: int) -> bool | None:
+        """True: a whole packet whose CRC matches; False: none starts here, it is cut, or its
+        CRC is wrong; None: framed, but its message id is not in the dialect (unchecked)."""
+        if start in self._verdicts:
+            return self._verdicts[start]
+        verdict = self._verdicts[start] = self._check(start)
+        if len(self._verdicts) > 64:
+            self._verdicts.clear()  # only the records around the current one are asked again
+        return verdict
+
+    def length(self, start: int) -> int | None:
+        """The packet's length from its header; None when no packet starts there or it runs
+        past the file's end."""
+        n = _packet_length(self.data, start)
+        return None if n is None or start + n > len(self.data) else n
+
+    def _check(self, start: int) -> bool | None:
+        data = self.data
+        n = self.length(start)
+        if n is None:
+            return False
+        v2 = data[start] == _MAGIC_V2
+        if v2 and data[start + 2] & ~0x01:
+            return False  # an incompatibility flag other than "signed": not a packet we frame
+        hlen = 10 if v2 else 6
+        plen = data[start + 1]
+        if v2:
+            msgid = data[start + 7] | data[start + 8] << 8 | data[start + 9] << 16
+        else:
+            msgid = data[start + 5]
+        extra = self.extras.get(msgid)
+        if extra is None:
+            return None
+        crc_end = start + hlen + plen
+        wire = data[crc_end] | data[crc_end + 1] << 8
+        if self.crc(data[start + 1 : crc_end] + bytes((extra,))) == wire:
+            return True
+        body = data[start + 2 : crc_end]
+        for k in range(plen + 1, (self.full.get(msgid, 0) if v2 else 0) + 1):
+            if self.crc(bytes((k,)) + body + bytes(k - plen) + bytes((extra,))) == wire:
+                return True  # the CRC of the untruncated payload (see the docstring)
+        return False
+
+    def next_starts(self, start: int) -> bool:
+        """True when the record after the packet at ``start`` starts a packet (or the file
+        ends there exactly)."""
+        n = self.length(start)
+        if n is None:
+            return False
+        nxt = start + n
+        return nxt == len(self.data) or _packet_length(self.data, nxt + 8) is not None
+
+    def _next_time(self, rec: int) -> int | None:
+        """The timestamp of the record after the one at ``rec`` when its packet is framed and
+        not known bad (CRC-valid or unchecked); None at the file's end or when it is bad."""
+        n = self.length(rec + 8)
+        if n is None:
+            return None
+        nxt = rec + 8 + n
+        if nxt + 8 >= len(self.data) or self.packet(nxt + 8) is False:
+            return None
+        return int(struct.unpack_from(">Q", self.data, nxt)[0])
+
+    def chains(self, rec: int) -> bool:
+        """True when the record after the one at ``rec`` has a CRC-valid packet and a timestamp
+        plausible after this one's."""
+        n = self.length(rec + 8)
+        if n is None:
+            return False
+        nxt = rec + 8 + n
+        if nxt + 8 >= len(self.data) or self.packet(nxt + 8) is not True:
+            return False
+        (t_us,) = struct.unpack_from(">Q", self.data, rec)
+        (t_next,) = struct.unpack_from(">Q", self.data, nxt)
+        return _plausible(t_next, t_us)
+
+    def time_ok(self, rec: int, last_t: int | None) -> bool:
+        """Whether the timestamp of the (valid) record at ``rec`` is believed, after the last
+        good one ``last_t``: plausible after it and followed plausibly by the next record's;
+        else refused only when those two neighbours agree without it (it alone is off)."""
+        (t_us,) = struct.unpack_from(">Q", self.data, rec)
+        if last_t is None:
+            return True
+        after_last = _plausible(t_us, last_t)
+        t_next = self._next_time(rec)
+        if t_next is None:  # the file's end, or the next record is damaged: no second opinion
+            return after_last
+        if after_last and _plausible(t_next, t_us):
+            return True
+        return not _plausible(t_next, last_t)
