@@ -458,6 +458,10 @@ class Router:
     ) -> None:
         self.cfg = cfg
         self.clock = clock
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.endpoints: list[Endpoint] = []
+        self.tlog: TlogWriter | None = None
         self.params = params if params is not None else ParamStore()
         self.stats = RouterStats()
         self._offsets = mio.target_offsets()
@@ -479,12 +483,6 @@ class Router:
                 f"{cfg.signing_key_file}.state" if cfg.signing_key_file else "")
             self._sig_state_path = Path(state).expanduser() if state else None
             self._load_signing_state()
-        self.tlog = tlog
-        if tlog is None and cfg.tlog_dir:
-            self.tlog = TlogWriter(cfg.tlog_dir, cfg.tlog_max_bytes, wall_clock,
-                                   dir_max_bytes=cfg.tlog_dir_max_bytes,
-                                   min_free_bytes=cfg.tlog_min_free_bytes, clock=clock)
-        self.endpoints: list[Endpoint] = []
         try:
             a = cfg.autopilot
             ap = open_link(a.url, a.baud, cfg.reconnect_max_s, peer_timeout_s=a.peer_timeout_s,
@@ -502,8 +500,13 @@ class Router:
                              queue=cfg.queue_packets, cfg=g)
                 )  # fmt: skip
         except PortError:
-            self.close()
+            self.close()  # the links opened so far (a busy port is an EndpointError: exit 2)
             raise
+        self.tlog = tlog
+        if tlog is None and cfg.tlog_dir:
+            self.tlog = TlogWriter(cfg.tlog_dir, cfg.tlog_max_bytes, wall_clock,
+                                   dir_max_bytes=cfg.tlog_dir_max_bytes,
+                                   min_free_bytes=cfg.tlog_min_free_bytes, clock=clock)
         self._pending: _PendingCommand | None = None
         self._any_clients = False
         self._next_reap = 0.0
@@ -526,8 +529,6 @@ class Router:
         self._next_flush = self._t0 + 1.0
         self._next_slow = self._t0 + SIGNING_STATE_EVERY_S
         self._next_report = self._t0 + cfg.report_stats_s
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
 
     # -- thread-safe API for the pipelines -------------------------------------------------
 
