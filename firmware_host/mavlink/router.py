@@ -42,6 +42,7 @@ import os
 import selectors
 import shutil
 import socket
+import stat
 import struct
 import threading
 import time
@@ -89,8 +90,9 @@ def load_signing_key(path: str | Path) -> bytes:
     """A 32-byte MAVLink signing key from a file holding 64 hexadecimal characters.
 
     MAVProxy's and QGroundControl's passphrase keys are ``sha256(passphrase)``; write that as
-    hex. The file must not be readable by other users and must not sit inside a git working
-    tree (a key is never committed).
+    hex. The file must be readable and writable by its owner only (mode 0600 or stricter: no
+    bit for the group or others, as ssh asks of a private key) and must not sit inside a git
+    working tree (a key is never committed).
     """
     p = Path(path).expanduser()
     try:
@@ -98,8 +100,9 @@ def load_signing_key(path: str | Path) -> bytes:
         text = p.read_text(encoding="ascii").strip()
     except (OSError, UnicodeDecodeError) as err:
         raise ConfigError(str(p), "(file)", "a readable key file", str(err)) from err
-    if mode & 0o007:
-        raise ConfigError(str(p), "(mode)", "a file only its owner can read (chmod 600)", oct(mode))
+    if mode & 0o077:
+        raise ConfigError(str(p), "(mode)", "a file only its owner can read (chmod 600)",
+                          f"mode {stat.S_IMODE(mode):04o}, open to its group or others")
     for parent in p.resolve().parents:
         if (parent / ".git").exists():
             raise ConfigError(
@@ -400,6 +403,7 @@ class RouterStats:
     dropped_bytes: int = 0
     unchecked: int = 0
     refused_unsigned: int = 0  # unsigned packets dropped from a signing link
+    unsigned_allowed: int = 0  # unsigned packets of allow_unsigned passed from a signing link
     bad_signature: int = 0
     replayed_signature: int = 0  # not newer than its stream's last packet
     old_stream_refused: int = 0  # a new stream more than a minute behind our timestamp
@@ -783,9 +787,10 @@ class Router:
         src.stats.rx_packets += 1
         msgid = frame.msgid
         verified = False
-        if src.signing and msgid not in src.allow_unsigned:
+        if src.signing and (frame.signed or msgid not in src.allow_unsigned):
             # A link marked for signing passes only correctly signed, fresh packets, towards
-            # the vehicle and anywhere else (MAVLink 2 signing: sig, stream order, 1 min).
+            # the vehicle and anywhere else (MAVLink 2 signing: sig, stream order, 1 min),
+            # and unsigned ones of allow_unsigned (a signed one is checked all the same).
             # Unsigned parameter reads addressed to the bridge are answered, not forwarded.
             if not frame.signed and msgid in _PARAM_READ_IDS:
                 target = frame_target(frame, self._offsets)
@@ -802,11 +807,13 @@ class Router:
             src.stats.filtered_in += 1
             return
         source = (frame.sysid, frame.compid)
-        if frame.crc_checked:  # only a checked packet teaches a route (as mavlink-router)
+        if not frame.crc_checked:
+            self.stats.unchecked += 1
+        elif src.signing and not verified:
+            self.stats.unsigned_allowed += 1  # allow_unsigned: passed, but teaches no route
+        else:  # only a checked (and, on a signing link, signed) packet teaches a route
             src.seen_sys.add(frame.sysid)
             src.seen.add(source)
-        else:
-            self.stats.unchecked += 1
         raw = frame.raw
         if self.tlog is not None:
             self.tlog.write(raw)
