@@ -23,12 +23,14 @@ import pytest
 from drivers.mavlink import io as mio
 from drivers.mavlink.framer import MavFrame, MavFramer
 from fdi.errors import ConfigError, EndpointError
+from firmware_host.mavlink.params import ParamSpec, ParamStore
 from firmware_host.mavlink.router import (
     EndpointConfig,
     MavlinkConfig,
     Router,
     load_signing_key,
 )
+from firmware_host.runtime.loop import FakeClock
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -205,7 +207,7 @@ def test_unsigned_heartbeat_neither_passes_nor_teaches_a_route_on_a_signing_link
         peer = router.endpoints[-1]
         assert peer.parent is not None  # the GCS's peer endpoint
         # Nothing unsigned taught a route: a command targeted at (255, 190) has nowhere to go.
-        assert peer.seen == set() and peer.seen_sys == set()
+        assert not peer.seen and not peer.seen_sys
         # A signed heartbeat does teach it.
         gcs_pack.setup_signing(key, link_id=3)
         gcs.sendto(gcs_pack.send_heartbeat(), dest)
@@ -247,3 +249,141 @@ def test_a_group_readable_key_stops_the_command_at_start(key_dir: Path, tmp_path
     proc = _cli("mavlink", "--config", str(cfg), "--seconds", "1", cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     assert "mode 0640" in proc.stderr and "internal error" not in proc.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# Item 9: framer resync, route expiry, one PARAM_VALUE per peer
+
+
+def _commands(n: int) -> list[bytes]:
+    gcs = mio.MavPacker(255, 190)
+    return [gcs._emit(gcs._mav.command_long_encode(1, 1, 31000 + i, 0, 0, 0, 0, 0, 0, 0, 0))
+            for i in range(n)]
+
+
+@pytest.mark.parametrize("synced", [True, False])
+def test_stray_bytes_before_a_stream_do_not_swallow_the_packets_after_them(synced: bool) -> None:
+    framer = MavFramer(synced=synced)
+    packets = _commands(12)
+    frames = framer.feed(b"\xfd\xff\x00" + b"".join(packets))
+    # Before: a 267-byte "frame" of an unknown id made of the first six commands, forwarded.
+    assert [f.raw for f in frames] == packets
+    assert framer.stats.unchecked == 0 and framer.stats.dropped_bytes == 3
+
+
+def test_stray_bytes_at_a_tcp_links_start_lose_and_hold_back_nothing() -> None:
+    cfg = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+                        gcs=(EndpointConfig("tcpin:127.0.0.1:0"),), stats_hz=0.0)
+    router = Router(cfg)
+    router.start()
+    ap = _udp()
+    gcs = socket.create_connection(("127.0.0.1", _port(router, 1)), timeout=5.0)
+    try:
+        ap.sendto(mio.MavPacker(1, 1).send_heartbeat(), ("127.0.0.1", _port(router, 0)))
+        _wait(lambda: (1, 1) in router.autopilot.seen, "the autopilot's route")
+        gcs.sendall(b"\xfd\xff\x00")  # stray bytes first (a GCS's half-written packet)
+        got: list[MavFrame] = []
+        for i, raw in enumerate(_commands(12)):
+            gcs.sendall(raw)  # one at a time: each must arrive without the next one's bytes
+            _wait(lambda i=i: sum(f.msgid == 76 for f in _extend(got, ap)) == i + 1,
+                  f"command {i} at the autopilot")
+        assert [f.raw for f in got if f.msgid == 76] == _commands(12)
+        assert router.summary()["gcs0"]["rx_packets"] == 12
+    finally:
+        gcs.close()
+        router.close()
+        ap.close()
+
+
+def test_an_echoed_packet_with_the_autopilots_ids_cuts_a_peer_off_only_until_it_expires(
+        ) -> None:
+    clock = FakeClock(1000.0)
+    cfg = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+                        gcs=(EndpointConfig("udpin:127.0.0.1:0"),), stats_hz=0.0,
+                        heartbeat_hz=0.1)
+    assert cfg.route_timeout_s == 10.0
+    router = Router(cfg, clock=clock)
+    ap, gcs = _udp(), _udp()
+    ap_pack = mio.MavPacker(1, 1)
+    ap_addr, gcs_addr = ("127.0.0.1", _port(router, 0)), ("127.0.0.1", _port(router, 1))
+
+    def deliver(sock: socket.socket, raw: bytes, addr: tuple[str, int]) -> None:
+        rx = sum(ep.stats.rx_packets for ep in router.endpoints)
+        sock.sendto(raw, addr)
+        _wait_polled(router, lambda: sum(ep.stats.rx_packets for ep in router.endpoints) > rx,
+                     "the packet routed")
+
+    def texts_at_gcs() -> list[bytes]:
+        return [f.payload for f in _frames(gcs) if f.msgid == _STATUSTEXT and f.sysid == 1]
+
+    try:
+        deliver(ap, ap_pack.send_heartbeat(), ap_addr)
+        deliver(gcs, mio.MavPacker(255, 190).send_heartbeat(), gcs_addr)
+        deliver(ap, ap_pack.send_statustext(6, "before"), ap_addr)
+        assert len(texts_at_gcs()) == 1
+        # The GCS echoes one packet with the autopilot's ids: the loop guard now keeps the
+        # autopilot's packets from that GCS.
+        deliver(gcs, mio.MavPacker(1, 1).send_heartbeat(), gcs_addr)
+        deliver(ap, ap_pack.send_statustext(6, "cut off"), ap_addr)
+        assert texts_at_gcs() == []
+        guard = router.summary()["gcs0"]["loop_guard"]
+        assert guard >= 1
+        # 11 s on, the autopilot heard every second: the echo's route has expired.
+        for _ in range(11):
+            clock.advance(1.0)
+            deliver(ap, ap_pack.send_heartbeat(), ap_addr)
+        deliver(ap, ap_pack.send_statustext(6, "back"), ap_addr)
+        assert len(texts_at_gcs()) == 1  # before: cut off for as long as the bridge ran
+        assert router.stats.routes_expired >= 1
+        assert (1, 1) in router.autopilot.seen  # the live route stayed
+    finally:
+        router.close()
+        ap.close()
+        gcs.close()
+
+
+def _wait_polled(router: Router, cond: Callable[[], bool], what: str) -> None:
+    """Run the router's loop (this thread) until ``cond``; a deadline bounds it."""
+    end = time.monotonic() + 10.0
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        router.poll(0.01)
+    router.poll(0.0)  # the round's periodic jobs (tick) too
+
+
+_STATUSTEXT = mio.message_id("STATUSTEXT")
+
+
+def test_param_set_is_answered_once_per_ground_station_peer(tmp_path: Path) -> None:
+    params = ParamStore(tmp_path / "params.toml")
+    params.register(ParamSpec("FDI_ALPHA", 0.05, 1e-6, 0.5, "false-alarm rate"))
+    params.register(ParamSpec("FDI_WINDOW", 20.0, 1.0, 500.0, "window length, epochs"))
+    cfg = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
+                        gcs=(EndpointConfig("udpin:127.0.0.1:0"),), stats_hz=0.0)
+    router = Router(cfg, params=params)
+    router.start()
+    a = mio.MavEndpoint(f"udpout:127.0.0.1:{_port(router, 1)}", source_system=255)
+    b = mio.MavEndpoint(f"udpout:127.0.0.1:{_port(router, 1)}", source_system=254)
+    try:
+        for peer in (a, b):
+            peer.send_heartbeat()
+        _wait(lambda: len(router.endpoints) == 4, "two peers")
+        a.send_param_set(1, 191, "FDI_ALPHA", 0.01)
+        for peer in (a, b):
+            # A marker: answered to this peer after every answer to the set was sent.
+            peer.send_param_request_read(1, 191, "FDI_WINDOW")
+            names: list[str] = []
+            end = time.monotonic() + 10.0
+            while "FDI_WINDOW" not in names:
+                assert time.monotonic() < end, names
+                msg = peer.recv(timeout_s=0.05)
+                if msg is not None and msg.get_type() == "PARAM_VALUE":
+                    names.append(msg.param_id)
+            # Before: FDI_ALPHA twice to each (through the server's line and the peer's).
+            assert names == ["FDI_ALPHA", "FDI_WINDOW"]
+        assert params.get("FDI_ALPHA") == pytest.approx(0.01)
+    finally:
+        router.close()
+        a.close()
+        b.close()

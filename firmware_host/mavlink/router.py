@@ -308,8 +308,10 @@ class Endpoint:
         self.queue: deque[bytes] = deque()
         self.queue_max = queue
         self.framers: dict[Hashable, MavFramer] = {}
-        self.seen_sys: set[int] = set()
-        self.seen: set[tuple[int, int]] = set()
+        # Routes: what was heard here, with when (router clock); forgotten after
+        # ``route_timeout_s`` of silence (Router._expire_routes).
+        self.seen_sys: dict[int, float] = {}
+        self.seen: dict[tuple[int, int], float] = {}
         self.stats = EndpointStats()
         c = cfg or EndpointConfig("")
         self.allow_unsigned = c.ids("allow_unsigned")
@@ -417,6 +419,7 @@ class RouterStats:
     command_refused: int = 0  # COMMAND_ACK with a result other than ACCEPTED / IN_PROGRESS
     command_unacked: int = 0  # no COMMAND_ACK after command_retries attempts
     ftp_nak: int = 0
+    routes_expired: int = 0  # (system, component) routes forgotten after route_timeout_s
 
 
 _COMMAND_IDS = frozenset(
@@ -533,6 +536,8 @@ class Router:
         self._next_flush = self._t0 + 1.0
         self._next_slow = self._t0 + SIGNING_STATE_EVERY_S
         self._next_report = self._t0 + cfg.report_stats_s
+        self._now = self._t0  # the clock at this round's reads: when a route was last heard
+        self._next_expiry = self._t0 + 1.0
 
     # -- thread-safe API for the pipelines -------------------------------------------------
 
@@ -679,6 +684,7 @@ class Router:
         if self._outbox:
             wait = 0.0
         events = self._sel.select(wait)
+        self._now = self.clock()
         self._drain_outbox()
         done: list[Endpoint] = []
         for key, mask in events:
@@ -774,7 +780,8 @@ class Router:
         for data, key, boundary in src.link.read(self.cfg.read_burst):
             framer = framers.get(key)
             if framer is None:
-                framer = framers[key] = MavFramer(on_drop=self._on_drop)
+                # A stream (serial, TCP) is joined at an unknown point: it starts resyncing.
+                framer = framers[key] = MavFramer(on_drop=self._on_drop, synced=boundary)
             for frame in framer.feed(data, boundary=boundary):
                 route(src, frame)
 
@@ -812,8 +819,9 @@ class Router:
         elif src.signing and not verified:
             self.stats.unsigned_allowed += 1  # allow_unsigned: passed, but teaches no route
         else:  # only a checked (and, on a signing link, signed) packet teaches a route
-            src.seen_sys.add(frame.sysid)
-            src.seen.add(source)
+            now = self._now
+            src.seen_sys[frame.sysid] = now
+            src.seen[source] = now
         raw = frame.raw
         if self.tlog is not None:
             self.tlog.write(raw)
@@ -1034,11 +1042,10 @@ class Router:
                 self.stats.params_set += 1
             else:
                 self.stats.params_rejected += 1
-            # Answer with the value now in force (new, or unchanged when refused) to every GCS.
-            raw = self._param_value(name, names.index(name), len(names))
-            for ep in self.endpoints:
-                if ep.is_gcs:
-                    self._emit(raw, ep)
+            # Answer with the value now in force (new, or unchanged when refused) to every
+            # ground station, once each: a server's peers are endpoints of their own.
+            self._emit(self._param_value(name, names.index(name), len(names)), None,
+                       gcs_only=True)
         elif kind in ("COMMAND_LONG", "COMMAND_INT"):
             with self._lock:
                 raw = self._own.send_command_ack(
@@ -1053,8 +1060,9 @@ class Router:
         with self._lock:
             return self._own.send_param_value(name, self.params.get(name), index, count, kind)
 
-    def _emit(self, raw: bytes, dest: Endpoint | None) -> None:
-        """Queue one of the bridge's own packets: to ``dest``, or to every endpoint."""
+    def _emit(self, raw: bytes, dest: Endpoint | None, *, gcs_only: bool = False) -> None:
+        """Send one of the bridge's own packets: to ``dest``, or to every endpoint (every
+        ground station's with ``gcs_only``), once each; recorded once in the tlog."""
         self.stats.own_sent += 1
         if self.tlog is not None:
             self.tlog.write(raw)
@@ -1062,7 +1070,7 @@ class Router:
             dest.send(raw)
             return
         for ep in self.endpoints:
-            if not ep.server:  # a server's clients are in the list themselves
+            if not ep.server and (ep.is_gcs or not gcs_only):  # a server's clients are listed
                 ep.send(raw)
 
     def _drain_outbox(self) -> None:
@@ -1093,6 +1101,9 @@ class Router:
                 periods = int((now - self._next_stats) * cfg.stats_hz) + 1
                 self._next_stats += periods / cfg.stats_hz
         self._retry_command(now)
+        if now >= self._next_expiry:
+            self._next_expiry = now + 1.0
+            self._expire_routes(now)
         if now >= self._next_flush:
             self._next_flush = now + 1.0
             if self.tlog is not None:
@@ -1114,6 +1125,22 @@ class Router:
                 raw = self._own.send_statustext(severity, text)
             self._text_tokens -= 1.0
             self._emit(raw, None)
+
+    def _expire_routes(self, now: float) -> None:
+        """Forget what an endpoint has not been heard from for ``route_timeout_s`` (checked
+        each second): one packet with another endpoint's ids (an echo) no longer cuts that
+        endpoint off by the loop guard, nor draws its targeted messages, for good."""
+        timeout = self.cfg.route_timeout_s
+        if timeout <= 0:
+            return
+        old = now - timeout
+        for ep in self.endpoints:
+            if ep.seen and min(ep.seen.values()) < old:
+                stale = [k for k, t in ep.seen.items() if t < old]
+                for k in stale:
+                    del ep.seen[k]
+                self.stats.routes_expired += len(stale)
+                ep.seen_sys = {sysid: t for sysid, t in ep.seen_sys.items() if t >= old}
 
     def run(self, stop: threading.Event | None = None, poll_s: float = 0.05) -> None:
         """Poll until ``stop`` is set (or :meth:`stop` is called)."""

@@ -99,6 +99,9 @@ class MavlinkConfig:
     reconnect_max_s: float = field(
         default=5.0, metadata={"gt": 0.0, "doc": "serial links: longest wait between reopens"}
     )
+    route_timeout_s: float = field(
+        default=10.0, metadata={"ge": 0.0, "doc": "forget a (system, component) route silent "
+                                "this long, s; 0 = never"})
 
     def __post_init__(self) -> None:
         if any(g.signing for g in self.gcs) and not self.signing_key_file:
