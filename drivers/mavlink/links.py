@@ -119,6 +119,28 @@ def open_error(url: str, proto: str, port: int, err: OSError, what: str) -> Endp
     return EndpointError(f"{url}: could not {what}: {_strerror(err)}")
 
 
+def udp_socket_drops(sock: socket.socket) -> int | None:
+    """The kernel's drop count of UDP socket ``sock`` (``/proc/net/udp`` ``drops``), or None."""
+    try:
+        inode = str(os.fstat(sock.fileno()).st_ino)
+    except (OSError, ValueError):
+        return None
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(table, encoding="ascii") as f:
+                lines = f.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            cols = line.split()
+            if len(cols) >= 13 and cols[9] == inode:
+                try:
+                    return int(cols[12])
+                except ValueError:
+                    return None
+    return None
+
+
 def port_holder(proto: str, port: int) -> str:
     """Best effort, Linux only: who holds local ``proto`` (``"udp"``/``"tcp"``) ``port``, as
     ``ss -p`` finds it: the socket's inode in ``/proc/net/<proto>[6]``, then the process whose
@@ -239,6 +261,13 @@ class _UdpLink(Link):
 
     def filenos(self) -> list[int]:
         return [self.sock.fileno()]
+
+    def kernel_drops(self) -> int | None:
+        """Datagrams the kernel dropped on this socket because its receive buffer was full
+        (the router did not read them in time): the ``drops`` column of ``/proc/net/udp`` for
+        the socket's inode (Linux; None where it cannot be read). Read when asked, not per
+        packet."""
+        return udp_socket_drops(self.sock)
 
 
 class UdpServerLink(_UdpLink):

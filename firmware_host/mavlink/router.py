@@ -287,7 +287,8 @@ TLOG_RETRY_S = 5.0
 class EndpointStats:
     rx_packets: int = 0
     tx_packets: int = 0
-    dropped_queue_full: int = 0
+    dropped_queue_full: int = 0  # forwarded packets dropped (the oldest) from a full queue
+    dropped_own: int = 0  # the bridge's own packets dropped from a full queue of their own
     no_peer: int = 0  # packets for this endpoint while nobody was there to take them
     unroutable: int = 0  # targeted packets from here that no other endpoint could take
     loop_guard: int = 0  # packets not sent here because their source was seen here
@@ -305,7 +306,8 @@ class Endpoint:
         self.link = link
         self.is_gcs = is_gcs
         self.signing = signing
-        self.queue: deque[bytes] = deque()
+        self.queue: deque[bytes] = deque()  # forwarded packets waiting for the link
+        self.own_queue: deque[bytes] = deque()  # the bridge's own, written before the others
         self.queue_max = queue
         self.framers: dict[Hashable, MavFramer] = {}
         # Routes: what was heard here, with when (router clock); forgotten after
@@ -347,44 +349,56 @@ class Endpoint:
         self.stats.rate_limited += 1
         return False
 
-    def send(self, raw: bytes) -> None:
-        """Write ``raw`` now when nothing waits before it; else queue it behind the others."""
+    def send(self, raw: bytes, own: bool = False) -> None:
+        """Write ``raw`` now when nothing waits before it; else queue it behind the others.
+
+        ``own``: one of the bridge's own packets (GPS_INPUT, heartbeat, STATUSTEXT, answers).
+        They wait only behind each other, in a queue of their own written first, never behind
+        forwarded traffic; a full queue drops forwarded packets, never the bridge's own for
+        them (the oldest own packet goes only when ``queue_packets`` of them wait).
+        """
         if self.server:  # its clients are endpoints of their own: to each of them
             for child in self.children:
-                child.send(raw)
+                child.send(raw, own)
             return
-        if self.queue:
-            self.enqueue(raw)
+        if self.own_queue or (self.queue and not own):
+            self.enqueue(raw, own)
         elif not self.link.has_peer():
             self.stats.no_peer += 1
         elif self.link.write(raw):
             self.stats.tx_packets += 1
         else:
-            self.enqueue(raw)
+            self.enqueue(raw, own)
 
-    def enqueue(self, raw: bytes) -> None:
-        if len(self.queue) >= self.queue_max:
-            self.queue.popleft()
-            self.stats.dropped_queue_full += 1
-        self.queue.append(raw)
+    def enqueue(self, raw: bytes, own: bool = False) -> None:
+        q = self.own_queue if own else self.queue
+        if len(q) >= self.queue_max:
+            q.popleft()
+            if own:
+                self.stats.dropped_own += 1
+            else:
+                self.stats.dropped_queue_full += 1
+        q.append(raw)
 
     def blocked(self) -> bool:
         """True when packets or bytes wait for the link to become writable."""
-        return bool(self.queue) or self.link.backlog()
+        return bool(self.queue or self.own_queue) or self.link.backlog()
 
     def flush(self) -> None:
+        """Write what waits, the bridge's own packets first, until the link refuses."""
         link = self.link
         if link.backlog():
             link.flush()
-        q = self.queue
-        if q and not link.has_peer():
-            self.stats.no_peer += len(q)  # the peer went away (TCP client closed)
-            q.clear()
-        while q:
-            if not link.write(q[0]):
-                break
-            q.popleft()
-            self.stats.tx_packets += 1
+        if not link.has_peer():
+            self.stats.no_peer += len(self.own_queue) + len(self.queue)  # the peer went away
+            self.own_queue.clear()
+            self.queue.clear()
+        for q in (self.own_queue, self.queue):
+            while q:
+                if not link.write(q[0]):
+                    return
+                q.popleft()
+                self.stats.tx_packets += 1
 
     def accepts(self, target: tuple[int, int]) -> bool:
         """mavlink-router's rule for a message addressed to ``target`` (system, component)."""
@@ -738,6 +752,7 @@ class Router:
         assert isinstance(link, UdpServerLink)
         by_addr = server.by_addr
         route = self._route
+        outbox = self._outbox
         for data, addr, boundary in link.read(self.cfg.read_burst):
             src = by_addr.get(addr)
             if src is None or src.parent is None:
@@ -748,6 +763,8 @@ class Router:
                 framer = src.framers[addr] = MavFramer(on_drop=self._on_drop)
             for frame in framer.feed(data, boundary=boundary):
                 route(src, frame)
+            if outbox:  # the bridge's own packets never wait for the rest of a burst
+                self._drain_outbox()
 
     def _reap(self) -> None:
         """Drop the endpoints of TCP clients that have gone (their counters fold into the
@@ -759,7 +776,7 @@ class Router:
             parent = ep.parent
             assert parent is not None
             parent.clients_gone += 1
-            ep.stats.no_peer += len(ep.queue)
+            ep.stats.no_peer += len(ep.queue) + len(ep.own_queue)
             for name, value in ep.stats.__dict__.items():
                 setattr(parent.gone_stats, name, getattr(parent.gone_stats, name) + value)
             parent.children = [c for c in parent.children if c is not ep]
@@ -777,6 +794,7 @@ class Router:
             return
         framers = src.framers
         route = self._route
+        outbox = self._outbox
         for data, key, boundary in src.link.read(self.cfg.read_burst):
             framer = framers.get(key)
             if framer is None:
@@ -784,6 +802,8 @@ class Router:
                 framer = framers[key] = MavFramer(on_drop=self._on_drop, synced=boundary)
             for frame in framer.feed(data, boundary=boundary):
                 route(src, frame)
+            if outbox:  # the bridge's own packets never wait for the rest of a burst
+                self._drain_outbox()
 
     def _on_drop(self, data: bytes, reason: str) -> None:
         self.stats.dropped_bytes += len(data)
@@ -1067,11 +1087,11 @@ class Router:
         if self.tlog is not None:
             self.tlog.write(raw)
         if dest is not None:
-            dest.send(raw)
+            dest.send(raw, own=True)
             return
         for ep in self.endpoints:
             if not ep.server and (ep.is_gcs or not gcs_only):  # a server's clients are listed
-                ep.send(raw)
+                ep.send(raw, own=True)
 
     def _drain_outbox(self) -> None:
         while self._outbox:
@@ -1182,7 +1202,14 @@ class Router:
         if self.tlog is not None:
             out.update(self.tlog.counters())
         for ep in self.endpoints:
-            extra: dict[str, Any] = {"queued": len(ep.queue), "link_errors": ep.link.errors}
+            extra: dict[str, Any] = {"queued": len(ep.queue) + len(ep.own_queue),
+                                     "link_errors": ep.link.errors}
+            dropped = getattr(ep.link, "dropped", None)
+            if dropped is not None:  # datagrams a full send buffer lost (UDP)
+                extra["send_dropped"] = dropped
+            kernel_drops = getattr(ep.link, "kernel_drops", None)
+            if kernel_drops is not None:  # what the kernel dropped before the router read it
+                extra["rx_kernel_drops"] = kernel_drops() or 0
             counts = dict(ep.stats.__dict__)
             if ep.server:  # the server's line adds up its clients, present and gone
                 extra.update(clients=ep.clients, clients_gone=ep.clients_gone)
@@ -1190,7 +1217,9 @@ class Router:
                     st = child.stats if child is not None else ep.gone_stats
                     for name, value in st.__dict__.items():
                         counts[name] += value
-                extra["queued"] += sum(len(c.queue) for c in ep.children)
+                extra["queued"] += sum(len(c.queue) + len(c.own_queue) for c in ep.children)
+                extra["send_dropped"] = extra.get("send_dropped", 0) + sum(
+                    getattr(c.link, "dropped", 0) for c in ep.children)
             foreign = getattr(ep.link, "foreign", None)
             if foreign is not None:
                 extra["foreign_dropped"] = foreign
