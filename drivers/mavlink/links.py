@@ -664,7 +664,9 @@ class TcpClientLink(_TcpBase):
             return
         self.reconnects += 1
         log.warning("%s: connected again", self.url)
-        self.conns = [_TcpConn(sock, ("tcp", *self._addr))]
+        # A new stream key: the new connection gets a framer of its own, not the old one's
+        # half-received packet.
+        self.conns = [_TcpConn(sock, ("tcp", *self._addr, self.reconnects))]
 
     def read(self, max_chunks: int) -> Iterator[Chunk]:
         if not self.conns:

@@ -35,7 +35,7 @@ by the
   ``gpsd/nmea-rtk.log`` through a pty: user + system time from ``wait4``, worst of 5, for this
   tree and the ``--against`` one (:func:`bench_startup`; alone: ``--only startup``).
 
-With the defaults it runs in about four minutes (the two 60 s loops and the 24 h replays
+With the defaults it runs in about four and a half minutes (the two 60 s loops and the 24 h replays
 dominate).
 """
 

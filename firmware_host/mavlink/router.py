@@ -25,7 +25,10 @@ thread that runs the detectors (that thread only hands packets over, through
 :meth:`Router.send_gps_input` and friends, and never blocks on a socket). Packets for a UDP
 server endpoint nobody has spoken to yet are dropped and counted (``no_peer``): there is
 nowhere to send them, and a ground station that connects later wants fresh telemetry, not a
-backlog.
+backlog. The bridge's own packets never wait behind forwarded ones: the loop takes them between
+any two datagrams, and an endpoint keeps them in a queue of their own that is written first.
+Routes (a system/component seen on an endpoint) are forgotten after ``route_timeout_s`` of
+silence. Drops are counted per endpoint (queues, send buffers, the kernel's receive drops).
 
 The loop owns time: ``clock`` (monotonic seconds) is an argument; :meth:`Router.tick` runs the
 periodic jobs for a given time so tests drive it with
