@@ -485,6 +485,11 @@ def test_datagrams_the_kernel_dropped_before_the_router_read_them_are_counted() 
         _wait_polled(router, accounted, "every datagram read or counted as dropped")
         g = router.summary()["gcs0"]
         assert g["rx_kernel_drops"] > 0 and g["rx_packets"] > 0
+        from firmware_host.commands.live import router_table  # the summary `mavlink` prints
+
+        line = next(row for row in router_table(router.summary()).splitlines()
+                    if row.startswith("gcs0 "))
+        assert str(g["rx_kernel_drops"]) in line.split()
     finally:
         router.close()
         gcs.close()
