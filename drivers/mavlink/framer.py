@@ -220,6 +220,14 @@ class MavFramer:
             self._on_drop(bytes(data), reason)
 
     def feed(self, data: bytes, *, boundary: bool = False) -> list[MavFrame]:
+        if boundary and not self._buf:
+            frame = self._whole_datagram(data)
+            if frame is not None:  # the usual datagram: one packet of a known id, CRC right
+                st = self.stats
+                st.bytes_in += len(data)
+                st.frames += 1
+                self._in_sync = True
+                return [frame]
         self.stats.bytes_in += len(data)
         buf = self._buf
         buf += data
@@ -331,6 +339,40 @@ class MavFramer:
         if boundary:
             self._in_sync = True  # one datagram is one framing context: the next starts afresh
         return out
+
+    def _whole_datagram(self, data: bytes) -> MavFrame | None:
+        """The frame ``data`` is when it is exactly one packet of a known id with a right CRC
+        (what :meth:`feed` would find, without its loop); None for anything else, which the
+        loop then frames byte by byte."""
+        n = len(data)
+        if n < HEADER_V1 + CRC_LEN:
+            return None
+        b0 = data[0]
+        if b0 == MAGIC_V2:
+            iflags = data[2]
+            if iflags & ~IFLAG_SIGNED or n < HEADER_V2 + CRC_LEN:
+                return None
+            signed = bool(iflags)
+            crc_end = HEADER_V2 + data[1]
+            if crc_end + CRC_LEN + (SIGNATURE_LEN if signed else 0) != n:
+                return None
+            msgid = data[7] | (data[8] << 8) | (data[9] << 16)
+        elif b0 == MAGIC_V1:
+            crc_end = HEADER_V1 + data[1]
+            if crc_end + CRC_LEN != n:
+                return None
+            signed = False
+            msgid = data[5]
+        else:
+            return None
+        extra = self._extras.get(msgid)
+        if extra is None or x25crc(data[1:crc_end] + bytes((extra,))) != (
+                data[crc_end] | (data[crc_end + 1] << 8)):
+            return None
+        raw = bytes(data)
+        if b0 == MAGIC_V2:
+            return MavFrame(raw, 2, raw[4], raw[5], raw[6], msgid, signed, True)
+        return MavFrame(raw, 1, raw[2], raw[3], raw[4], msgid, False, True)
 
     @staticmethod
     def _crc_ok(buf: bytearray, pos: int, crc_end: int, extra: int) -> bool:

@@ -658,12 +658,21 @@ def flood_rows(res: dict[str, Any]) -> list[dict[str, Any]]:
         {"figure": "... the same fixes sent straight to the autopilot (this machine's floor)",
          "unit": "ms", "p50": _nan(fl.get("direct_p50_ms")), "p99": _nan(fl.get("direct_p99_ms")),
          "max": _nan(fl.get("direct_max_ms")), "value": None, "goal": "", "ok": None},
+        {"figure": "... the router's share (routed minus floor; a busy machine shows in both)",
+         "unit": "ms", "p50": _minus(fl.get("p50_ms"), fl.get("direct_p50_ms")),
+         "p99": _minus(fl.get("p99_ms"), fl.get("direct_p99_ms")), "max": None, "value": None,
+         "goal": "", "ok": None},
         {"figure": f"... flood packets lost: {lost}, counted by the router "
                    f"(gcs0 rx_kernel_drops {drops.get('rx_kernel_drops', '?')})",
          "unit": "% of sent", "p50": None, "p99": None, "max": None,
          "value": round(100.0 * lost / max(1, int(fl["flood_sent"])), 2), "goal": "",
          "ok": None},
     ]
+
+
+def _minus(a: Any, b: Any) -> float | None:
+    x, y = _nan(a), _nan(b)
+    return None if x is None or y is None else round(x - y, 3)
 
 
 def against_rows(res: dict[str, Any]) -> list[dict[str, Any]]:
