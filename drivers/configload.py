@@ -8,12 +8,19 @@ dataclass, or ``X | None``) and optional bounds in the field metadata::
 
 :func:`load_dataclass` checks a TOML table against the class: unknown keys, wrong types and
 values out of range (bounds ``ge``, ``gt``, ``le``, ``lt``, ``ne``; ``inf`` and ``nan`` are never a
-number here) fail with a :class:`~fdi.errors.ConfigError` that names the file, the dotted key,
+number here; see :func:`check_number` for the floors every float keeps) fail with a
+:class:`~fdi.errors.ConfigError` that names the file, the dotted key,
 what was expected and what was found; an unknown key says which known key it is close to ("did
 you mean"). All the errors of a file are collected (:class:`~fdi.errors.ConfigErrors` when more
 than one). Missing keys take the dataclass default, so a preset only states what it changes, and
 the built-in defaults are the dataclass defaults. A field with ``metadata={"toml": False}`` is
 not a key of the file (the loader fills it in).
+
+The bounds are the one validation of a value wherever it comes from: the MAVLink parameter
+table (:mod:`firmware_host.mavlink.params`) is built from the same metadata and refuses a
+PARAM_SET with :func:`check_number`, so a ground station cannot set what a file may not hold.
+A documented "off" value outside the range (``gate_sigmas = 0``: the fixed gate) is stated as
+``"off": 0.0``: that value, or one inside the bounds.
 """
 
 from __future__ import annotations
@@ -31,7 +38,17 @@ from fdi.errors import ConfigError, ConfigErrors
 
 T = TypeVar("T")
 
-_BOUND_TEXT = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<", "ne": "!="}
+MAX_MAGNITUDE = 1e6
+"""A float field without an upper (lower) bound of its own is at most (at least) this. No
+setting of the bridge means more (a million seconds is 11 days, a million metres 1 000 km), and
+beyond it a time overflows what it feeds (a selector's timeout in milliseconds, a sleep) and a
+scale overflows a square (``1e308``)."""
+
+STRICT_MARGIN = 1e-6
+"""A strict bound of a float, ``gt: b`` (``lt: b``), is the floor ``b + 1e-6 x max(1, |b|)``
+(the ceiling ``b - ...``): a quantity that must be positive is at least a millionth of its unit,
+never ``1e-38`` or ``5e-324``, whose reciprocal or square is not a number. A field that needs a
+smaller positive value says so with ``ge`` (``alpha``: ``ge = 1e-15``)."""
 
 
 def _found(value: object) -> str:
@@ -127,23 +144,67 @@ def _convert(value: Any, tp: Any, file: str, key: str, errors: list[ConfigError]
     raise ConfigError(file, key, _describe(tp), _found(value))
 
 
+def number_range(meta: typing.Mapping[str, Any], integer: bool) -> tuple[float, float]:
+    """The closed range ``[lo, hi]`` a number of a field with this metadata must be in (besides
+    its ``off`` value and ``ne``): the bounds as :func:`check_number` applies them."""
+    lo, hi = -math.inf, math.inf
+    if "ge" in meta:
+        lo = float(meta["ge"])
+    if "gt" in meta:
+        gt = float(meta["gt"])
+        strict = math.floor(gt) + 1.0 if integer else gt + STRICT_MARGIN * max(1.0, abs(gt))
+        lo = max(lo, strict)
+    if "le" in meta:
+        hi = float(meta["le"])
+    if "lt" in meta:
+        lt = float(meta["lt"])
+        strict = math.ceil(lt) - 1.0 if integer else lt - STRICT_MARGIN * max(1.0, abs(lt))
+        hi = min(hi, strict)
+    if integer:
+        lo = float(math.ceil(lo)) if math.isfinite(lo) else lo
+        hi = float(math.floor(hi)) if math.isfinite(hi) else hi
+    else:
+        lo = lo if "ge" in meta or "gt" in meta else -MAX_MAGNITUDE
+        hi = hi if "le" in meta or "lt" in meta else MAX_MAGNITUDE
+    return lo, hi
+
+
+def check_number(value: float, meta: typing.Mapping[str, Any], integer: bool = False) -> str | None:
+    """None when ``value`` passes the bounds of ``meta``; else what was expected (one line).
+
+    ``integer``: the field is an ``int`` (its bounds are exact). A float keeps the floors of
+    :data:`STRICT_MARGIN` and :data:`MAX_MAGNITUDE`, and must be finite. ``meta["off"]``, when
+    present, is accepted as well (a documented "off")."""
+    if not integer and not math.isfinite(value):
+        return "a finite number"
+    off = meta.get("off")
+    if off is not None and value == off:
+        return None
+    prefix = f"{off!r} (off) or " if off is not None else ""
+    lo, hi = number_range(meta, integer)
+    if value < lo:  # the bound as stated, else the floor it keeps
+        if "ge" in meta and float(meta["ge"]) == lo:
+            return f"{prefix}a number >= {meta['ge']}"
+        if "gt" in meta and (integer or value <= meta["gt"]):
+            return f"{prefix}a number > {meta['gt']}"
+        return f"{prefix}a number >= {lo:g}"
+    if value > hi:
+        if "le" in meta and float(meta["le"]) == hi:
+            return f"{prefix}a number <= {meta['le']}"
+        if "lt" in meta and (integer or value >= meta["lt"]):
+            return f"{prefix}a number < {meta['lt']}"
+        return f"{prefix}a number <= {hi:g}"
+    if "ne" in meta and value == meta["ne"]:
+        return f"a number other than {meta['ne']}"
+    return None
+
+
 def _check_bounds(value: Any, meta: typing.Mapping[str, Any], file: str, key: str) -> None:
     if not isinstance(value, int | float) or isinstance(value, bool):
         return
-    for name, op in _BOUND_TEXT.items():
-        if name not in meta:
-            continue
-        bound = meta[name]
-        ok = {
-            "ge": value >= bound,
-            "gt": value > bound,
-            "le": value <= bound,
-            "lt": value < bound,
-            "ne": value != bound,
-        }[name]
-        if not ok:
-            what = f"a number other than {bound}" if name == "ne" else f"a number {op} {bound}"
-            raise ConfigError(file, key, what, _found(value))
+    expected = check_number(value, meta, integer=isinstance(value, int))
+    if expected is not None:
+        raise ConfigError(file, key, expected, _found(value))
 
 
 def _unknown_key(file: str, dotted: str, key: str, known: list[str]) -> ConfigError:

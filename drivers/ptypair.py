@@ -3,7 +3,10 @@
 The master side is a file descriptor owned by the test harness or the replayer; the slave side
 has a path (``/dev/pts/N``) that a driver opens like any serial device, by URL. The slave is put
 in raw mode at once, so no byte written before the driver opens it is translated (CR to NL) or
-echoed. An optional symlink gives the slave a stable name (like ``socat``'s ``link=``).
+echoed. An optional symlink gives the slave a stable name (like ``socat``'s ``link=``); it is
+removed on :meth:`close` (while it still names this pty), which the commands that make one run
+on ``SIGTERM`` and ``SIGHUP`` too (``fdi-bridge replay``): a link left behind would name
+whichever program gets that ``/dev/pts/N`` next.
 """
 
 from __future__ import annotations
@@ -77,9 +80,10 @@ class PtyPair:
             if fd >= 0:
                 with contextlib.suppress(OSError):
                     os.close(fd)
-        if self.link is not None:
-            with contextlib.suppress(FileNotFoundError):
-                self.link.unlink()
+        if self.link is not None:  # ours only: another program may have taken the name since
+            with contextlib.suppress(OSError):
+                if os.readlink(self.link) == self.slave_path:
+                    self.link.unlink()
 
     def __enter__(self) -> PtyPair:
         return self

@@ -59,6 +59,22 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   (a slow drift passing near the dead reckoning is not taken back); both headings are then
   re-aligned to the compass by that mean.
 
+* Warm-up restart: three innovations in a row on one side beyond ``jump_sigmas`` sigmas
+  (``sigma0_deg`` at least) during the warm-up are a step of the compass before it was ever
+  trusted (ArduSub's EKF aligns its yaw, 0 -> 348.5 deg, about 1.6 s after boot): the warm-up
+  starts again from the new level. Fitted as a slope, that step made a 1.6 deg/s "bias" on a
+  gyro whose true bias was under 0.01 deg/s, and the dead reckoning then drifted 1 deg/s
+  (``../shared/corpus/ardusub-sitl``).
+* Manoeuvres: a period whose dead reckoning may be off the compass by more than
+  ``maneuver_deg`` for reasons that are not a fault -- the compass's lag behind the gyro
+  (``maneuver_lag_s`` x |r|: ArduSub's RAW_IMU compass trails its gyro by 0.12-0.17 s, 9.5
+  deg at 77 deg/s) or the integration of a rate sampled once or twice a period (``dt`` x
+  |r(k) - r(k-1)|: ArduSub's yaw rate steps from 2 to 77 deg/s between two samples) -- and
+  the ``maneuver_settle`` periods after it are not tested, not fitted and do not move the
+  loops (the gyro carries the headings through); at its end the innovation's change is taken
+  into both headings up to the integration bound accumulated over it (sum of ``dt`` x
+  |r(k) - r(k-1)|), so that a turn's sampling error is not a fault, and whatever is beyond
+  the bound is left for the test.
 * Offset compensation (``comp_samples`` > 0) after a step confirmed by the fast CUSUM: the
   compass minus its offset, once the offset is known to be a level, steers ``psi`` again
   (:meth:`GyroWitness._compensate`), so that the dead reckoning's drift stays bounded.
@@ -268,6 +284,9 @@ class WitnessParams:
     comp_drift_bias_sd_dps: float = 0.005  # ... the bias before it known to no better than this
     drift_recover_s: float = 20.0  # after it, the compass taken back only once the slope of
     drift_recover_max_dps: float = 0.05  # ... its innovation over this long is within this
+    maneuver_lag_s: float = 0.15  # the compass's lag behind the gyro (a bound), s
+    maneuver_deg: float = 1.0  # a period whose lag + sampling bound exceeds this: a manoeuvre
+    maneuver_settle: int = 2  # periods after a manoeuvre still carried by the gyro alone
 
 
 @dataclass(frozen=True)
@@ -348,6 +367,15 @@ class GyroWitness:
         self._comp_ok = False
         self._gc = [0.0, 0.0]
         self._comp_prior: tuple[float, float] | None = None  # (z's slope, info) before it
+        # Manoeuvres (module docstring): this period's and the last rate, the periods still
+        # to settle, and the integration bound accumulated since the manoeuvre began (deg).
+        self._r: float | None = None
+        self._r_prev: float | None = None
+        self._man_left = 0
+        self._man_bound = 0.0
+        self.maneuvers = 0  # manoeuvres carried by the gyro alone (for the summary)
+        self._warm_nu: deque[float] = deque(maxlen=3)  # the warm-up's last innovations
+        self.warmup_restarts = 0
 
     @property
     def ready(self) -> bool:
@@ -360,6 +388,7 @@ class GyroWitness:
             self.psi += step
             self.psi_t += step
         self._G += rate_dps * dt
+        self._r_prev, self._r = self._r, rate_dps
         self.t += dt
         self._lam = 1.0 - dt / self.p.bias_tau_s
         self._dt = dt
@@ -378,6 +407,27 @@ class GyroWitness:
         nu_o = _wrap180(y_deg - self.psi)
         self._y_unw = self.psi + nu_o
         nu = _wrap180(y_deg - self.psi_t)
+        if not self.fault and self._maneuvering(dt):
+            # carried by the gyro alone: nothing tested, fitted or corrected (module doc)
+            if self.k >= p.warmup_samples:
+                self._delayed.append((self.t, self._y_unw - self._G, False, self.psi))
+            self.short.restart()
+            self._nu_prev = None
+            return WitnessStep(self.psi, nu, 0.0, self.var.sigma, self.suspect, False, False,
+                               False, False)
+        if self._man_bound > 0.0 and not self.fault:
+            # the manoeuvre's end: its sampling error (within the bound) into both headings
+            d = max(-self._man_bound, min(self._man_bound, nu - self.nu_ref))
+            self._man_bound = 0.0
+            self.psi += d
+            self.psi_t += d
+            self._G += d  # z = y - sum r dt goes on as one line: the bias fit sees no step
+            nu_o -= d
+            nu -= d
+            self._y_unw = self.psi + nu_o
+        if self.k < p.warmup_samples and self._warmup_step(nu_o, y_deg):
+            return WitnessStep(y_deg, 0.0, 0.0, self.var.sigma, False, False, False, False,
+                               False)
         if self.k >= p.warmup_samples:  # the bias fit's delay line (trusted: set below)
             self._delayed.append((self.t, self._y_unw - self._G, False, self.psi))
             # the hinge test halfway up: the bias fit does not take the samples of its hinge
@@ -536,6 +586,57 @@ class GyroWitness:
             self.nu_ref += max(dt / p.ref_tau_s, 1.0 / (self._ref_n + 25)) * d
         return WitnessStep(self.psi, nu, level, sigma, self.suspect, confirmed, dismissed, False,
                            burst)
+
+    def _maneuvering(self, dt: float) -> bool:
+        """This period is a manoeuvre, or settles after one (module docstring); keeps the
+        integration bound accumulated since the manoeuvre began."""
+        p = self.p
+        if self._r is None or p.maneuver_deg <= 0.0:
+            return False
+        dr = abs(self._r - self._r_prev) if self._r_prev is not None else 0.0
+        if p.maneuver_lag_s * abs(self._r) + dt * dr > p.maneuver_deg:
+            if self._man_left == 0 and self._man_bound == 0.0:
+                self.maneuvers += 1
+            self._man_left = p.maneuver_settle + 1
+            self._man_bound += dt * dr
+        elif self._man_left > 0 and self._man_bound > 0.0:
+            self._man_bound += dt * dr
+        if self._man_left > 0:
+            self._man_left -= 1
+            # the bound is at least the threshold: the last period's lag is still unwinding
+            self._man_bound = max(self._man_bound, p.maneuver_deg)
+            return True
+        return False
+
+    def _warmup_step(self, nu_o: float, y_deg: float) -> bool:
+        """A step of the compass during the warm-up (module docstring): start it again from
+        the new level; True if it did."""
+        p = self.p
+        self._warm_nu.append(nu_o)
+        w = self._warm_nu
+        gate = p.jump_sigmas * max(self.var.sigma, p.sigma0_deg)
+        if (len(w) < 3 or min(abs(v) for v in w) <= gate
+                or not (min(w) > 0.0 or max(w) < 0.0)):
+            return False
+        self.warmup_restarts += 1
+        self.psi = self.psi_t = y_deg
+        self.k = 0
+        self._S = [0.0, 0.0, 0.0, 0.0, 0.0]
+        self.bias = 0.0
+        self.info = 0.0
+        self._warm_nu.clear()
+        self._nu_prev = None
+        self.nu_ref = 0.0
+        self._ref_n = 0
+        self._corr.clear()
+        self._hold_ref = None
+        if self.hinge is not None:
+            self.hinge.clear()
+        self._hmax.clear()
+        self._hmin.clear()
+        self.short.restart()
+        self.clear()
+        return True
 
     def _drift_test(self, nu_o: float, sigma: float, skip: bool, step: bool,
                     glr: float | None = None, offset: float = 0.0,

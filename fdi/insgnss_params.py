@@ -67,7 +67,7 @@ class FaultStateParams:
     """The ``[filter.fault_state]`` table of ``config/insgnss.toml``."""
 
     alpha_onset: float = field(
-        default=0.01, metadata={"gt": 0.0, "lt": 1.0,
+        default=0.01, metadata={"ge": 1e-15, "le": 0.5,
                                 "doc": "onset significance: T_on = χ²₃(1 − α_on)"})
     window: int = field(
         default=4, metadata={"ge": 1, "le": 64, "doc": "innovation history of the jump test"})

@@ -96,28 +96,42 @@ REVERSAL_FLOOR_SIGMAS = 3.0
 _new = tuple.__new__
 
 
+# Bounds of the detector's parameters, in which it works as documented: the loader
+# (drivers/configload.py) checks a file against them and the MAVLink parameter table
+# (FDI_ALPHA ...) is built from them, so a ground station cannot set what a file may not hold.
+# "off": the documented value that turns a test off, accepted beside the range.
+_ALPHA = {"ge": 1e-15, "le": 0.5}  # a significance level: its χ² threshold finite, at most 1/2
+_SIGMAS = {"ge": 1.0, "le": 100.0}  # a test's width in σ: under 1 σ it flags a third of clean fixes
+_SIGMA_M = {"ge": 0.001, "le": 100.0}  # a noise σ or gate in metres: at least 1 mm
+_SPAN_S = {"off": 0.0, "ge": 0.01, "le": 3600.0}  # a time span, 0: off / at once
+_LONG_S = {"off": 0.0, "ge": 1.0, "le": 86400.0}  # a calibration time, 0: none
+_LAG_S = {"off": 0.0, "ge": 0.001, "le": 10.0}  # the Doppler's lag (fdi-bridge calibrate: 1 ms)
+_COUNT = {"ge": 1, "le": 1000}  # a count of epochs
+
+
 @dataclass(frozen=True)
 class RoverDetectorParams:
     """Detector parameters (the ``[rover.detector]`` config table)."""
 
     strategy: Literal["grey", "three_zone", "combined"] = "grey"
     # Section 1: residual chi-square test.
-    alpha: float = field(default=0.05, metadata={"gt": 0.0, "lt": 1.0})
+    alpha: float = field(default=0.05, metadata=_ALPHA)
     chi2_enabled: bool = True
-    sigma_m: float = field(default=0.35, metadata={"gt": 0.0})  # R = σ² when no GST
-    sigma_up_m: float = field(default=0.7, metadata={"gt": 0.0})
+    sigma_m: float = field(default=0.35, metadata=_SIGMA_M)  # R = σ² when no GST
+    sigma_up_m: float = field(default=0.7, metadata=_SIGMA_M)
     use_gst: bool = True
-    q_accel: float = field(default=0.5, metadata={"gt": 0.0})  # m²/s³
+    q_accel: float = field(default=0.5, metadata={"ge": 1e-6, "le": 1e4})  # m²/s³
     # Section 2: GM(1,1) grey prediction.
     window: int = field(default=12, metadata={"ge": 4, "le": 50})
     predictor: Literal["raw", "doppler"] = "doppler"
-    shift_m: float = field(default=100.0, metadata={"gt": 0.0})
-    gate_m: float = field(default=0.7, metadata={"gt": 0.0})  # fixed gate (the floor if adaptive)
-    gate_up_m: float = field(default=1.5, metadata={"gt": 0.0})
+    shift_m: float = field(default=100.0, metadata={"ge": 1.0, "le": 1e5})
+    # fixed gate (the floor if adaptive)
+    gate_m: float = field(default=0.7, metadata={"ge": 0.01, "le": 1000.0})
+    gate_up_m: float = field(default=1.5, metadata={"ge": 0.01, "le": 1000.0})
     gate_axes: Literal["per_axis", "horizontal"] = "horizontal"
-    gate_sigmas: float = field(default=6.0, metadata={"ge": 0.0})  # 0: fixed gate
-    gate_tau_epochs: float = field(default=50.0, metadata={"ge": 1.0})
-    gate_sigma0_m: float = field(default=0.1, metadata={"gt": 0.0})
+    gate_sigmas: float = field(default=6.0, metadata={**_SIGMAS, "off": 0.0})  # 0: fixed gate
+    gate_tau_epochs: float = field(default=50.0, metadata={"ge": 1.0, "le": 1e4})
+    gate_sigma0_m: float = field(default=0.1, metadata=_SIGMA_M)
     test_up: bool = True
     # Doppler consistency (beyond the paper): the fix must match the accepted fix of `window`
     # epochs ago moved by the receiver's Doppler displacement since, within
@@ -127,12 +141,12 @@ class RoverDetectorParams:
     # decides whether the receiver agrees with its own Doppler over the last RAW_HORIZON
     # epochs: then restart on it (no lock-in), else coast on Doppler, up to max_coast_s.
     doppler_test: bool = True
-    doppler_sigmas: float = field(default=6.0, metadata={"ge": 0.0})
-    doppler_floor_m: float = field(default=0.5, metadata={"gt": 0.0})
+    doppler_sigmas: float = field(default=6.0, metadata=_SIGMAS)
+    doppler_floor_m: float = field(default=0.5, metadata={"ge": 0.01, "le": 1000.0})
     # The residual's prior σ per axis over a 1 s span, x sqrt(the window's span in s) at the
     # first fix interval (a random walk), then learned (weighing as DOPPLER_PRIOR_N residuals).
-    doppler_s0_m: float = field(default=0.2, metadata={"gt": 0.0})
-    max_coast_s: float = field(default=30.0, metadata={"ge": 0.0})
+    doppler_s0_m: float = field(default=0.2, metadata=_SIGMA_M)
+    max_coast_s: float = field(default=30.0, metadata=_SPAN_S)
     # Slow faults and level changes (issue 13, fdi/drift.py and fdi/level.py; beyond the
     # paper). Needs predictor = "doppler" and strategy = "grey". drift_sigma_m: the per-axis
     # σ of the Doppler-free value's change over each horizon: with drift_calibrate_s > 0 the
@@ -140,75 +154,80 @@ class RoverDetectorParams:
     # seconds of trusted fixes; with 0, as configured (a receiver calibrated offline:
     # fdi-bridge calibrate, firmware_host/rover/calibration.py).
     drift_test: bool = True
-    drift_horizons_s: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0)
-    drift_sigma_m: tuple[float, ...] = (0.3, 0.4, 0.6, 0.9, 1.4)
-    drift_calibrate_s: float = field(default=300.0, metadata={"ge": 0.0})  # 0: as configured
+    drift_horizons_s: tuple[float, ...] = field(default=(1.0, 3.0, 10.0, 30.0, 100.0),
+                                             metadata={"ge": 0.1, "le": 3600.0})
+    drift_sigma_m: tuple[float, ...] = field(default=(0.3, 0.4, 0.6, 0.9, 1.4),
+                                          metadata={"ge": 1e-4, "le": 100.0})
+    drift_calibrate_s: float = field(default=300.0, metadata=_LONG_S)  # 0: as configured
     # A provisional calibration after drift_precal_s (0: none): the same robust estimate x
     # drift_prefactor, never wider than drift_sigma_m, until the calibration proper; estimated
     # again every 10 s, the factor shrinking as 1 + (f - 1) x sqrt(drift_precal_s / elapsed).
-    drift_precal_s: float = field(default=120.0, metadata={"ge": 0.0})
-    drift_prefactor: float = field(default=2.0, metadata={"ge": 1.0})
+    drift_precal_s: float = field(default=120.0, metadata=_LONG_S)
+    drift_prefactor: float = field(default=2.0, metadata={"ge": 1.0, "le": 100.0})
     # The calibration at start never goes below this fraction of drift_sigma_m: 0.2 for the
     # wide defaults; fdi-bridge calibrate writes 1/1.5, so a day's calibration can widen a
     # receiver's offline σ but not narrow them (it sees only the fixes it trusts, and from
     # the offline σ it trusts fewer: multipath 10 Hz seed 202, a false hold at 860 s).
-    drift_floor_frac: float = field(default=0.2, metadata={"ge": 0.0, "le": 1.0})
+    drift_floor_frac: float = field(default=0.2, metadata={"off": 0.0, "ge": 0.01, "le": 1.0})
     # The calibration's own uncertainty: each σ_H x (1 + drift_cal_k / sqrt(n_H)), n_H
     # the independent H-long differences the calibration saw (2 axes), H >= drift_cal_min_h.
-    drift_cal_k: float = field(default=1.5, metadata={"ge": 0.0})
-    drift_cal_min_h: float = field(default=30.0, metadata={"ge": 0.0})
-    drift_sigmas: float = field(default=5.0, metadata={"gt": 0.0})
+    drift_cal_k: float = field(default=1.5, metadata={"off": 0.0, "ge": 0.01, "le": 100.0})
+    drift_cal_min_h: float = field(default=30.0, metadata=_LONG_S)
+    drift_sigmas: float = field(default=5.0, metadata=_SIGMAS)
     # Flag (warn) from this statistic on, the fix still passed on as it is (0: off).
-    drift_warn_sigmas: float = field(default=4.5, metadata={"ge": 0.0})
+    drift_warn_sigmas: float = field(default=4.5, metadata={**_SIGMAS, "off": 0.0})
     # Flagged (reason drift_watch, the fix otherwise as if clean) from the drift statistic of
     # the ramp_window_s horizon alone over ramp_sigmas (0: off). The maximum over five horizons
     # at 4.5 σ flags ~0 clean epochs; one horizon at 4 σ is a budget of its own for the window
     # a ramp must be found in (10 s): tools/ramp_bound.py shows that its clean 99.9 %
     # (0.6-1.2 m) is under the 1 m a 0.1 m/s ramp makes there. (MAVLink parameters
     # FDI_RAMP_WINDOW and FDI_RAMP_SIGMAS.)
-    ramp_window_s: float = field(default=10.0, metadata={"ge": 0.0})
-    ramp_sigmas: float = field(default=4.0, metadata={"ge": 0.0})
-    drift_lag_s: float = field(default=0.15, metadata={"ge": 0.0})  # Doppler behind position
-    drift_lag_sd_s: float = field(default=0.15, metadata={"ge": 0.0})
-    stale_s: float = field(default=2.0, metadata={"gt": 0.0})  # whole fix repeated this long
+    ramp_window_s: float = field(default=10.0, metadata=_SPAN_S)
+    ramp_sigmas: float = field(default=4.0, metadata={**_SIGMAS, "off": 0.0})
+    # Doppler behind position
+    drift_lag_s: float = field(default=0.15, metadata=_LAG_S)
+    drift_lag_sd_s: float = field(default=0.15, metadata=_LAG_S)
+    # whole fix repeated this long
+    stale_s: float = field(default=2.0, metadata={"ge": 0.1, "le": 3600.0})
     # ... or its position repeated while its own speed says it moved this far (0: off);
     # beyond a coordinate quantum
-    stale_move_m: float = field(default=0.15, metadata={"ge": 0.0})
+    stale_move_m: float = field(default=0.15, metadata={"off": 0.0, "ge": 0.001, "le": 1000.0})
     # ... and at least this many of its coordinate quanta (the larger axis; learned from the
     # fixes, the rule waits for it; 0: stale_move_m alone)
-    stale_move_quanta: float = field(default=1.6, metadata={"ge": 0.0})
+    stale_move_quanta: float = field(default=1.6, metadata={"off": 0.0, "ge": 0.1, "le": 1000.0})
     # ... or after n repeats in a row where this receiver's chance of them, p^n, is at most
     # stale_p; p is learned from all its pairs of fixes: (repeats + 1) / (pairs + 2). A
     # receiver whose fix changes every epoch is found frozen at its second repeat; one that
     # repeats often (a static hold at stops) is given up to stale_s (0 = off).
-    stale_p: float = field(default=1e-4, metadata={"ge": 0.0, "lt": 1.0})
-    hold_exit_sigmas: float = field(default=3.0, metadata={"gt": 0.0})
-    hold_side_sigmas: float = field(default=2.0, metadata={"gt": 0.0})
-    hold_exit_s: float = field(default=1.0, metadata={"ge": 0.0})  # the short fixed lag
+    stale_p: float = field(default=1e-4, metadata={**_ALPHA, "off": 0.0})
+    hold_exit_sigmas: float = field(default=3.0, metadata=_SIGMAS)
+    hold_side_sigmas: float = field(default=2.0, metadata=_SIGMAS)
+    hold_exit_s: float = field(default=1.0, metadata=_SPAN_S)  # the short fixed lag
     # A slow hold's (a drift) "new_level": fixes that stepped to an older level by less than
     # half the old track's distance from it sit there this long (0: as an abrupt one's,
     # hold_exit_s; with it, fixes that drifted there never end the hold: fdi/level.py).
-    hold_level_s: float = field(default=10.0, metadata={"ge": 0.0})
-    hold_output_s: float = field(default=10.0, metadata={"ge": 0.0})  # then alarm, no output
-    hold_max_s: float = field(default=120.0, metadata={"gt": 0.0})  # then the receiver again
+    hold_level_s: float = field(default=10.0, metadata=_SPAN_S)
+    hold_output_s: float = field(default=10.0, metadata=_SPAN_S)  # then alarm, no output
+    # then the receiver again
+    hold_max_s: float = field(default=120.0, metadata={"ge": 1.0, "le": 86400.0})
     # An abrupt step the track went on to accept (a multipath step) is remembered this long:
     # the fixes stepping back to the level before it end it (0: off).
-    step_pair_s: float = field(default=60.0, metadata={"ge": 0.0})
-    replaced_r_factor: float = field(default=100.0, metadata={"ge": 1.0})
+    step_pair_s: float = field(default=60.0, metadata=_SPAN_S)
+    replaced_r_factor: float = field(default=100.0, metadata={"ge": 1.0, "le": 1e6})
     # After two or more replacements, a fix that only the grey test flags (the chi-square,
     # Doppler and drift tests pass, the drift statistic at most this many σ) is passed on
     # (flagged): the grey window has fed on its own predictions (0: off).
-    grey_fed_sigmas: float = field(default=2.0, metadata={"ge": 0.0})
+    grey_fed_sigmas: float = field(default=2.0, metadata={**_SIGMAS, "off": 0.0})
     # Isolation and alarm.
-    max_consecutive: int = field(default=5, metadata={"ge": 0})
-    recover_epochs: int = field(default=5, metadata={"ge": 1})
+    max_consecutive: int = field(default=5, metadata=_COUNT)
+    recover_epochs: int = field(default=5, metadata=_COUNT)
     # Strategies three_zone and combined (Cai & Shao): per-axis zones on the Kalman innovation.
     three_zone: ThreeZoneParams = field(default_factory=ThreeZoneParams)
     # Quality screens (0 disables).
-    min_sats: int = field(default=4, metadata={"ge": 0})
-    max_hdop: float = field(default=0.0, metadata={"ge": 0.0})
+    min_sats: int = field(default=4, metadata={"ge": 0, "le": 64})  # 0: off
+    max_hdop: float = field(default=0.0, metadata={"ge": 0.5, "le": 99.0, "off": 0.0})
     # Time.
-    max_gap_s: float = field(default=5.0, metadata={"gt": 0.0})
+    max_gap_s: float = field(default=5.0, metadata={"ge": 0.05, "le": 3600.0})
 
     @property
     def runs_drift_test(self) -> bool:

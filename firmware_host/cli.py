@@ -367,6 +367,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return _main(argv)
+    except OSError as err:  # a path the command line names that cannot even be looked at
+        from firmware_host.commands.checks import os_error_text
+
+        print(f"fdi-bridge: error: {os_error_text('', err)}", file=sys.stderr)
+        return 2
     except Exception as err:  # the last line of defence: one line, no traceback (issue 17)
         verbose = _verbose_argv(argv)
         hint = "" if verbose else " (run with -v for the traceback)"

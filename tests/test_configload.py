@@ -80,7 +80,7 @@ def test_paper_preset_loads_and_differs_where_it_says() -> None:
          "'0.05' (str)"),
         ("rover = 3\n", "rover", "a table [RoverConfig]", "3 (int)"),
         # bounds
-        ("[rover.detector]\nalpha = 1.5\n", "rover.detector.alpha", "a number < 1.0",
+        ("[rover.detector]\nalpha = 1.5\n", "rover.detector.alpha", "a number <= 0.5",
          "1.5 (float)"),
         ("[rover.detector]\nwindow = 2\n", "rover.detector.window", "a number >= 4", "2 (int)"),
         ("[rover.port]\nbytesize = 9\n", "rover.port.bytesize", "a number <= 8", "9 (int)"),
@@ -167,7 +167,7 @@ def test_cli_exits_2_and_names_file_and_key(
     assert status == 2
     assert str(bad) in captured.err
     assert "rover.detector.alpha" in captured.err
-    assert "expected a number < 1.0, found 1.5" in captured.err
+    assert "expected a number <= 0.5, found 1.5" in captured.err
     assert captured.out == ""
     assert not out.exists()  # it failed at start, before doing anything
 
@@ -198,12 +198,12 @@ def test_non_finite_numbers_are_refused(tmp_path: Path, text: str, key: str) -> 
     ("[insgnss.filter.three_zone]\nalpha1 = 1e-200\nalpha2 = 1e-300\n",
      "insgnss.filter.three_zone.alpha1"),
 ])
-def test_a_level_inside_its_bounds_whose_threshold_is_not_finite(
+def test_a_level_whose_threshold_is_not_finite_is_below_its_bound(
         tmp_path: Path, text: str, key: str) -> None:
     with pytest.raises(ConfigError) as info:
         load_bridge_file(write(tmp_path, text))
     assert info.value.key == key
-    assert info.value.expected.startswith("a significance level whose threshold is a finite")
+    assert info.value.expected == "a number >= 1e-15"  # issue C: the level's own bound
     # the smallest level the message promises is accepted
     load_bridge_file(write(tmp_path, "[rover.detector]\nalpha = 1e-15\n", "ok.toml"))
 

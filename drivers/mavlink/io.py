@@ -421,6 +421,11 @@ class _Encoders:
         )
         return self._emit(msg)
 
+    def send_ahrs2(self, roll_rad: float, pitch_rad: float, yaw_rad: float) -> bytes:
+        """AHRS2 (ArduPilot's second attitude estimate; angles in rad, no position)."""
+        msg = self._mav.ahrs2_encode(roll_rad, pitch_rad, yaw_rad, 0.0, 0, 0)
+        return self._emit(msg)
+
     def send_param_set(
         self, target_system: int, target_component: int, name: str, value: float
     ) -> bytes:

@@ -207,9 +207,20 @@ def _as_type(check: Callable[[str], T], name: str) -> Callable[[str], T]:
         except UsageError as err:
             text = str(err).removeprefix("value").lstrip(": ")
             raise argparse.ArgumentTypeError(text) from None
+        except OSError as err:  # EACCES: a directory on the path this user may not search
+            raise argparse.ArgumentTypeError(os_error_text(text, err)) from None
 
     convert.__name__ = name  # argparse names the type in "invalid NAME value"
     return convert
+
+
+def os_error_text(path: str, err: OSError) -> str:
+    """``PATH: Permission denied (...)``: an OSError met while looking at a path, for a user."""
+    hint = ""
+    if isinstance(err, PermissionError):
+        hint = (" (this user may not search a directory on the path, or read or write the "
+                "file)")
+    return f"{err.filename or path}: {err.strerror or err}{hint}"
 
 
 def _float(text: str) -> float:

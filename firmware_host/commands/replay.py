@@ -9,15 +9,24 @@ it; ``--speed 1`` paces the bytes at their recorded times (a plain log is paced 
 times), ``--speed 10`` ten times faster.
 
 Outputs (the replay contract, see README): ``OUT/epochs.jsonl``, one object per receiver epoch,
-and ``OUT/summary.json``.
+and ``OUT/summary.json`` (written whole or not at all).
+
+``^C``, ``SIGTERM`` and ``SIGHUP`` (a closed terminal, a ``timeout``, systemd) stop a replay the
+same way: the epochs read so far are completed, ``summary.json`` is written marked ``partial``
+(with the signal in ``interrupted_by``), every output is closed (a ``pty:PATH`` link removed,
+so that nothing opens it later onto another program's pty) and the exit status is 128 + the
+signal's number (130, 143, 129), as a shell reports a job a signal ended.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import logging
 import re
+import signal
 import sys
 import threading
 import time
@@ -36,6 +45,9 @@ from firmware_host.commands.summaries import replay_problems, replay_text
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
+from firmware_host.runtime.records import write_json_atomic
+
+log = logging.getLogger("fdi_bridge.replay")
 
 # An ROV recording (firmware_host.rov.vehicle's TICK and LINK channels) goes to the ROV's
 # replay, loaded only then (as the CLI loads a command): the rover's replay stays light.
@@ -273,20 +285,21 @@ def run_replay(
     with open(out_dir / "epochs.jsonl", "w", encoding="utf-8") as jsonl:
         pipeline = RoverPipeline(cfg.rover, jsonl=jsonl, sinks=sinks)
         t0 = time.perf_counter()
-        partial = False
+        partial = ""
         try:
             if use_pty:
                 transport = replay_through_pty(inp, pipeline, speed=speed)
             else:
                 transport = replay_direct(inp, pipeline)
-        except KeyboardInterrupt:  # ^C: keep what was read (summary marked partial)
-            partial = True
+        except KeyboardInterrupt as err:  # ^C, SIGTERM, SIGHUP: keep what was read (partial)
+            partial = getattr(err, "signame", "SIGINT")
             pipeline.finish()
             transport = {"bytes_total": inp.total_bytes, "pty": use_pty}
         wall = time.perf_counter() - t0
     summary = pipeline.summary()
     if partial:
         summary["partial"] = True
+        summary["interrupted_by"] = partial
     summary["config"] = cfg.name
     summary["input"]["file"] = str(capture)
     summary["input"]["kind"] = inp.kind
@@ -299,7 +312,43 @@ def run_replay(
 
 
 def _write_json(path: Path, obj: Any) -> None:
-    path.write_text(json.dumps(obj, indent=2, sort_keys=False) + "\n", encoding="utf-8")
+    write_json_atomic(path, obj)
+
+
+class Interrupted(KeyboardInterrupt):
+    """A stop signal other than ^C (SIGTERM, SIGHUP): a replay stops as on ^C."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        self.signame = signal.Signals(signum).name
+        super().__init__(self.signame)
+
+
+@contextlib.contextmanager
+def signals_interrupt(signums: tuple[int, ...] = (signal.SIGTERM, signal.SIGHUP)
+                      ) -> Iterator[None]:
+    """While the block runs, the first of ``signums`` raises :class:`Interrupted` in the main
+    thread (as ^C raises KeyboardInterrupt); later ones are ignored, so that the partial
+    summary is written and the outputs closed. The handlers are restored after the block.
+    Outside the main thread (an embedding) nothing is installed."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+
+    def handler(signum: int, frame: object) -> None:
+        if received:
+            log.warning("%s: already stopping", signal.Signals(signum).name)
+            return
+        received.append(signum)
+        raise Interrupted(signum)
+
+    previous = {s: signal.signal(s, handler) for s in signums}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def print_summary(s: dict[str, Any], stream: TextIO) -> None:
@@ -322,6 +371,11 @@ def _print_rov(args: argparse.Namespace, summary: dict[str, Any]) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    with signals_interrupt():
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     if is_capture(args.capture):
         names = {c.name for c in CaptureReader(args.capture).channels}
         if {ROV_TICK, ROV_LINK_RX} <= names or ARDUSUB_TICK in names:
@@ -340,8 +394,12 @@ def run(args: argparse.Namespace) -> int:
     if nmea_url and not nmea_url.startswith("pty:"):  # a wrong port must not look like success
         check_port_opens(nmea_url, "--nmea-out", cfg.rover.output.nmea_baudrate)
     sinks = build_sinks(cfg, args.nmea_out, args.mavlink)
-    summary = run_replay(cfg, args.capture, args.out, speed=args.speed,
-                         use_pty=not args.no_pty, sinks=sinks)
+    try:
+        summary = run_replay(cfg, args.capture, args.out, speed=args.speed,
+                             use_pty=not args.no_pty, sinks=sinks)
+    finally:  # closed by the pipeline's finish, unless a signal came before or after it
+        for sink in sinks:
+            sink.close()
     useless, warnings = replay_problems(summary)
     for w in warnings:
         print(f"fdi-bridge replay: warning: {w}", file=sys.stderr)
@@ -351,9 +409,10 @@ def run(args: argparse.Namespace) -> int:
         print(replay_text(summary))
         print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
     if summary.get("partial"):
-        print(f"fdi-bridge replay: interrupted after {summary['epochs']} epochs: "
+        name = summary.get("interrupted_by", "SIGINT")
+        print(f"fdi-bridge replay: interrupted ({name}) after {summary['epochs']} epochs: "
               "summary.json is partial", file=sys.stderr)
-        return 130
+        return 128 + int(getattr(signal.Signals, name, signal.SIGINT))
     if useless is not None:
         print(f"fdi-bridge replay: {useless}", file=sys.stderr)
         return 1

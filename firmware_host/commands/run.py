@@ -23,6 +23,11 @@ Every vehicle runs on the one runtime, :class:`~firmware_host.runtime.runner.Run
   telemetry is back;
 * the flight recorder (``[recorder] dir`` or ``--record DIR``) keeps every byte read and sent on
   every port (:mod:`firmware_host.runtime.recorder`);
+* files never stop the bridge: ``--out DIR``, ``--record DIR`` and ``[recorder] dir`` on a disk
+  that is full, read-only or not writable at start or later are said once (the path and the
+  error), counted in the summary and retried; detection and the outputs go on (a field laptop's
+  SD card remounted read-only must not take the GPS corrections with it; ``fdi-bridge doctor``
+  is the check before a mission that refuses such a directory);
 * ``SIGTERM`` (systemd's stop) and ``^C`` end the loop cleanly (exit 0): nothing stale is
   sent, the recorder, the ``.tlog`` and ``epochs.jsonl`` are flushed and ``summary.json`` written.
 """
@@ -42,7 +47,6 @@ from drivers.resilient import Opener, ResilientPort
 from firmware_host.commands import mavlink as mavlink_cmd
 from firmware_host.commands.checks import (
     mavlink_url_arg,
-    output_dir_arg,
     output_url_arg,
     positive_float,
 )
@@ -162,15 +166,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True,
                         help="config file or preset name; [rover] -> rover, [rov] -> ROV; "
                              "[mavlink] attaches the router")
-    parser.add_argument("--out", type=output_dir_arg, default=None,
-                        help="write epochs.jsonl/summary.json here (default: none)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="write epochs.jsonl/summary.json here (default: none); a disk "
+                             "that is full, read-only or not writable is said once and "
+                             "retried, the bridge runs on")
     parser.add_argument("--nmea-out", type=output_url_arg, default=None,
                         help="rover: corrected NMEA to this URL or pty:PATH "
                              "(default: the config's)")
     parser.add_argument("--mavlink", type=mavlink_url_arg, default=None,
                         help="rover: GPS_INPUT to this MAVLink URL (default: the config's)")
-    parser.add_argument("--record", type=output_dir_arg, default=None,
-                        help="flight recorder directory (overrides [recorder] dir)")
+    parser.add_argument("--record", type=Path, default=None,
+                        help="flight recorder directory (overrides [recorder] dir; as it, a "
+                             "disk that cannot be written is said once and retried)")
     parser.add_argument("--duration", type=positive_float, default=None,
                         help="stop after this many seconds (default: until SIGTERM or ^C)")
     parser.add_argument("--json", action="store_true",

@@ -45,7 +45,8 @@ def replay_text(s: dict[str, Any]) -> str:
                          f"bytes out, {fmt(st.get('dropped_bytes', 0))} dropped"
                          if "bytes_out" in st else _counts(st)))
     if s.get("partial"):
-        rows.append(("partial", True, "interrupted: only what was read before ^C"))
+        rows.append(("partial", True, "interrupted: only what was read before "
+                     f"{s.get('interrupted_by', 'SIGINT')}"))
     return fields(rows)
 
 

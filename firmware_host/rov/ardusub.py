@@ -77,6 +77,8 @@ from drivers.mavlink.modes import MODES
 from drivers.outland.link import ThrusterCommand
 from drivers.ratelog import RateLimitedLog
 from fdi.errors import ConfigError, DecodeError
+from fdi.heading_ft import HeadingDecision
+from fdi.lms_fir import wrap180
 from firmware_host.mavlink.router import Router
 from firmware_host.rov.config import RovConfig
 from firmware_host.rov.control import RovController, epoch_record
@@ -91,6 +93,10 @@ log = logging.getLogger(__name__)
 STEERING = "steer"
 """The bridge's state while it commands the yaw (others: :data:`STATE_TEXT`)."""
 
+HANDBACK = "handback"
+"""While the heading is substituted, the substitute is not trusted (:meth:`RovAutopilotLoop.
+_supervise`): the bridge stops steering and the pilot's yaw (neutral without one) goes on."""
+
 STATE_TEXT: dict[str, tuple[int, str]] = {
     STEERING: (mio.MAV_SEVERITY_NOTICE, "FDI heading hold: steering yaw"),
     "no_heartbeat": (mio.MAV_SEVERITY_WARNING, "FDI heading hold: no autopilot heartbeat"),
@@ -99,6 +105,7 @@ STATE_TEXT: dict[str, tuple[int, str]] = {
     "pilot": (mio.MAV_SEVERITY_NOTICE, "FDI heading hold: pilot yaw, yielding"),
     "pilot_silent": (mio.MAV_SEVERITY_WARNING, "FDI heading hold: pilot input lost, not sending"),
     "detect_only": (mio.MAV_SEVERITY_INFO, "FDI heading hold: detect only, not steering"),
+    HANDBACK: (mio.MAV_SEVERITY_CRITICAL, "FDI heading: substitute untrusted, yaw to pilot"),
 }
 _SUB_MODE_NAMES = {n: name for name, n in MODES["sub"].items()}
 
@@ -277,7 +284,7 @@ COMPASS_RATE_PERIODS = 50
 COMPASS_RATE_MIN = 0.9
 """The compass (or its gyro) must arrive in 90 % of the 50 periods from the first one."""
 
-_RELEASE_ON = frozenset({"mode", "disarmed", "no_heartbeat", "detect_only"})
+_RELEASE_ON = frozenset({"mode", "disarmed", "no_heartbeat", "detect_only", HANDBACK})
 
 
 class RovAutopilotLoop:
@@ -309,6 +316,7 @@ class RovAutopilotLoop:
         a = self.acfg
         self.heading: AutopilotListener | None = None
         self.autopilot: AutopilotListener | None = None
+        self.ahrs2: AutopilotListener | None = None
         self.compass: AutopilotListener | None = None
         self.pilot: PilotInput | None = None
         self._uses_compass = a.heading == "raw_compass" or a.gyro == "imu"
@@ -316,6 +324,8 @@ class RovAutopilotLoop:
             ap = (vehicle_system_id, 1)
             self.heading = AutopilotListener(router, "ATTITUDE", self.inbox, ap)
             self.autopilot = AutopilotListener(router, "HEARTBEAT", self.inbox, ap)
+            # AHRS2 (ArduPilot's second attitude estimate): a cross-check of a substitute
+            self.ahrs2 = AutopilotListener(router, "AHRS2", self.inbox, ap)
             if self._uses_compass:
                 self.compass = AutopilotListener(router, a.compass_message, self.inbox, ap)
             self.pilot = PilotInput(router, vehicle_system_id, a.yaw_dead_band, self.inbox)
@@ -344,6 +354,14 @@ class RovAutopilotLoop:
         self.rejected: Counter[str] = Counter()  # frames or values not used, by reason
         self._ratelog = RateLimitedLog(log)
         self._compass_periods = 0
+        # The substitute's supervision (:meth:`_supervise`): this period's other headings,
+        # how long the substitute has been dead reckoning, and the hand-backs so far.
+        self._ahrs2_yaw: float | None = None
+        self._compass_yaw: float | None = None
+        self._dr_s = 0.0
+        self.handbacks = 0
+        self.handback_reason = ""
+        self._pulled = False  # this fault's other headings left the judged one (see above)
         self._compass_hits = 0
         self.compass_slow_hz: float | None = None  # said once: the compass is too slow
 
@@ -387,6 +405,10 @@ class RovAutopilotLoop:
                             self._reject("rate_not_finite")
                         else:
                             rates.append(rate)
+                elif kind == "AHRS2":
+                    yaw2 = float(msg.yaw)
+                    if math.isfinite(yaw2):
+                        self._ahrs2_yaw = math.degrees(yaw2) % 360.0
                 elif kind == "HEARTBEAT":
                     hb = (bool(int(msg.base_mode) & mio.MAV_MODE_FLAG_SAFETY_ARMED),
                           int(msg.custom_mode))
@@ -408,6 +430,11 @@ class RovAutopilotLoop:
                             self._reject("compass_field_too_weak")
                         else:
                             compass = (h + a.compass_offset_deg) % 360.0
+                    elif self._attitude is not None:  # heading from ATTITUDE: a cross-check
+                        h = tilt_compensated_heading_deg(sample.field_mgauss, roll, pitch,
+                                                         a.declination_deg)
+                        if h is not None:
+                            self._compass_yaw = (h + a.compass_offset_deg) % 360.0
                     if a.gyro == "imu":
                         rate = (None if sample.gyro_rad_s is None
                                 else heading_rate_dps(sample.gyro_rad_s, roll, pitch))
@@ -474,6 +501,71 @@ class RovAutopilotLoop:
                 self._pilot_has = False
         return self._pilot_has
 
+    def _others(self, yaw_att: float | None) -> list[tuple[str, float]]:
+        """This period's headings other than the one the FDI judges: the EKF's (when the
+        FDI judges the raw compass), AHRS2's, the raw compass (when it judges the EKF's)."""
+        out: list[tuple[str, float]] = []
+        if self.acfg.heading == "raw_compass" and yaw_att is not None:
+            out.append(("EKF yaw", yaw_att))
+        if self._ahrs2_yaw is not None:
+            out.append(("AHRS2", self._ahrs2_yaw))
+        if self.acfg.heading == "attitude" and self._compass_yaw is not None:
+            out.append(("compass", self._compass_yaw))
+        self._ahrs2_yaw = self._compass_yaw = None
+        return out
+
+    def _supervise(self, dec: HeadingDecision, meas: float | None, yaw_att: float | None,
+                   dt: float) -> bool:
+        """A substitute may never steer the vehicle further off than no fault tolerance
+        would: while the heading is substituted, it is not trusted (True: hand the yaw back to
+        the pilot, latched until the compass is taken back) when every other heading the link
+        carries and the judged one (not when it is stuck) agree with each other within
+        ``handback_deg`` and are all more than that from it (at least one besides the judged
+        heading), or when it has been gyro dead reckoning for ``substitute_max_s`` (its error grows
+        with the gyro's bias and scale errors, and no compass anchors it)."""
+        a = self.acfg
+        others = self._others(yaw_att)
+        if not dec.fault or dec.heading_used is None:
+            if self.handback_reason:
+                log.warning("FDI heading: compass taken back, steering resumes")
+                self.output.send_statustext(mio.MAV_SEVERITY_NOTICE,
+                                            "FDI heading: compass back, steering resumes")
+            self._dr_s = 0.0
+            self.handback_reason = ""
+            self._pulled = False
+            return False
+        if self.handback_reason:
+            return True
+        if meas is not None and dec.kind != "stuck":
+            # The judged compass votes too, unless it is stuck. A magnetometer fault pulls the
+            # EKF's yaw and AHRS2 towards itself, slowly: once they have disagreed with the
+            # judged compass by half the gate during this fault, their agreement later says
+            # nothing (they may have followed it), and only the time bound is left.
+            if any(abs(wrap180(h - meas)) > 0.5 * a.handback_deg for _, h in others):
+                self._pulled = True
+            others = [] if self._pulled else [*others, (
+                "compass" if self.acfg.heading == "raw_compass" else "EKF yaw", meas)]
+        w = self.ctl.heading.witness
+        compensated = dec.source == "gyro" and w.fault and w.offset is not None
+        self._dr_s = 0.0 if compensated else self._dr_s + dt
+        reason = ""
+        if a.substitute_max_s > 0.0 and self._dr_s > a.substitute_max_s + 1e-9:
+            reason = f"dead reckoning for {self._dr_s:.0f} s"
+        elif a.handback_deg > 0.0 and others and (len(others) > 1 or dec.kind == "stuck"):
+            used = dec.heading_used
+            offs = [(name, wrap180(h - used)) for name, h in others]
+            agree = max(abs(wrap180(h1 - h2)) for _, h1 in others for _, h2 in others)
+            if all(abs(d) > a.handback_deg for _, d in offs) and agree <= a.handback_deg:
+                name, d = offs[0]
+                reason = f"{name} {d:+.1f} deg from it"
+        if not reason:
+            return False
+        self.handbacks += 1
+        self.handback_reason = reason
+        log.critical("FDI heading: substitute not trusted (%s): yaw handed back to the "
+                     "pilot", reason)
+        return True
+
     def _set_state(self, state: str) -> None:
         if state == self.state:
             return
@@ -531,6 +623,8 @@ class RovAutopilotLoop:
             log.info("pilot yaw centred %.1f s: holding %.1f deg", self.acfg.pilot_release_s,
                      self.ctl.setpoint_deg)
         gate = self._gate()
+        if self._supervise(dec, meas, yaw_att, dt) and gate == STEERING:
+            gate = HANDBACK
         state = "pilot" if gate == STEERING and pilot_yaw else gate
         self._set_state(state)
         steering = state == STEERING
@@ -715,6 +809,10 @@ class ArduSubRovVehicle:
             if lp.acfg.output == "rc_override":
                 out["rc_releases"] = lp.rc_releases
             out["pilot_takeovers"] = lp.takeovers
+            out["handbacks"] = lp.handbacks
+            w = lp.ctl.heading.witness
+            out["witness"] = {"warmup_restarts": w.warmup_restarts, "maneuvers": w.maneuvers,
+                              "bias_dps": round(w.bias, 4)}
             out["ardusub_states"] = dict(sorted(lp.states.items()))
         out["failsafe"] = {"episodes": self.monitor.episodes,
                            "neutral": self.monitor.neutral_episodes}

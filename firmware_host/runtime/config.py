@@ -10,7 +10,9 @@ have is ``None``) and validates all of it (:mod:`drivers.configload`): a bad fil
 naming the file, the key, what was expected and what was found, every error of the file at once,
 and the CLI exits with status 2. Beyond the types and bounds it refuses what would only fail
 later: a significance level whose χ² threshold is not a finite number (``alpha = 5e-324``), a
-protocol file that does not load (``scale = 0``).
+protocol file that does not load (``scale = 0``), a URL the command line would refuse (a field
+with ``metadata={"url": kind}``, :data:`URL_KINDS`: ``udpout:127.0.0.1:99999``, ``tcp://...``
+for an NMEA output), named with the schemes that are accepted.
 
 Every command reads its file here; the older functions (:func:`load_config`,
 ``firmware_host.rov.config.load_rov_config``, ``firmware_host.mavlink.router.load_mavlink_config``,
@@ -46,9 +48,15 @@ from drivers.mavlink.modes import alarm_mode
 from drivers.outland.framecodec import load_protocol
 from drivers.transport import SerialSettings
 from fdi.chi2 import threshold
-from fdi.errors import ConfigError
+from fdi.errors import ConfigError, UsageError
 from fdi.rover import RoverDetectorParams
 from fdi.three_zone import ThreeZoneParams
+from firmware_host.commands.checks import (
+    MAVLINK_SCHEMES,
+    SERIAL_SCHEMES,
+    check_mavlink_url,
+    check_serial_url,
+)
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.config_mavlink import MavlinkConfig
 from firmware_host.runtime.config_rov import RovConfig, heading_source_errors
@@ -125,16 +133,17 @@ class ReferencePoint:
 
     lat_deg: float = field(default=0.0, metadata={"ge": -90.0, "le": 90.0})
     lon_deg: float = field(default=0.0, metadata={"ge": -180.0, "le": 180.0})
-    alt_m: float = 0.0  # ellipsoidal height
+    alt_m: float = field(default=0.0, metadata={"ge": -12000.0, "le": 100000.0})  # ellipsoidal
 
 
 @dataclass(frozen=True)
 class RoverOutputs:
     """Where corrected data goes. URLs are pyserial URLs; ``pty:PATH`` makes a pty, linked."""
 
-    nmea_url: str = ""
+    nmea_url: str = field(default="", metadata={"url": "nmea_out"})
     nmea_baudrate: int = field(default=9600, metadata={"gt": 0})
-    mavlink_url: str = ""  # e.g. "udpout:127.0.0.1:14550", or a serial device (reopened if lost)
+    # e.g. "udpout:127.0.0.1:14550", or a serial device (reopened if lost)
+    mavlink_url: str = field(default="", metadata={"url": "mavlink_out"})
     mavlink_baudrate: int = field(default=57600, metadata={"gt": 0})  # serial mavlink_url only
     mavlink_system: int = field(default=1, metadata={"ge": 1, "le": 255})
     mavlink_component: int = field(default=191, metadata={"ge": 1, "le": 255})
@@ -146,7 +155,7 @@ class RoverOutputs:
     alarm_mode: str = ""
     gps_id: int = field(default=0, metadata={"ge": 0, "le": 1, "doc": "GPS_INPUT gps_id: 1 = GPS2"})
     # Accuracy reported with a replaced fix is the prediction's, raised by this factor.
-    replaced_accuracy_factor: float = field(default=3.0, metadata={"ge": 1.0})
+    replaced_accuracy_factor: float = field(default=3.0, metadata={"ge": 1.0, "le": 1000.0})
 
     def __post_init__(self) -> None:
         if self.hold_on_alarm:
@@ -162,8 +171,8 @@ class RoverConfig:
     reference: ReferencePoint | None = None
     output: RoverOutputs = field(default_factory=RoverOutputs)
     max_line: int = field(default=120, metadata={"ge": 82, "le": 4096})
-    silence_s: float = field(default=2.0, metadata={"gt": 0.0})
-    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1})  # reopen backoff cap
+    silence_s: float = field(default=2.0, metadata={"ge": 0.1, "le": 3600.0})
+    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1, "le": 3600.0})  # reopen cap
 
 
 @dataclass(frozen=True)
@@ -243,6 +252,66 @@ def _walk(obj: Any, prefix: str) -> Iterator[tuple[str, Any]]:
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         for f in dataclasses.fields(obj):
             yield from _walk(getattr(obj, f.name), f"{prefix}.{f.name}" if prefix else f.name)
+    elif isinstance(obj, tuple):
+        for i, item in enumerate(obj):
+            if dataclasses.is_dataclass(item):
+                yield from _walk(item, f"{prefix}[{i}]")
+
+
+_SERIAL = ("a device path or a pyserial URL ("
+           + ", ".join(f"{s}://" for s in SERIAL_SCHEMES) + ")")
+_MAVLINK = ("a MAVLink URL (" + ", ".join(f"{s}:" for s in MAVLINK_SCHEMES)
+            + " HOST:PORT, port 1-65535) or " + _SERIAL)
+URL_KINDS: dict[str, str] = {
+    "serial": _SERIAL,
+    "imu": '"router", "" (none) or ' + _SERIAL,
+    "nmea_out": '"" (none), pty:PATH or ' + _SERIAL,
+    "mavlink": _MAVLINK,
+    "mavlink_out": '"" (none) or ' + _MAVLINK,
+}
+"""What a URL field (``metadata={"url": kind}``) accepts; checked at load with the command
+line's own checks (:mod:`firmware_host.commands.checks`), the spelling only (a port is opened
+when the bridge runs, a pty's directory is checked by the command that makes it)."""
+
+# SerialSettings (drivers/transport.py) is the drivers' own; its url is a port to read.
+_URL_FIELDS_ELSEWHERE: dict[tuple[type, str], str] = {(SerialSettings, "url"): "serial"}
+
+
+def _url_refusal(url: str, kind: str) -> str | None:
+    """Why ``url`` is not a URL of ``kind``; None when it is."""
+    if kind in ("imu", "nmea_out", "mavlink_out") and url == "":
+        return None
+    if kind == "imu" and url == "router":
+        return None
+    if kind == "nmea_out" and url.startswith("pty:"):
+        return None
+    try:
+        if kind in ("mavlink", "mavlink_out"):
+            check_mavlink_url(url, "value")
+        else:
+            check_serial_url(url, "value", pty=False)
+    except UsageError as err:
+        why = str(err).removeprefix(f"value {url}: ").removeprefix("value: ")
+        return why.split(" (known: ")[0].split(" (a MAVLink URL is ")[0]  # listed as expected
+    return None
+
+
+def _url_errors(bf: BridgeFile, file: str) -> list[ConfigError]:
+    """Every URL of the file spelled as the command line would take it (:data:`URL_KINDS`)."""
+    errors: list[ConfigError] = []
+    for key, obj in _walk(bf, ""):
+        if not dataclasses.is_dataclass(obj) or isinstance(obj, type):
+            continue
+        for f in dataclasses.fields(obj):
+            kind = f.metadata.get("url") or _URL_FIELDS_ELSEWHERE.get((type(obj), f.name))
+            url = getattr(obj, f.name)
+            if kind is None or not isinstance(url, str):
+                continue
+            why = _url_refusal(url, kind)
+            if why is not None:
+                errors.append(ConfigError(file, f"{key}.{f.name}", URL_KINDS[kind],
+                                          f"{url!r} ({why})"))
+    return errors
 
 
 def _derived_errors(bf: BridgeFile, file: str) -> list[ConfigError]:
@@ -271,8 +340,8 @@ def parse_bridge_file(table: dict[str, Any], file: str, path: Path | None = None
     """A :class:`BridgeFile` from a TOML table already read (``file`` names it in errors)."""
     bf = load_dataclass(BridgeFile, _migrate(table, file), file)
     bf = dataclasses.replace(bf, path=path)
-    raise_all(_derived_errors(bf, file) + heading_source_errors(bf.rov, bf.mavlink is not None,
-                                                                file))
+    raise_all(_derived_errors(bf, file) + _url_errors(bf, file)
+              + heading_source_errors(bf.rov, bf.mavlink is not None, file))
     if bf.rov is not None:
         proto = resolve_protocol(bf.rov.link.protocol, bf.base_dir if path else None)
         load_protocol(proto)  # a protocol that does not load fails now, not at the first frame

@@ -50,6 +50,7 @@ class InsGnssLiveParams:
     comes from and how its samples are put in order. The GNSS receiver is ``[rover]``'s port."""
 
     imu_url: str = field(default="", metadata={
+        "url": "imu",
         "doc": "the autopilot's MAVLink link carrying the IMU (a serial device, a pty, "
                "socket://HOST:PORT); \"router\": the [mavlink] router's autopilot link; "
                "empty: no INS, the rover detector alone"})
@@ -57,10 +58,11 @@ class InsGnssLiveParams:
     imu_message: Literal["RAW_IMU", "HIGHRES_IMU", "SCALED_IMU", "SCALED_IMU2",
                          "SCALED_IMU3"] = "RAW_IMU"
     hold_s: float = field(default=0.3, metadata={
-        "ge": 0.0, "doc": "an epoch waits for IMU samples stamped this long after it "
+        "ge": 0.0, "le": 10.0, "doc": "an epoch waits for IMU samples stamped this long after it "
                           "(late and out-of-order samples of a telemetry link)"})
     max_wait_s: float = field(default=1.0, metadata={
-        "gt": 0.0, "doc": "wall-clock wait for those samples before the epoch goes without"})
+        "ge": 0.001, "le": 60.0,
+        "doc": "wall-clock wait for those samples before the epoch goes without"})
     rate_samples: int = field(default=50, metadata={
         "ge": 10, "doc": "IMU samples whose median interval decides the rate check"})
     align_s: float = field(default=1.0, metadata={

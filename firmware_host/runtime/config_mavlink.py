@@ -22,7 +22,7 @@ DEFAULT_ALLOW_UNSIGNED = ("RADIO_STATUS", "RADIO")
 class EndpointConfig:
     """One link: ``url`` in the mavutil spelling (see :mod:`drivers.mavlink.links`)."""
 
-    url: str
+    url: str = field(metadata={"url": "mavlink"})
     baud: int = field(default=115200, metadata={"gt": 0, "doc": "serial links only"})
     signing: bool = field(
         default=False, metadata={"doc": "GCS links: only correctly signed packets pass"}
@@ -33,7 +33,8 @@ class EndpointConfig:
         default=DEFAULT_ALLOW_UNSIGNED,
         metadata={"doc": "signing links: message names passed unsigned (never teach a route)"})
     peer_timeout_s: float = field(
-        default=0.0, metadata={"ge": 0.0, "doc": "udpin: forget a peer silent this long; 0 never"}
+        default=0.0, metadata={"ge": 0.0, "le": 86400.0,
+                                "doc": "udpin: forget a peer silent this long; 0 never"}
     )
     accept_any: bool = field(
         default=False, metadata={"doc": "udpout: take datagrams from any sender"}
@@ -43,7 +44,8 @@ class EndpointConfig:
     allow_out: tuple[str, ...] = ()  # empty: everything not in block_out
     block_out: tuple[str, ...] = ()
     max_out_pps: float = field(
-        default=0.0, metadata={"ge": 0.0, "doc": "packets/s towards this endpoint; 0 = no cap"}
+        default=0.0, metadata={"ge": 0.0, "le": 1e6,
+                                "doc": "packets/s towards this endpoint; 0 = no cap"}
     )
 
     def __post_init__(self) -> None:
@@ -73,9 +75,9 @@ class MavlinkConfig:
     pilot_system_id: int = field(
         default=255, metadata={"ge": 1, "le": 255, "doc": "GCS id for MANUAL_CONTROL"}
     )
-    heartbeat_hz: float = field(default=1.0, metadata={"gt": 0.0, "le": 50.0})
+    heartbeat_hz: float = field(default=1.0, metadata={"ge": 0.1, "le": 50.0})
     stats_hz: float = field(default=2.0, metadata={"ge": 0.0, "le": 50.0})
-    statustext_per_s: float = field(default=5.0, metadata={"gt": 0.0, "le": 50.0})
+    statustext_per_s: float = field(default=5.0, metadata={"ge": 0.1, "le": 50.0})
     queue_packets: int = field(default=2000, metadata={"ge": 16})
     read_burst: int = field(default=64, metadata={"ge": 1})
     tlog_dir: str = ""
@@ -92,16 +94,19 @@ class MavlinkConfig:
         default="", metadata={"doc": "last signing timestamps; default <signing_key_file>.state"}
     )
     command_retries: int = field(default=5, metadata={"ge": 1, "le": 20})
-    command_retry_s: float = field(default=1.0, metadata={"gt": 0.0})
+    command_retry_s: float = field(default=1.0, metadata={"ge": 0.05, "le": 60.0})
     report_stats_s: float = field(
-        default=0.0, metadata={"ge": 0.0, "doc": "log the counters this often; 0 = off"}
+        default=0.0,
+        metadata={"ge": 0.0, "le": 86400.0, "doc": "log the counters this often; 0 = off"}
     )
     reconnect_max_s: float = field(
-        default=5.0, metadata={"gt": 0.0, "doc": "serial links: longest wait between reopens"}
+        default=5.0, metadata={"ge": 0.1, "le": 3600.0,
+                                "doc": "serial links: longest wait between reopens"}
     )
     route_timeout_s: float = field(
-        default=10.0, metadata={"ge": 0.0, "doc": "forget a (system, component) route silent "
-                                "this long, s; 0 = never"})
+        default=10.0, metadata={"ge": 0.0, "le": 3600.0,
+                                 "doc": "forget a (system, component) route silent "
+                                        "this long, s; 0 = never"})
 
     def __post_init__(self) -> None:
         if any(g.signing for g in self.gcs) and not self.signing_key_file:

@@ -28,8 +28,8 @@ class LinkConfig:
     wiring: Wiring = "rs232"
     protocol: str = "protocols/outland1000.toml"
     address: int = field(default=1, metadata={"ge": 0, "le": 255})
-    reply_timeout_s: float = field(default=0.05, metadata={"gt": 0.0, "lt": 1.0})
-    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1})  # reopen backoff cap
+    reply_timeout_s: float = field(default=0.05, metadata={"ge": 0.001, "lt": 1.0})
+    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1, "le": 3600.0})  # reopen cap
 
 
 Plant = Literal["nomoto", "nonlinear"]
@@ -59,12 +59,14 @@ class ArduSubConfig:
     yaw_dead_band: int = field(
         default=100, metadata={"ge": 0, "le": 1000, "doc": "pilot |r| above: the pilot steers"})
     pilot_release_s: float = field(
-        default=2.0, metadata={"ge": 0.0, "doc": "pilot yaw centred this long: hand back"})
+        default=2.0, metadata={"ge": 0.0, "le": 3600.0,
+                                "doc": "pilot yaw centred this long: hand back"})
     pilot_timeout_s: float = field(
-        default=1.0, metadata={"gt": 0.0, "lt": 3.0,
+        default=1.0, metadata={"ge": 0.05, "lt": 3.0,
                                "doc": "pilot MANUAL_CONTROL silent this long: stop sending"})
     heartbeat_timeout_s: float = field(
-        default=3.0, metadata={"gt": 0.0, "doc": "autopilot HEARTBEAT older: not commanding"})
+        default=3.0, metadata={"ge": 0.1, "le": 3600.0,
+                                "doc": "autopilot HEARTBEAT older: not commanding"})
     heading: ArduSubHeading = field(
         default="attitude", metadata={"doc": "attitude: ATTITUDE.yaw (the EKF's); raw_compass: "
                                              "xmag/ymag of compass_message, tilt-compensated"})
@@ -90,6 +92,15 @@ class ArduSubConfig:
         default=5, metadata={"ge": 1, "le": 8, "doc": "rc_override: RCMAP_FORWARD"})
     rc_lateral_channel: int = field(
         default=6, metadata={"ge": 1, "le": 8, "doc": "rc_override: RCMAP_LATERAL"})
+    handback_deg: float = field(
+        default=8.0, metadata={"ge": 0.0, "le": 90.0, "doc": "deg: while the heading is "
+                               "substituted, every other heading the link carries (EKF yaw, "
+                               "AHRS2, the raw compass) this far from the substitute: yaw "
+                               "handed back to the pilot (0: off)"})
+    substitute_max_s: float = field(
+        default=120.0, metadata={"ge": 0.0, "le": 3600.0, "doc": "s: a substitute that is gyro "
+                                 "dead reckoning (no compensated compass) is trusted this "
+                                 "long, then yaw is handed back to the pilot (0: no limit)"})
 
     def __post_init__(self) -> None:
         bad = [m for m in self.modes if m not in ARDUSUB_YAW_MODES]
@@ -146,13 +157,13 @@ class RovConfig:
     ``recorder`` is the file's top-level ``[recorder]`` (one per file), filled in by the loader.
     """
 
-    period_s: float = field(default=0.2, metadata={"gt": 0.0})
+    period_s: float = field(default=0.2, metadata={"ge": 0.005, "le": 60.0})
     heading_source: HeadingSource = field(
         default="outland",
         metadata={"doc": "outland: the Outland link; mavlink: an ArduSub autopilot ([mavlink])"})
     setpoint_deg: float = field(default=150.0, metadata={"ge": 0.0, "lt": 360.0})
     surge_pct: float = field(default=0.0, metadata={"ge": -100.0, "le": 100.0})
-    dropout_hold_s: float = field(default=1.0, metadata={"ge": 0.0})
+    dropout_hold_s: float = field(default=1.0, metadata={"ge": 0.0, "le": 3600.0})
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     ft: FtConfig = field(default_factory=FtConfig)
     pid: PidConfig = field(default_factory=PidConfig)

@@ -4,24 +4,44 @@
 :meth:`EpochLog.write`; the rover pipeline writes its records (the replay contract, in the same
 compact encoding) to :attr:`EpochLog.stream`. Without a directory both are no-ops, so a vehicle
 never asks whether there is an output.
+
+The live bridge's files (``EpochLog(dir, keep_going=True)``, what the runner opens for
+``run --out DIR``) are written as the flight recorder writes (issue C.3): a full, read-only or
+missing disk never stops detection or the outputs. ``epochs.jsonl`` is a :class:`JsonlFile`
+(handed to the kernel every 0.25 s, a failure logged once, counted, retried, never a cut line);
+``summary.json`` is written whole or not at all (:func:`write_json_atomic`), into space
+reserved when the run started, and a summary that cannot be written is said on stderr (the
+log) without changing the exit status. The replays' files (``keep_going=False``) stop the
+replay with the error instead: an offline job's output is its product.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import math
-from collections.abc import Iterable
+import os
+import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, TextIO, cast
 
 try:  # the ``fast`` extra: a compiled encoder (no wheel on every platform, so optional)
     import orjson as _orjson
 except ImportError:  # pragma: no cover - exercised by the tests with the encoder disabled
     _orjson = None  # type: ignore[assignment]
 
+log = logging.getLogger("fdi_bridge.records")
+
 _floor = math.floor
 EPOCHS = "epochs.jsonl"
 SUMMARY = "summary.json"
+# Space kept for summary.json from the start of a run (a run's summary is 2-10 kB; a router
+# with many links more): the bridge's own files filling the disk cannot keep it from its end.
+SUMMARY_RESERVE = ".summary.json.reserve"
+SUMMARY_RESERVE_BYTES = 64 * 1024
+_write = os.write  # the one write call of JsonlFile (tests inject a failing disk here)
 
 
 def encode_line_stdlib(record: dict[str, Any]) -> str:
@@ -137,23 +157,296 @@ def encode_plain_line(record: dict[str, Any]) -> str:
     return encode_line_stdlib(record)
 
 
-class EpochLog:
-    """``DIR/epochs.jsonl`` (or nothing, with ``directory=None``); or a caller's open ``stream``
-    (an embedding, a test), which is flushed but not closed."""
 
-    def __init__(self, directory: Path | None, stream: TextIO | None = None) -> None:
+
+# --------------------------------------------------------------------------- files
+
+
+def write_json_atomic(path: Path, obj: Any) -> None:
+    """``path`` holds ``obj`` (``json.dumps(obj, indent=2)`` and a newline) whole, or is left
+    as it was: a temporary file in the same directory, written, fsynced and renamed over
+    ``path`` (then the directory fsynced), as editors and package managers replace a file.
+    Raises OSError, the temporary file removed."""
+    data = (json.dumps(obj, indent=2) + "\n").encode("utf-8")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            written = 0
+            while written < len(data):
+                written += os.write(fd, data[written:])
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except OSError:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    with contextlib.suppress(OSError):  # the rename itself durable (not all systems allow it)
+        dfd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+
+
+class JsonlFile:
+    """A JSON Lines file that a full or read-only disk never stops, kill-safe to 0.25 s.
+
+    :meth:`write` takes whole lines (a ``TextIO``'s ``write``, for the rover pipeline) and keeps
+    them in memory; they are handed to the kernel in one ``os.write`` at least every
+    ``flush_interval_s`` of the injected ``clock`` (the runner's monotonic clock: wall time,
+    not the epochs' times; :meth:`poll`, called by the runner after every iteration, every 50 ms
+    or sooner with the rover's default port timeout) and whenever ``buffer_max`` bytes wait.
+    A ``SIGKILL`` loses at most the lines of the last interval and one iteration
+    (tests/test_epochs_kill.py); there is no fsync (a power cut may lose what the kernel had not
+    written yet; the flight recorder is the file that is fsynced).
+
+    A write the disk refuses (``ENOSPC``, ``EROFS``, ``EIO``) never raises: the file is cut back
+    to its last whole line (never a partial line in it), the outage is logged once and counted
+    (``outages``, ``write_errors`` for every failed try), and what the disk refused is kept for
+    the next try up to ``buffer_max`` bytes, past it dropped and counted (``lost_lines``,
+    ``lost_bytes``): memory stays bounded during a long outage. Every interval the writer tries
+    again; when the disk takes the lines again it says so once and goes on (the flight
+    recorder's policy, :class:`~firmware_host.runtime.recorder.FlightRecorder`). A file that
+    cannot be created (a read-only or missing directory, no permission) is the same outage: it
+    is created (empty, then appended to) as soon as it can be.
+    """
+
+    def __init__(self, path: Path, *, clock: Callable[[], float] = time.monotonic,
+                 flush_interval_s: float = 0.25, buffer_max: int = 256 * 1024) -> None:
+        self.path = path
+        self.clock = clock
+        self.flush_interval_s = flush_interval_s
+        self.buffer_max = buffer_max
+        self._lines: list[str] = []  # written, not yet encoded
+        self._pending = 0  # characters in _lines
+        self._held = bytearray()  # encoded whole lines not yet taken by the disk
+        self._partial = False  # _held starts inside a line the file holds the start of
+        self._fd: int | None = None
+        self._size = 0
+        self._last_flush = clock()
+        self._failing_since: float | None = None
+        self._lost_in_outage = 0
+        self.closed = False
+        # Counters.
+        self.lines_written = 0  # lines the file holds
+        self.lost_lines = 0
+        self.lost_bytes = 0
+        self.write_errors = 0  # failed tries (create, write)
+        self.outages = 0
+        self.last_error = ""
+        self._open()
+
+    @property
+    def writing(self) -> bool:
+        """False while a disk error keeps the lines out of the file."""
+        return self._failing_since is None
+
+    # ------------------------------------------------------------------ TextIO's part
+
+    def write(self, text: str) -> int:
+        """Keep ``text`` (whole lines) for the next flush; flush when ``buffer_max`` waits."""
+        if self.closed:
+            self.lost_lines += text.count("\n")
+            self.lost_bytes += len(text)
+            return len(text)
+        self._lines.append(text)
+        self._pending += len(text)
+        if self._pending >= self.buffer_max:
+            self.flush()
+        return len(text)
+
+    def poll(self, now: float | None = None) -> None:
+        """Flush when ``flush_interval_s`` has passed since the last flush."""
+        if (self.clock() if now is None else now) - self._last_flush >= self.flush_interval_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Hand what waits to the kernel (or keep it for the next try, see the class)."""
+        self._last_flush = self.clock()
+        if self._lines:
+            self._held += "".join(self._lines).encode("utf-8")
+            self._lines.clear()
+            self._pending = 0
+        if not self._held:
+            return
+        if self._fd is None and not self._open():
+            self._bound()
+            return
+        err = self._append()
+        if err is None:
+            self._recovered()
+            return
+        self._failed(f"{self.path}: write failed: {err.strerror}")
+        self._bound()
+
+    def close(self) -> None:
+        """A last flush; what the disk still refuses is lost (counted)."""
+        if self.closed:
+            return
+        self.flush()
+        self.closed = True
+        if self._held:
+            self._lose()
+            self._held.clear()
+            log.warning("%s: %d lines lost in all (the disk refused them to the end)",
+                        self.path, self.lost_lines)
+        if self._fd is not None:
+            fd, self._fd = self._fd, None
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+    # ------------------------------------------------------------------ the disk
+
+    def _open(self) -> bool:
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND,
+                               0o644)
+        except FileExistsError:  # mkdir: a file where the directory should be
+            self._failed(f"could not create {self.path}: {self.path.parent} exists and is not "
+                         "a directory")
+            return False
+        except OSError as err:
+            self._failed(f"could not create {self.path}: {err.strerror}")
+            return False
+        self._size = 0
+        return True
+
+    def _append(self) -> OSError | None:
+        """Write ``_held``; on an error cut the file back to its last whole line."""
+        assert self._fd is not None
+        data = self._held
+        written = 0
+        try:
+            while written < len(data):
+                written += _write(self._fd, data if written == 0 else bytes(data[written:]))
+        except OSError as err:
+            keep = data.rfind(b"\n", 0, written) + 1
+            cut = False
+            if keep != written:
+                try:
+                    os.ftruncate(self._fd, self._size + keep)
+                except OSError:  # the cut line stays; the rest of it is the next write's start
+                    keep, cut = written, True
+            self._took(keep)
+            self._partial = self._partial or cut
+            return err
+        self._took(written)
+        return None
+
+    def _took(self, n: int) -> None:
+        """The file took the first ``n`` bytes of ``_held``."""
+        if n:
+            ended = self._held.count(b"\n", 0, n)
+            self.lines_written += ended
+            self._size += n
+            del self._held[:n]
+            if ended:
+                self._partial = False
+
+    def _bound(self) -> None:
+        """Past ``buffer_max`` what the disk refused is dropped (counted)."""
+        if len(self._held) >= self.buffer_max:
+            self._lose()
+            # A cut line in the file is ended, so that the next line starts a line of its own.
+            self._held = bytearray(b"\n") if self._partial else bytearray()
+            self._partial = False
+
+    def _lose(self) -> None:
+        n = self._held.count(b"\n")
+        self.lost_lines += n
+        self.lost_bytes += len(self._held)
+        self._lost_in_outage += n
+
+    def _failed(self, why: str) -> None:
+        self.write_errors += 1
+        self.last_error = why
+        if self._failing_since is None:
+            self._failing_since = self.clock()
+            self.outages += 1
+            log.warning("%s; records are not written (detection and outputs go on), retrying "
+                        "every %.2f s", why, self.flush_interval_s)
+
+    def _recovered(self) -> None:
+        if self._failing_since is None:
+            return
+        log.warning("%s: writing again after %.1f s (%d lines lost)", self.path,
+                    self.clock() - self._failing_since, self._lost_in_outage)
+        self._failing_since = None
+        self._lost_in_outage = 0
+
+    def counters(self) -> dict[str, Any]:
+        return {
+            "path": str(self.path),
+            "lines_written": self.lines_written,
+            "lost_lines": self.lost_lines,
+            "lost_bytes": self.lost_bytes,
+            "write_errors": self.write_errors,
+            "outages": self.outages,
+            "writing": self.writing,
+            "last_error": self.last_error,
+            "buffered_bytes": len(self._held) + self._pending,
+        }
+
+
+class EpochLog:
+    """``DIR/epochs.jsonl`` and ``DIR/summary.json`` (or nothing, with ``directory=None``); or
+    a caller's open ``stream`` (an embedding, a test), which is flushed but not closed.
+
+    ``keep_going=True`` (the live bridge, :class:`~firmware_host.runtime.runner.Runner`): the
+    disk never stops the run (see the module docstring; :meth:`poll` every iteration). A
+    ``summary.json`` left from an earlier run in ``DIR`` is removed at the start (it would
+    otherwise pass for this run's if this one's cannot be written), and
+    ``SUMMARY_RESERVE_BYTES`` are reserved for this run's (released just before it is
+    written). ``keep_going=False`` (the replays): a disk error raises ``OSError``.
+    """
+
+    def __init__(self, directory: Path | None, stream: TextIO | None = None, *,
+                 keep_going: bool = False, clock: Callable[[], float] = time.monotonic) -> None:
         self.dir = directory
         self.stream: TextIO | None = stream
         self._borrowed = stream is not None
+        self.keep_going = keep_going
+        self.file: JsonlFile | None = None
         self.lines = 0
+        self.summary_error = ""
         if directory is not None and stream is None:
-            directory.mkdir(parents=True, exist_ok=True)
-            self.stream = open(directory / EPOCHS, "w", encoding="utf-8")  # noqa: SIM115
+            if keep_going:
+                self.file = JsonlFile(directory / EPOCHS, clock=clock)
+                self.stream = cast(TextIO, self.file)
+                with contextlib.suppress(OSError):
+                    (directory / SUMMARY).unlink(missing_ok=True)
+                self._reserve(directory / SUMMARY_RESERVE)
+            else:
+                directory.mkdir(parents=True, exist_ok=True)
+                self.stream = open(directory / EPOCHS, "w", encoding="utf-8")  # noqa: SIM115
+
+    @staticmethod
+    def _reserve(path: Path) -> None:
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        except OSError:
+            return  # no directory yet or a read-only disk: nothing to reserve
+        try:
+            os.write(fd, bytes(SUMMARY_RESERVE_BYTES))
+        except OSError:  # a disk already full: the summary may not fit at the end (said then)
+            with contextlib.suppress(OSError):
+                path.unlink()
+        finally:
+            os.close(fd)
 
     def write(self, record: dict[str, Any]) -> None:
         if self.stream is not None:
             self.stream.write(encode_line(record))
             self.lines += 1
+
+    def poll(self, now: float) -> None:
+        """The live file's flush when due (``keep_going``); nothing otherwise."""
+        if self.file is not None:
+            self.file.poll(now)
 
     def flush(self) -> None:
         if self.stream is not None:
@@ -167,10 +460,25 @@ class EpochLog:
                 self.stream.close()
             self.stream = None
 
+    def counters(self) -> dict[str, Any] | None:
+        """The live file's counters (``keep_going``), else None."""
+        return None if self.file is None else self.file.counters()
+
     def write_summary(self, summary: dict[str, Any]) -> Path | None:
-        """``DIR/summary.json`` (None without a directory)."""
+        """``DIR/summary.json``, whole or not at all (None without a directory). With
+        ``keep_going`` a failure is logged (ERROR, on stderr) and None returned: the run's
+        exit status is the run's."""
         if self.dir is None:
             return None
         path = self.dir / SUMMARY
-        path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        with contextlib.suppress(OSError):
+            (self.dir / SUMMARY_RESERVE).unlink(missing_ok=True)
+        try:
+            write_json_atomic(path, summary)
+        except OSError as err:
+            if not self.keep_going:
+                raise
+            self.summary_error = f"could not write {path}: {err.strerror}"
+            log.error("%s; the run's result is unchanged", self.summary_error)
+            return None
         return path

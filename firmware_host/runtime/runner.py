@@ -17,7 +17,10 @@ The runner owns, once for every vehicle and every mode:
 * **outputs**: the MAVLink output built in one place (:mod:`firmware_host.runtime.mavout`):
   through the router when the config has ``[mavlink]`` (the router is started, attached and
   closed here), else from the vehicle's own URL, tapped into the recorder;
-* **files**: ``epochs.jsonl`` and ``summary.json`` (:mod:`firmware_host.runtime.records`);
+* **files**: ``epochs.jsonl`` and ``summary.json`` (:mod:`firmware_host.runtime.records`):
+  the records handed to the kernel every 0.25 s (a ``SIGKILL`` loses at most that), a full or
+  read-only disk logged once, counted (``epochs_file`` in the summary) and retried while
+  detection and the outputs go on, ``summary.json`` written whole or not at all;
 * **failsafes**: the vehicle's ``check`` (silence watchdogs) on every iteration, whatever the
   input does;
 * **status**: with a ``status`` sink (:mod:`firmware_host.runtime.status`), a
@@ -194,8 +197,8 @@ class Runner:
         self.t0 = self.clock()
         if self.duration_s is not None:
             self._deadline = self.t0 + self.duration_s
-        if self.out_dir is not None:
-            self.epochs = EpochLog(self.out_dir)
+        if self.out_dir is not None:  # a full or read-only disk never stops the run
+            self.epochs = EpochLog(self.out_dir, keep_going=True, clock=self.clock)
         v = self.vehicle
         if self.router is None and self.mavlink_cfg is not None:
             cfg = self.mavlink_cfg
@@ -239,6 +242,7 @@ class Runner:
             self.records += n
             self._last_record_t = now
         self.vehicle.check(now)
+        self.epochs.poll(now)
         if self.recorder is not None:
             self.recorder.poll()
         if self.status is not None and now >= self._next_status:
@@ -347,6 +351,9 @@ class Runner:
             s["router"] = self.router.summary()
         if self.recorder is not None:
             s["recorder"] = self.recorder.counters()
+        epochs_file = self.epochs.counters()
+        if epochs_file is not None:
+            s["epochs_file"] = epochs_file
         if self.loop is not None:
             s.update(self.loop.stats.summary())
         s["runtime"] = {"stopped_by": self.stopped_by or "end",
