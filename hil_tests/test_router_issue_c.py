@@ -90,6 +90,7 @@ def test_a_busy_udp_port_is_a_start_up_error_naming_its_holder(
 
 @pytest.mark.parametrize(("url", "text"), [
     ("udpin:300.1.1.1:14550", "'300.1.1.1' is not an IPv4 address"),
+    ("udpin:1.2:14550", "'1.2' is not an IPv4 address"),  # not 0.0.0.0 (inet_aton's reading)
     ("udpin:300.1.1.1", "the port must be a number"),
     ("udpout:127.0.0.1:99999", "the port must be 0-65535, found 99999"),
     ("tcpin:127.0.0.1:70000", "the port must be 0-65535"),

@@ -86,11 +86,10 @@ def _split_hostport(rest: str, url: str, default_host: str | None) -> tuple[str,
 
 def _address(host: str, url: str) -> str:
     """``host`` as an IPv4 address (a name is resolved); EndpointError naming ``url``."""
-    if host.replace(".", "").isdigit():  # a dotted quad: checked here, never sent to DNS
-        try:
-            return socket.inet_ntoa(socket.inet_aton(host)) if host.count(".") == 3 else ""
-        except OSError:
-            pass
+    if host.replace(".", "").isdigit():  # digits and dots: checked here, never sent to DNS
+        parts = host.split(".")
+        if len(parts) == 4 and all(p and int(p) <= 255 for p in parts):
+            return ".".join(str(int(p)) for p in parts)
         raise EndpointError(f"{url}: {host!r} is not an IPv4 address (four numbers 0-255)")
     try:
         return socket.gethostbyname(host)
