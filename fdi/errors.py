@@ -70,3 +70,9 @@ class EstimatorError(FdiBridgeError):
 class UsageError(FdiBridgeError):
     """A command-line argument is wrong (a path, URL or number): the command exits 2 before its
     work starts. The message names the option, what was expected and what was found."""
+
+
+class EndpointError(UsageError, PortError):
+    """A network endpoint cannot be opened at start (its port held by another process, its
+    address invalid or not on this machine): the command exits 2 before its work starts, with
+    one line naming the URL and, where it can, the process that holds the port."""

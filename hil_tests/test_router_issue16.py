@@ -211,14 +211,14 @@ def test_signing_link_forwards_only_signed_packets_to_the_vehicle(tmp_path: Path
         disarm = bad.p._mav.command_long_encode(1, 1, 400, 0, 0, 0, 0, 0, 0, 0, 0)
         bad.send(bad.p._emit(disarm), _port(r, 1))  # unsigned COMMAND_LONG 400 (disarm)
         bad.send(bad.p.send_param_set(1, 1, "ARMING_CHECK", 0), _port(r, 1))
-        bad.send(bad.p.send_heartbeat(), _port(r, 1))  # allow-listed: passes unsigned
+        bad.send(bad.p.send_heartbeat(), _port(r, 1))  # refused too (issue C: RADIO* only)
         good.send(good.p._emit(good.p._mav.command_long_encode(1, 1, 400, 0, 0, 0, 0, 0, 0,
                                                                0, 0)), _port(r, 1))
         got = ap.recv_all(1.0)
         kinds = [(m.get_type(), m.get_srcSystem()) for m in got]
         assert ("COMMAND_LONG", 255) not in kinds and ("PARAM_SET", 255) not in kinds
-        assert ("HEARTBEAT", 255) in kinds and ("COMMAND_LONG", 254) in kinds
-        assert r.stats.refused_unsigned == 2
+        assert ("HEARTBEAT", 255) not in kinds and ("COMMAND_LONG", 254) in kinds
+        assert r.stats.refused_unsigned == 3
     finally:
         r.close()
         for p in (ap, bad, good):

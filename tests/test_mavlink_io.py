@@ -255,4 +255,4 @@ def test_importing_the_io_module_does_not_import_pymavlink() -> None:
 
 def test_default_unsigned_pass_list_names_dialect_messages() -> None:
     ids = [mio.message_id(name) for name in DEFAULT_ALLOW_UNSIGNED]  # KeyError if not
-    assert ids == [0, 109]
+    assert ids == [109, 166]  # RADIO_STATUS, RADIO: ArduPilot's unsigned accept list

@@ -31,6 +31,12 @@ Policy
   Without a CRC such a frame cannot be told from noise, so while the framer is resyncing
   (after dropped bytes, until a CRC-checked frame has been found) unknown-id candidates are
   dropped too (``unknown_refused``): a 0xFD inside a damaged packet must not become a frame.
+  The decision is taken as soon as the header is in, without waiting for the body its length
+  byte announces, so the packets behind a refused candidate are not held back.
+  A byte stream joined at an unknown point (``synced=False``: a serial line, a TCP connection,
+  whose first bytes may be stray, e.g. ``FD FF 00``) starts resyncing. And an unknown-id
+  candidate whose body holds a complete CRC-valid frame is refused even in sync
+  (``unchecked_swallow``): it is stray bytes about to swallow good packets, not a frame.
   A byte error that hits an in-sync packet's message id can turn it into an unknown one, which
   then passes (framed whole, its neighbours intact); ``pass_unknown=False`` refuses every
   unknown id instead.
@@ -188,7 +194,10 @@ class MavFramer:
         on_drop: OnDrop | None = None,
         pass_unknown: bool = True,
         full_lengths: Mapping[int, int] | None = None,
+        synced: bool = True,
     ) -> None:
+        """``synced=False``: the bytes are a stream joined at an unknown point (serial, TCP):
+        unknown ids are refused until a CRC-checked frame has been found."""
         self._pass_unknown = pass_unknown
         self._extras = _default_crc_extras() if crc_extras is None else crc_extras
         if full_lengths is None:
@@ -196,7 +205,7 @@ class MavFramer:
         self._full_len = full_lengths
         self._on_drop = on_drop
         self._buf = bytearray()
-        self._in_sync = True
+        self._in_sync = synced
         self.stats = FramerStats()
 
     def _drop(self, data: bytes | bytearray, reason: str) -> None:
@@ -211,6 +220,14 @@ class MavFramer:
             self._on_drop(bytes(data), reason)
 
     def feed(self, data: bytes, *, boundary: bool = False) -> list[MavFrame]:
+        if boundary and not self._buf:
+            frame = self._whole_datagram(data)
+            if frame is not None:  # the usual datagram: one packet of a known id, CRC right
+                st = self.stats
+                st.bytes_in += len(data)
+                st.frames += 1
+                self._in_sync = True
+                return [frame]
         self.stats.bytes_in += len(data)
         buf = self._buf
         buf += data
@@ -254,13 +271,23 @@ class MavFramer:
                 hlen = HEADER_V1
                 total = hlen + plen + CRC_LEN
             end = pos + total
-            if end > n:
-                break  # the length is known: wait for the body (at most 280 bytes)
+            if n - pos < hlen:
+                break  # wait for the header
             if hlen == HEADER_V2:
                 msgid = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
             else:
                 msgid = buf[pos + 5]
             extra = extras.get(msgid)
+            if extra is None and not (self._pass_unknown and self._in_sync):
+                # An unknown id is refused from its header alone (see the policy): waiting for
+                # the body its length byte announces would hold the packets behind it.
+                st.unknown_refused += 1
+                self._drop(buf[pos : pos + 1],
+                           "unchecked_resync" if self._pass_unknown else "unknown_id")
+                pos += 1
+                continue
+            if end > n:
+                break  # the length is known: wait for the body (at most 280 bytes)
             crc_end = pos + hlen + plen
             checked = extra is not None
             if end == n and not boundary and self._pass_unknown and self._in_sync and (
@@ -281,25 +308,19 @@ class MavFramer:
                         self._drop(buf[pos : pos + 1], "bad_crc")
                         pos += 1
                         continue
-            elif not self._pass_unknown:
-                st.unknown_refused += 1
-                self._drop(buf[pos : pos + 1], "unknown_id")
-                pos += 1
-                continue
-            elif not self._in_sync:
-                # No CRC to trust and we are resyncing after a drop: a candidate here is as
-                # likely noise (a 0xFD inside a damaged packet) as a frame. Refuse it until a
-                # CRC-checked frame has re-established sync.
-                st.unknown_refused += 1
-                self._drop(buf[pos : pos + 1], "unchecked_resync")
-                pos += 1
-                continue
             elif not _next_is_start(buf, end, n, boundary):
                 # In sync, but what follows is not a frame start: the length byte of this
                 # unknown-id packet is wrong (a byte lost inside it), and taking it whole would
                 # swallow the start of the good packet after it.
                 st.unknown_refused += 1
                 self._drop(buf[pos : pos + 1], "unchecked_overrun")
+                pos += 1
+                continue
+            elif _holds_a_frame(buf, pos + 1, end, extras):
+                # In sync, but a complete CRC-valid packet lies inside: stray bytes (``FD FF
+                # 00`` at a stream's start) whose length byte would swallow good packets.
+                st.unknown_refused += 1
+                self._drop(buf[pos : pos + 1], "unchecked_swallow")
                 pos += 1
                 continue
             raw = bytes(buf[pos:end])
@@ -318,6 +339,40 @@ class MavFramer:
         if boundary:
             self._in_sync = True  # one datagram is one framing context: the next starts afresh
         return out
+
+    def _whole_datagram(self, data: bytes) -> MavFrame | None:
+        """The frame ``data`` is when it is exactly one packet of a known id with a right CRC
+        (what :meth:`feed` would find, without its loop); None for anything else, which the
+        loop then frames byte by byte."""
+        n = len(data)
+        if n < HEADER_V1 + CRC_LEN:
+            return None
+        b0 = data[0]
+        if b0 == MAGIC_V2:
+            iflags = data[2]
+            if iflags & ~IFLAG_SIGNED or n < HEADER_V2 + CRC_LEN:
+                return None
+            signed = bool(iflags)
+            crc_end = HEADER_V2 + data[1]
+            if crc_end + CRC_LEN + (SIGNATURE_LEN if signed else 0) != n:
+                return None
+            msgid = data[7] | (data[8] << 8) | (data[9] << 16)
+        elif b0 == MAGIC_V1:
+            crc_end = HEADER_V1 + data[1]
+            if crc_end + CRC_LEN != n:
+                return None
+            signed = False
+            msgid = data[5]
+        else:
+            return None
+        extra = self._extras.get(msgid)
+        if extra is None or x25crc(data[1:crc_end] + bytes((extra,))) != (
+                data[crc_end] | (data[crc_end + 1] << 8)):
+            return None
+        raw = bytes(data)
+        if b0 == MAGIC_V2:
+            return MavFrame(raw, 2, raw[4], raw[5], raw[6], msgid, signed, True)
+        return MavFrame(raw, 1, raw[2], raw[3], raw[4], msgid, False, True)
 
     @staticmethod
     def _crc_ok(buf: bytearray, pos: int, crc_end: int, extra: int) -> bool:
@@ -354,6 +409,29 @@ def _padded_crc_ok(buf: bytearray, pos: int, crc_end: int, plen: int, full: int,
         if x25crc(bytes((n,)) + body + bytes(n - plen) + bytes((extra,))) == wire:
             return True
     return False
+
+
+def _holds_a_frame(buf: bytearray, start: int, stop: int, extras: Mapping[int, int]) -> bool:
+    """True when a complete packet of a known id with a valid CRC starts in ``buf[start:stop]``
+    and ends by ``stop``."""
+    i = start
+    while True:
+        i = _next_magic(buf, i)
+        if i >= stop:
+            return False
+        if buf[i] == MAGIC_V2 and i + HEADER_V2 <= stop and not buf[i + 2] & ~IFLAG_SIGNED:
+            hlen, msgid = HEADER_V2, buf[i + 7] | (buf[i + 8] << 8) | (buf[i + 9] << 16)
+        elif buf[i] == MAGIC_V1 and i + HEADER_V1 <= stop:
+            hlen, msgid = HEADER_V1, buf[i + 5]
+        else:
+            i += 1
+            continue
+        crc_end = i + hlen + buf[i + 1]
+        extra = extras.get(msgid)
+        if extra is not None and crc_end + CRC_LEN <= stop and MavFramer._crc_ok(
+                buf, i, crc_end, extra):
+            return True
+        i += 1
 
 
 def _next_is_start(buf: bytearray, end: int, n: int, boundary: bool) -> bool:

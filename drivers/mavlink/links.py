@@ -19,7 +19,12 @@ and ``boundary`` is True when the chunk ended a datagram. ``write(data)`` return
 link cannot take the bytes now (kernel buffer full): the router keeps them in its bounded
 queue and waits for :meth:`Link.write_filenos` to become writable. Stream links (TCP, serial)
 keep a short backlog of their own (a partial write); :meth:`Link.flush` pushes it on.
-OS errors are translated into :class:`~fdi.errors.PortError` at open time; at run time a
+An endpoint that cannot be opened at start (its port held by another process, an address that
+is not an address or not on this machine, a port out of range, a refused first TCP connection)
+raises :class:`~fdi.errors.EndpointError`: one line naming the URL and, where the kernel tells,
+the process that holds the port (:func:`port_holder`, as ``ss -p`` finds it). A UDP server
+binds without ``SO_REUSEADDR``: with it, Linux lets two programs that both set it (mavutil's
+``udpin`` does) share one port, each getting part of the datagrams, silently. At run time a
 failing peer is dropped and counted, never raised into the forwarding loop.
 """
 
@@ -27,6 +32,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import os
 import socket
 import time
 from abc import ABC, abstractmethod
@@ -34,7 +40,7 @@ from collections.abc import Hashable, Iterator
 
 from drivers.resilient import ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
-from fdi.errors import PortError
+from fdi.errors import EndpointError
 
 Chunk = tuple[bytes, Hashable, bool]
 log = logging.getLogger("fdi_bridge.mavlink")
@@ -67,12 +73,138 @@ def _split_hostport(rest: str, url: str, default_host: str | None) -> tuple[str,
         host, port = "", rest
     if not host:
         if default_host is None:
-            raise PortError(f"{url!r}: expected HOST:PORT")
+            raise EndpointError(f"{url}: expected HOST:PORT")
         host = default_host
     try:
-        return host, int(port)
+        number = int(port)
     except ValueError as err:
-        raise PortError(f"{url!r}: bad port {port!r}") from err
+        raise EndpointError(f"{url}: the port must be a number 0-65535, found {port!r}") from err
+    if not 0 <= number <= 65535:
+        raise EndpointError(f"{url}: the port must be 0-65535, found {number}")
+    return host, number
+
+
+def _address(host: str, url: str) -> str:
+    """``host`` as an IPv4 address (a name is resolved); EndpointError naming ``url``."""
+    if host.replace(".", "").isdigit():  # digits and dots: checked here, never sent to DNS
+        parts = host.split(".")
+        if len(parts) == 4 and all(p and int(p) <= 255 for p in parts):
+            return ".".join(str(int(p)) for p in parts)
+        raise EndpointError(f"{url}: {host!r} is not an IPv4 address (four numbers 0-255)")
+    try:
+        return socket.gethostbyname(host)
+    except (OSError, UnicodeError) as err:
+        raise EndpointError(f"{url}: {host!r} is neither an IPv4 address nor a known host name "
+                            f"({_strerror(err)})") from err
+
+
+def _strerror(err: BaseException) -> str:
+    return str(getattr(err, "strerror", None) or err)
+
+
+def open_error(url: str, proto: str, port: int, err: OSError, what: str) -> EndpointError:
+    """The start-up error for ``err`` raised while binding/connecting ``url``: a busy port names
+    its holder where it can (:func:`port_holder`)."""
+    if err.errno == errno.EADDRINUSE:
+        holder = port_holder(proto, port)
+        by = f" by {holder}" if holder else " by another program"
+        return EndpointError(f"{url}: {proto.upper()} port {port} is already in use{by}; stop "
+                             f"it or choose another port")
+    if err.errno == errno.EADDRNOTAVAIL:
+        return EndpointError(f"{url}: the address is not one of this machine's (ip -br addr "
+                             f"lists them)")
+    if err.errno == errno.EACCES and port < 1024:
+        return EndpointError(f"{url}: port {port} needs root (ports below 1024); use 1024 or above")
+    return EndpointError(f"{url}: could not {what}: {_strerror(err)}")
+
+
+def udp_socket_drops(sock: socket.socket) -> int | None:
+    """The kernel's drop count of UDP socket ``sock`` (``/proc/net/udp`` ``drops``), or None."""
+    try:
+        inode = str(os.fstat(sock.fileno()).st_ino)
+    except (OSError, ValueError):
+        return None
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(table, encoding="ascii") as f:
+                lines = f.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            cols = line.split()
+            if len(cols) >= 13 and cols[9] == inode:
+                try:
+                    return int(cols[12])
+                except ValueError:
+                    return None
+    return None
+
+
+def port_holder(proto: str, port: int) -> str:
+    """Best effort, Linux only: who holds local ``proto`` (``"udp"``/``"tcp"``) ``port``, as
+    ``ss -p`` finds it: the socket's inode in ``/proc/net/<proto>[6]``, then the process whose
+    ``/proc/<pid>/fd`` links to it. ``"pid 1234 (mavproxy.py --master ...)"``; for another
+    user's process, whose descriptors are not readable, ``"a process of uid 1000"``; ``""``
+    when nothing is found."""
+    inodes: dict[str, int] = {}
+    for table in (f"/proc/net/{proto}", f"/proc/net/{proto}6"):
+        try:
+            with open(table, encoding="ascii") as f:
+                lines = f.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            cols = line.split()
+            if len(cols) < 10 or ":" not in cols[1]:
+                continue
+            try:
+                local_port = int(cols[1].rsplit(":", 1)[1], 16)
+            except ValueError:
+                continue
+            if local_port != port or (proto == "tcp" and cols[3] != "0A"):  # 0A: LISTEN
+                continue
+            try:
+                inodes[cols[9]] = int(cols[7])
+            except ValueError:
+                continue
+    inodes.pop("0", None)
+    if not inodes:
+        return ""
+    wanted = {f"socket:[{inode}]": inode for inode in inodes}
+    try:
+        pids = [d for d in os.listdir("/proc") if d.isdigit()]
+    except OSError:
+        pids = []
+    for pid in pids:
+        try:
+            fds = os.listdir(f"/proc/{pid}/fd")
+        except OSError:
+            continue  # another user's process, or gone
+        for fd in fds:
+            try:
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                continue
+            if target in wanted:
+                return f"pid {pid} ({_command(pid)})"
+    uid = next(iter(inodes.values()))
+    return f"a process of uid {uid}"
+
+
+def _command(pid: str) -> str:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            argv = [a.decode(errors="replace") for a in f.read().split(b"\0") if a]
+    except OSError:
+        argv = []
+    if not argv:
+        try:
+            with open(f"/proc/{pid}/comm", encoding="utf-8", errors="replace") as f:
+                return f.read().strip()
+        except OSError:
+            return "?"
+    text = " ".join(" ".join([os.path.basename(argv[0]), *argv[1:]]).split())
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 class Link(ABC):
@@ -129,6 +261,13 @@ class _UdpLink(Link):
     def filenos(self) -> list[int]:
         return [self.sock.fileno()]
 
+    def kernel_drops(self) -> int | None:
+        """Datagrams the kernel dropped on this socket because its receive buffer was full
+        (the router did not read them in time): the ``drops`` column of ``/proc/net/udp`` for
+        the socket's inode (Linux; None where it cannot be read). Read when asked, not per
+        packet."""
+        return udp_socket_drops(self.sock)
+
 
 class UdpServerLink(_UdpLink):
     def __init__(self, url: str, host: str, port: int,
@@ -136,14 +275,16 @@ class UdpServerLink(_UdpLink):
         self.url = url
         self._clock = time.monotonic
         self.peer_timeout_s = peer_timeout_s
+        address = _address(host, url)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            # No SO_REUSEADDR (see the module docstring): a port in use is an error, not a share.
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF_BYTES)
-            self.sock.bind((host, port))
+            self.sock.bind((address, port))
             self.sock.setblocking(False)
         except OSError as err:
-            raise PortError(f"could not bind {url!r}: {err}") from err
+            self.sock.close()
+            raise open_error(url, "udp", port, err, "bind") from err
         self.peers: dict[tuple[str, int], float] = {}
         self.dropped = 0  # datagrams a peer lost because the socket's send buffer was full
 
@@ -254,14 +395,17 @@ class UdpClientLink(_UdpLink):
         self.url = url
         self.accept_any = accept_any
         self.foreign = 0
+        if port == 0:
+            raise EndpointError(f"{url}: a udpout: link needs the port to send to (1-65535)")
+        self.target = (_address(host, url), port)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF_BYTES)
             self.sock.setblocking(False)
-            self.target = (socket.gethostbyname(host), port)
             self.sock.bind(("0.0.0.0" if host not in ("127.0.0.1", "localhost") else host, 0))
         except OSError as err:
-            raise PortError(f"could not open {url!r}: {err}") from err
+            self.sock.close()
+            raise open_error(url, "udp", 0, err, "open a UDP socket") from err
 
     def read(self, max_chunks: int) -> Iterator[Chunk]:
         recvfrom = self.sock.recvfrom
@@ -396,14 +540,18 @@ class TcpServerLink(_TcpBase):
         self.conns = []
         self.children: list[TcpClientConnLink] = []
         self._n = 0
+        address = _address(host, url)
+        self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         try:
-            self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            # SO_REUSEADDR on a TCP listener only skips TIME_WAIT after a restart: Linux still
+            # refuses a second listener on the port (EADDRINUSE).
             self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            self.listener.bind((host, port))
+            self.listener.bind((address, port))
             self.listener.listen(8)
             self.listener.setblocking(False)
         except OSError as err:
-            raise PortError(f"could not listen on {url!r}: {err}") from err
+            self.listener.close()
+            raise open_error(url, "tcp", port, err, "listen") from err
 
     @property
     def local_address(self) -> tuple[str, int]:
@@ -480,10 +628,14 @@ class TcpClientLink(_TcpBase):
         self.reconnects = 0
         self._backoff = 0.1
         self._next_try = 0.0
+        if port == 0:
+            raise EndpointError(f"{url}: a tcp: link needs the port to connect to (1-65535)")
+        self._addr = (_address(host, url), port)
         try:
             sock = self._connect(connect_timeout_s)
         except OSError as err:
-            raise PortError(f"could not connect to {url!r}: {err}") from err
+            raise EndpointError(f"{url}: could not connect: {_strerror(err)} (is the server "
+                                f"running?)") from err
         self.conns = [_TcpConn(sock, ("tcp", host, port))]
 
     def _connect(self, timeout_s: float) -> socket.socket:
@@ -511,7 +663,9 @@ class TcpClientLink(_TcpBase):
             return
         self.reconnects += 1
         log.warning("%s: connected again", self.url)
-        self.conns = [_TcpConn(sock, ("tcp", *self._addr))]
+        # A new stream key: the new connection gets a framer of its own, not the old one's
+        # half-received packet.
+        self.conns = [_TcpConn(sock, ("tcp", *self._addr, self.reconnects))]
 
     def read(self, max_chunks: int) -> Iterator[Chunk]:
         if not self.conns:

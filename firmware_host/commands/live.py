@@ -230,8 +230,9 @@ def router_table(router: dict[str, Any]) -> str:
     for name, c in router.items():
         if isinstance(c, dict) and ("rx_packets" in c or "tx_packets" in c):
             rows.append([name, c.get("rx_packets"), c.get("tx_packets"),
-                         c.get("dropped_queue_full"), c.get("no_peer"), c.get("link_errors")])
+                         c.get("dropped_queue_full"), c.get("rx_kernel_drops", "-"),
+                         c.get("no_peer"), c.get("link_errors")])
     if not rows:
         return fields([("router", _counts(router), "")])
-    return table(["link", "rx packets", "tx packets", "queue full", "no peer", "link errors"],
-                 rows)
+    return table(["link", "rx packets", "tx packets", "queue full", "rx lost (kernel)",
+                  "no peer", "link errors"], rows)

@@ -17,6 +17,11 @@ Speed is measured here, never asserted in tests. Figures (goals from issue 6 in 
 * MAVLink forwarding latency (:func:`firmware_host.devtools.router_bench.bench_forwarding`), added
 by the
   router over a direct UDP path.
+* GPS_INPUT latency to the autopilot while a ground station floods the router with 20 000
+  packets/s for 20 s on 127.0.0.1
+  (:func:`firmware_host.devtools.router_bench.bench_gps_input_under_flood`; issue C's goal p99
+  <= 20 ms), with the flood's losses as the router counts them per endpoint (alone:
+  ``--only flood``).
 
 * replay's peak memory (max RSS of a child ``fdi-bridge replay``) on a 24 h and a 1 min log at
   1 Hz, plain NMEA and capture (:func:`bench_replay_memory`; alone: ``--only replay-memory``);
@@ -30,7 +35,7 @@ by the
   ``gpsd/nmea-rtk.log`` through a pty: user + system time from ``wait4``, worst of 5, for this
   tree and the ``--against`` one (:func:`bench_startup`; alone: ``--only startup``).
 
-With the defaults it runs in about four minutes (the two 60 s loops and the 24 h replays
+With the defaults it runs in about four and a half minutes (the two 60 s loops and the 24 h replays
 dominate).
 """
 
@@ -321,6 +326,25 @@ def bench_forwarding_figures(rate_pps: int = 200, seconds: float = 5.0) -> dict[
     return dict(json.loads(proc.stdout.strip().splitlines()[-1]))
 
 
+def bench_flood_figures(rate_pps: int = 20000, seconds: float = 20.0) -> dict[str, Any]:
+    """:func:`firmware_host.devtools.router_bench.bench_gps_input_under_flood` in a child
+    interpreter with a deadline (as :func:`bench_forwarding_figures`)."""
+    code = ("import json\n"
+            "from firmware_host.devtools.router_bench import bench_gps_input_under_flood\n"
+            "if __name__ == '__main__':\n"
+            f"    print(json.dumps(bench_gps_input_under_flood({int(rate_pps)}, "
+            f"{float(seconds)!r})))\n")
+    try:
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              timeout=2 * seconds + 90.0, check=False)
+    except subprocess.TimeoutExpired:
+        return {"error": "timed out"}
+    if proc.returncode != 0:
+        tail = (proc.stderr.strip().splitlines() or ["?"])[-1]
+        return {"error": f"failed: {tail}"}
+    return dict(json.loads(proc.stdout.strip().splitlines()[-1]))
+
+
 def bench_replay_memory(long_s: float = 86400.0, short_s: float = 60.0, rate_hz: float = 1.0,
                         kinds: tuple[str, ...] = ("rover.nmea", "rover.cap")) -> dict[str, Any]:
     """Peak memory (max RSS, MiB) of ``fdi-bridge replay`` on a 24 h and on a 1 min log.
@@ -499,8 +523,8 @@ def _machine() -> dict[str, Any]:
 
 
 BENCH_STEPS = ("rover pipeline", "ROV step", "INS/GNSS step", "end to end", "loop 5 Hz",
-               "loop 10 Hz", "MAVLink forwarding", "replay memory", "against a commit",
-               "replay process time")
+               "loop 10 Hz", "MAVLink forwarding", "GPS_INPUT under a flood", "replay memory",
+               "against a commit", "replay process time")
 
 
 def run_bench(duration_s: float = 60.0, replay_s: float = 600.0, e2e_epochs: int = 200,
@@ -528,13 +552,15 @@ def run_bench(duration_s: float = 60.0, replay_s: float = 600.0, e2e_epochs: int
         done(name)
     res["mavlink_forwarding"] = bench_forwarding_figures(fwd_rate, fwd_seconds)
     done(BENCH_STEPS[6])
-    res["replay_memory"] = bench_replay_memory()
+    res["gps_input_flood"] = bench_flood_figures()
     done(BENCH_STEPS[7])
+    res["replay_memory"] = bench_replay_memory()
+    done(BENCH_STEPS[8])
     res["against"] = (_or_error(lambda: bench_against(against, replay_s, goal=ratio_goal))
                       if against else None)
-    done(BENCH_STEPS[8])
-    res["startup"] = _or_error(lambda: bench_startup(corpus, against))
     done(BENCH_STEPS[9])
+    res["startup"] = _or_error(lambda: bench_startup(corpus, against))
+    done(BENCH_STEPS[10])
     res["seconds"] = round(time.perf_counter() - t0, 1)
     return res
 
@@ -596,6 +622,7 @@ def figures(res: dict[str, Any]) -> list[dict[str, Any]]:
             fw["max_ms"])
         add("... added by the router over direct UDP", "ms", fw["added_p50_ms"],
             fw["added_p99_ms"])
+    rows += flood_rows(res)
     if r:
         for strat, v in r["strategies"].items():
             x = v["throughput_eps_no_pty"]
@@ -612,6 +639,40 @@ def figures(res: dict[str, Any]) -> list[dict[str, Any]]:
                 value=v["ratio"], goal="<= 1.10", ok=v["ratio"] <= 1.10)
     rows += against_rows(res)
     return rows
+
+
+def flood_rows(res: dict[str, Any]) -> list[dict[str, Any]]:
+    """The figures of :func:`bench_flood_figures` (see :func:`figures`)."""
+    fl = res.get("gps_input_flood") or {}
+    if "p99_ms" not in fl:
+        return []
+    from firmware_host.devtools.router_bench import FLOOD_GOAL_P99_MS as goal  # pymavlink: lazily
+    drops = fl.get("drops", {}).get("gcs0", {})
+    lost = int(fl["flood_sent"]) - int(fl["flood_at_autopilot"])
+    return [
+        {"figure": f"GPS_INPUT to the autopilot, {fl['rate_pps']} msg/s GCS flood for "
+                   f"{fl['seconds']:g} s ({fl['gps_received']} of {fl['gps_handed']} fixes)",
+         "unit": "ms", "p50": _nan(fl["p50_ms"]), "p99": _nan(fl["p99_ms"]),
+         "max": _nan(fl["max_ms"]), "value": None, "goal": f"p99 <= {goal:g}",
+         "ok": float(fl["p99_ms"]) <= goal and fl["gps_received"] == fl["gps_handed"]},
+        {"figure": "... the same fixes sent straight to the autopilot (this machine's floor)",
+         "unit": "ms", "p50": _nan(fl.get("direct_p50_ms")), "p99": _nan(fl.get("direct_p99_ms")),
+         "max": _nan(fl.get("direct_max_ms")), "value": None, "goal": "", "ok": None},
+        {"figure": "... the router's share (routed minus floor; a busy machine shows in both)",
+         "unit": "ms", "p50": _minus(fl.get("p50_ms"), fl.get("direct_p50_ms")),
+         "p99": _minus(fl.get("p99_ms"), fl.get("direct_p99_ms")), "max": None, "value": None,
+         "goal": "", "ok": None},
+        {"figure": f"... flood packets lost: {lost}, counted by the router "
+                   f"(gcs0 rx_kernel_drops {drops.get('rx_kernel_drops', '?')})",
+         "unit": "% of sent", "p50": None, "p99": None, "max": None,
+         "value": round(100.0 * lost / max(1, int(fl["flood_sent"])), 2), "goal": "",
+         "ok": None},
+    ]
+
+
+def _minus(a: Any, b: Any) -> float | None:
+    x, y = _nan(a), _nan(b)
+    return None if x is None or y is None else round(x - y, 3)
 
 
 def against_rows(res: dict[str, Any]) -> list[dict[str, Any]]:
@@ -675,8 +736,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "temporary directory)")
     parser.add_argument("--strict", action="store_true",
                         help="exit 1 when a figure misses its goal (default: exit 0 either way)")
-    parser.add_argument("--only", choices=("replay-memory", "against", "startup"), default=None,
-                        help="measure just this figure (replay-memory: about a minute; "
+    parser.add_argument("--only", choices=("replay-memory", "against", "startup", "flood"),
+                        default=None,
+                        help="measure just this figure (flood: GPS_INPUT under a 20 000 "
+                             "msg/s GCS flood, about 25 s; replay-memory: about a minute; "
                              "against: throughput ratio to --against, about a minute; "
                              "startup: the nmea-rtk replay's process time, seconds)")
     parser.add_argument("--against", default="HEAD~1", metavar="REV",
@@ -694,6 +757,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)  # gate-health notes etc.
     against = None if args.against.lower() == "none" else args.against
+    if args.only == "flood":
+        flood = {"gps_input_flood": bench_flood_figures()}
+        if "error" in flood["gps_input_flood"]:
+            print(f"fdi-bridge bench: {flood['gps_input_flood']['error']}", file=sys.stderr)
+        rows = flood_rows(flood)
+        print(table(flood) if rows else "(nothing measured)")
+        if args.json is not None:
+            args.json.write_text(json.dumps(flood, indent=2) + "\n")
+        return 1 if args.strict and any(f["ok"] is False for f in rows) else 0
     if args.only == "replay-memory":
         mem = bench_replay_memory()
         print(replay_memory_table(mem).console())

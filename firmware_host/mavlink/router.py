@@ -25,7 +25,10 @@ thread that runs the detectors (that thread only hands packets over, through
 :meth:`Router.send_gps_input` and friends, and never blocks on a socket). Packets for a UDP
 server endpoint nobody has spoken to yet are dropped and counted (``no_peer``): there is
 nowhere to send them, and a ground station that connects later wants fresh telemetry, not a
-backlog.
+backlog. The bridge's own packets never wait behind forwarded ones: the loop takes them between
+any two datagrams, and an endpoint keeps them in a queue of their own that is written first.
+Routes (a system/component seen on an endpoint) are forgotten after ``route_timeout_s`` of
+silence. Drops are counted per endpoint (queues, send buffers, the kernel's receive drops).
 
 The loop owns time: ``clock`` (monotonic seconds) is an argument; :meth:`Router.tick` runs the
 periodic jobs for a given time so tests drive it with
@@ -42,6 +45,7 @@ import os
 import selectors
 import shutil
 import socket
+import stat
 import struct
 import threading
 import time
@@ -89,8 +93,9 @@ def load_signing_key(path: str | Path) -> bytes:
     """A 32-byte MAVLink signing key from a file holding 64 hexadecimal characters.
 
     MAVProxy's and QGroundControl's passphrase keys are ``sha256(passphrase)``; write that as
-    hex. The file must not be readable by other users and must not sit inside a git working
-    tree (a key is never committed).
+    hex. The file must be readable and writable by its owner only (mode 0600 or stricter: no
+    bit for the group or others, as ssh asks of a private key) and must not sit inside a git
+    working tree (a key is never committed).
     """
     p = Path(path).expanduser()
     try:
@@ -98,8 +103,9 @@ def load_signing_key(path: str | Path) -> bytes:
         text = p.read_text(encoding="ascii").strip()
     except (OSError, UnicodeDecodeError) as err:
         raise ConfigError(str(p), "(file)", "a readable key file", str(err)) from err
-    if mode & 0o007:
-        raise ConfigError(str(p), "(mode)", "a file only its owner can read (chmod 600)", oct(mode))
+    if mode & 0o077:
+        raise ConfigError(str(p), "(mode)", "a file only its owner can read (chmod 600)",
+                          f"mode {stat.S_IMODE(mode):04o}, open to its group or others")
     for parent in p.resolve().parents:
         if (parent / ".git").exists():
             raise ConfigError(
@@ -284,7 +290,8 @@ TLOG_RETRY_S = 5.0
 class EndpointStats:
     rx_packets: int = 0
     tx_packets: int = 0
-    dropped_queue_full: int = 0
+    dropped_queue_full: int = 0  # forwarded packets dropped (the oldest) from a full queue
+    dropped_own: int = 0  # the bridge's own packets dropped from a full queue of their own
     no_peer: int = 0  # packets for this endpoint while nobody was there to take them
     unroutable: int = 0  # targeted packets from here that no other endpoint could take
     loop_guard: int = 0  # packets not sent here because their source was seen here
@@ -302,11 +309,14 @@ class Endpoint:
         self.link = link
         self.is_gcs = is_gcs
         self.signing = signing
-        self.queue: deque[bytes] = deque()
+        self.queue: deque[bytes] = deque()  # forwarded packets waiting for the link
+        self.own_queue: deque[bytes] = deque()  # the bridge's own, written before the others
         self.queue_max = queue
         self.framers: dict[Hashable, MavFramer] = {}
-        self.seen_sys: set[int] = set()
-        self.seen: set[tuple[int, int]] = set()
+        # Routes: what was heard here, with when (router clock); forgotten after
+        # ``route_timeout_s`` of silence (Router._expire_routes).
+        self.seen_sys: dict[int, float] = {}
+        self.seen: dict[tuple[int, int], float] = {}
         self.stats = EndpointStats()
         c = cfg or EndpointConfig("")
         self.allow_unsigned = c.ids("allow_unsigned")
@@ -342,44 +352,56 @@ class Endpoint:
         self.stats.rate_limited += 1
         return False
 
-    def send(self, raw: bytes) -> None:
-        """Write ``raw`` now when nothing waits before it; else queue it behind the others."""
+    def send(self, raw: bytes, own: bool = False) -> None:
+        """Write ``raw`` now when nothing waits before it; else queue it behind the others.
+
+        ``own``: one of the bridge's own packets (GPS_INPUT, heartbeat, STATUSTEXT, answers).
+        They wait only behind each other, in a queue of their own written first, never behind
+        forwarded traffic; a full queue drops forwarded packets, never the bridge's own for
+        them (the oldest own packet goes only when ``queue_packets`` of them wait).
+        """
         if self.server:  # its clients are endpoints of their own: to each of them
             for child in self.children:
-                child.send(raw)
+                child.send(raw, own)
             return
-        if self.queue:
-            self.enqueue(raw)
+        if self.own_queue or (self.queue and not own):
+            self.enqueue(raw, own)
         elif not self.link.has_peer():
             self.stats.no_peer += 1
         elif self.link.write(raw):
             self.stats.tx_packets += 1
         else:
-            self.enqueue(raw)
+            self.enqueue(raw, own)
 
-    def enqueue(self, raw: bytes) -> None:
-        if len(self.queue) >= self.queue_max:
-            self.queue.popleft()
-            self.stats.dropped_queue_full += 1
-        self.queue.append(raw)
+    def enqueue(self, raw: bytes, own: bool = False) -> None:
+        q = self.own_queue if own else self.queue
+        if len(q) >= self.queue_max:
+            q.popleft()
+            if own:
+                self.stats.dropped_own += 1
+            else:
+                self.stats.dropped_queue_full += 1
+        q.append(raw)
 
     def blocked(self) -> bool:
         """True when packets or bytes wait for the link to become writable."""
-        return bool(self.queue) or self.link.backlog()
+        return bool(self.queue or self.own_queue) or self.link.backlog()
 
     def flush(self) -> None:
+        """Write what waits, the bridge's own packets first, until the link refuses."""
         link = self.link
         if link.backlog():
             link.flush()
-        q = self.queue
-        if q and not link.has_peer():
-            self.stats.no_peer += len(q)  # the peer went away (TCP client closed)
-            q.clear()
-        while q:
-            if not link.write(q[0]):
-                break
-            q.popleft()
-            self.stats.tx_packets += 1
+        if not link.has_peer():
+            self.stats.no_peer += len(self.own_queue) + len(self.queue)  # the peer went away
+            self.own_queue.clear()
+            self.queue.clear()
+        for q in (self.own_queue, self.queue):
+            while q:
+                if not link.write(q[0]):
+                    return
+                q.popleft()
+                self.stats.tx_packets += 1
 
     def accepts(self, target: tuple[int, int]) -> bool:
         """mavlink-router's rule for a message addressed to ``target`` (system, component)."""
@@ -400,6 +422,7 @@ class RouterStats:
     dropped_bytes: int = 0
     unchecked: int = 0
     refused_unsigned: int = 0  # unsigned packets dropped from a signing link
+    unsigned_allowed: int = 0  # unsigned packets of allow_unsigned passed from a signing link
     bad_signature: int = 0
     replayed_signature: int = 0  # not newer than its stream's last packet
     old_stream_refused: int = 0  # a new stream more than a minute behind our timestamp
@@ -413,6 +436,7 @@ class RouterStats:
     command_refused: int = 0  # COMMAND_ACK with a result other than ACCEPTED / IN_PROGRESS
     command_unacked: int = 0  # no COMMAND_ACK after command_retries attempts
     ftp_nak: int = 0
+    routes_expired: int = 0  # (system, component) routes forgotten after route_timeout_s
 
 
 _COMMAND_IDS = frozenset(
@@ -458,6 +482,10 @@ class Router:
     ) -> None:
         self.cfg = cfg
         self.clock = clock
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.endpoints: list[Endpoint] = []
+        self.tlog: TlogWriter | None = None
         self.params = params if params is not None else ParamStore()
         self.stats = RouterStats()
         self._offsets = mio.target_offsets()
@@ -479,12 +507,6 @@ class Router:
                 f"{cfg.signing_key_file}.state" if cfg.signing_key_file else "")
             self._sig_state_path = Path(state).expanduser() if state else None
             self._load_signing_state()
-        self.tlog = tlog
-        if tlog is None and cfg.tlog_dir:
-            self.tlog = TlogWriter(cfg.tlog_dir, cfg.tlog_max_bytes, wall_clock,
-                                   dir_max_bytes=cfg.tlog_dir_max_bytes,
-                                   min_free_bytes=cfg.tlog_min_free_bytes, clock=clock)
-        self.endpoints: list[Endpoint] = []
         try:
             a = cfg.autopilot
             ap = open_link(a.url, a.baud, cfg.reconnect_max_s, peer_timeout_s=a.peer_timeout_s,
@@ -502,8 +524,13 @@ class Router:
                              queue=cfg.queue_packets, cfg=g)
                 )  # fmt: skip
         except PortError:
-            self.close()
+            self.close()  # the links opened so far (a busy port is an EndpointError: exit 2)
             raise
+        self.tlog = tlog
+        if tlog is None and cfg.tlog_dir:
+            self.tlog = TlogWriter(cfg.tlog_dir, cfg.tlog_max_bytes, wall_clock,
+                                   dir_max_bytes=cfg.tlog_dir_max_bytes,
+                                   min_free_bytes=cfg.tlog_min_free_bytes, clock=clock)
         self._pending: _PendingCommand | None = None
         self._any_clients = False
         self._next_reap = 0.0
@@ -526,8 +553,8 @@ class Router:
         self._next_flush = self._t0 + 1.0
         self._next_slow = self._t0 + SIGNING_STATE_EVERY_S
         self._next_report = self._t0 + cfg.report_stats_s
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
+        self._now = self._t0  # the clock at this round's reads: when a route was last heard
+        self._next_expiry = self._t0 + 1.0
 
     # -- thread-safe API for the pipelines -------------------------------------------------
 
@@ -674,6 +701,7 @@ class Router:
         if self._outbox:
             wait = 0.0
         events = self._sel.select(wait)
+        self._now = self.clock()
         self._drain_outbox()
         done: list[Endpoint] = []
         for key, mask in events:
@@ -727,6 +755,7 @@ class Router:
         assert isinstance(link, UdpServerLink)
         by_addr = server.by_addr
         route = self._route
+        outbox = self._outbox
         for data, addr, boundary in link.read(self.cfg.read_burst):
             src = by_addr.get(addr)
             if src is None or src.parent is None:
@@ -737,6 +766,8 @@ class Router:
                 framer = src.framers[addr] = MavFramer(on_drop=self._on_drop)
             for frame in framer.feed(data, boundary=boundary):
                 route(src, frame)
+            if outbox:  # the bridge's own packets never wait for the rest of a burst
+                self._drain_outbox()
 
     def _reap(self) -> None:
         """Drop the endpoints of TCP clients that have gone (their counters fold into the
@@ -748,7 +779,7 @@ class Router:
             parent = ep.parent
             assert parent is not None
             parent.clients_gone += 1
-            ep.stats.no_peer += len(ep.queue)
+            ep.stats.no_peer += len(ep.queue) + len(ep.own_queue)
             for name, value in ep.stats.__dict__.items():
                 setattr(parent.gone_stats, name, getattr(parent.gone_stats, name) + value)
             parent.children = [c for c in parent.children if c is not ep]
@@ -766,12 +797,16 @@ class Router:
             return
         framers = src.framers
         route = self._route
+        outbox = self._outbox
         for data, key, boundary in src.link.read(self.cfg.read_burst):
             framer = framers.get(key)
             if framer is None:
-                framer = framers[key] = MavFramer(on_drop=self._on_drop)
+                # A stream (serial, TCP) is joined at an unknown point: it starts resyncing.
+                framer = framers[key] = MavFramer(on_drop=self._on_drop, synced=boundary)
             for frame in framer.feed(data, boundary=boundary):
                 route(src, frame)
+            if outbox:  # the bridge's own packets never wait for the rest of a burst
+                self._drain_outbox()
 
     def _on_drop(self, data: bytes, reason: str) -> None:
         self.stats.dropped_bytes += len(data)
@@ -782,9 +817,10 @@ class Router:
         src.stats.rx_packets += 1
         msgid = frame.msgid
         verified = False
-        if src.signing and msgid not in src.allow_unsigned:
+        if src.signing and (frame.signed or msgid not in src.allow_unsigned):
             # A link marked for signing passes only correctly signed, fresh packets, towards
-            # the vehicle and anywhere else (MAVLink 2 signing: sig, stream order, 1 min).
+            # the vehicle and anywhere else (MAVLink 2 signing: sig, stream order, 1 min),
+            # and unsigned ones of allow_unsigned (a signed one is checked all the same).
             # Unsigned parameter reads addressed to the bridge are answered, not forwarded.
             if not frame.signed and msgid in _PARAM_READ_IDS:
                 target = frame_target(frame, self._offsets)
@@ -801,11 +837,14 @@ class Router:
             src.stats.filtered_in += 1
             return
         source = (frame.sysid, frame.compid)
-        if frame.crc_checked:  # only a checked packet teaches a route (as mavlink-router)
-            src.seen_sys.add(frame.sysid)
-            src.seen.add(source)
-        else:
+        if not frame.crc_checked:
             self.stats.unchecked += 1
+        elif src.signing and not verified:
+            self.stats.unsigned_allowed += 1  # allow_unsigned: passed, but teaches no route
+        else:  # only a checked (and, on a signing link, signed) packet teaches a route
+            now = self._now
+            src.seen_sys[frame.sysid] = now
+            src.seen[source] = now
         raw = frame.raw
         if self.tlog is not None:
             self.tlog.write(raw)
@@ -1026,11 +1065,10 @@ class Router:
                 self.stats.params_set += 1
             else:
                 self.stats.params_rejected += 1
-            # Answer with the value now in force (new, or unchanged when refused) to every GCS.
-            raw = self._param_value(name, names.index(name), len(names))
-            for ep in self.endpoints:
-                if ep.is_gcs:
-                    self._emit(raw, ep)
+            # Answer with the value now in force (new, or unchanged when refused) to every
+            # ground station, once each: a server's peers are endpoints of their own.
+            self._emit(self._param_value(name, names.index(name), len(names)), None,
+                       gcs_only=True)
         elif kind in ("COMMAND_LONG", "COMMAND_INT"):
             with self._lock:
                 raw = self._own.send_command_ack(
@@ -1045,17 +1083,18 @@ class Router:
         with self._lock:
             return self._own.send_param_value(name, self.params.get(name), index, count, kind)
 
-    def _emit(self, raw: bytes, dest: Endpoint | None) -> None:
-        """Queue one of the bridge's own packets: to ``dest``, or to every endpoint."""
+    def _emit(self, raw: bytes, dest: Endpoint | None, *, gcs_only: bool = False) -> None:
+        """Send one of the bridge's own packets: to ``dest``, or to every endpoint (every
+        ground station's with ``gcs_only``), once each; recorded once in the tlog."""
         self.stats.own_sent += 1
         if self.tlog is not None:
             self.tlog.write(raw)
         if dest is not None:
-            dest.send(raw)
+            dest.send(raw, own=True)
             return
         for ep in self.endpoints:
-            if not ep.server:  # a server's clients are in the list themselves
-                ep.send(raw)
+            if not ep.server and (ep.is_gcs or not gcs_only):  # a server's clients are listed
+                ep.send(raw, own=True)
 
     def _drain_outbox(self) -> None:
         while self._outbox:
@@ -1085,6 +1124,9 @@ class Router:
                 periods = int((now - self._next_stats) * cfg.stats_hz) + 1
                 self._next_stats += periods / cfg.stats_hz
         self._retry_command(now)
+        if now >= self._next_expiry:
+            self._next_expiry = now + 1.0
+            self._expire_routes(now)
         if now >= self._next_flush:
             self._next_flush = now + 1.0
             if self.tlog is not None:
@@ -1106,6 +1148,22 @@ class Router:
                 raw = self._own.send_statustext(severity, text)
             self._text_tokens -= 1.0
             self._emit(raw, None)
+
+    def _expire_routes(self, now: float) -> None:
+        """Forget what an endpoint has not been heard from for ``route_timeout_s`` (checked
+        each second): one packet with another endpoint's ids (an echo) no longer cuts that
+        endpoint off by the loop guard, nor draws its targeted messages, for good."""
+        timeout = self.cfg.route_timeout_s
+        if timeout <= 0:
+            return
+        old = now - timeout
+        for ep in self.endpoints:
+            if ep.seen and min(ep.seen.values()) < old:
+                stale = [k for k, t in ep.seen.items() if t < old]
+                for k in stale:
+                    del ep.seen[k]
+                self.stats.routes_expired += len(stale)
+                ep.seen_sys = {sysid: t for sysid, t in ep.seen_sys.items() if t >= old}
 
     def run(self, stop: threading.Event | None = None, poll_s: float = 0.05) -> None:
         """Poll until ``stop`` is set (or :meth:`stop` is called)."""
@@ -1147,7 +1205,14 @@ class Router:
         if self.tlog is not None:
             out.update(self.tlog.counters())
         for ep in self.endpoints:
-            extra: dict[str, Any] = {"queued": len(ep.queue), "link_errors": ep.link.errors}
+            extra: dict[str, Any] = {"queued": len(ep.queue) + len(ep.own_queue),
+                                     "link_errors": ep.link.errors}
+            dropped = getattr(ep.link, "dropped", None)
+            if dropped is not None:  # datagrams a full send buffer lost (UDP)
+                extra["send_dropped"] = dropped
+            kernel_drops = getattr(ep.link, "kernel_drops", None)
+            if kernel_drops is not None:  # what the kernel dropped before the router read it
+                extra["rx_kernel_drops"] = kernel_drops() or 0
             counts = dict(ep.stats.__dict__)
             if ep.server:  # the server's line adds up its clients, present and gone
                 extra.update(clients=ep.clients, clients_gone=ep.clients_gone)
@@ -1155,7 +1220,9 @@ class Router:
                     st = child.stats if child is not None else ep.gone_stats
                     for name, value in st.__dict__.items():
                         counts[name] += value
-                extra["queued"] += sum(len(c.queue) for c in ep.children)
+                extra["queued"] += sum(len(c.queue) + len(c.own_queue) for c in ep.children)
+                extra["send_dropped"] = extra.get("send_dropped", 0) + sum(
+                    getattr(c.link, "dropped", 0) for c in ep.children)
             foreign = getattr(ep.link, "foreign", None)
             if foreign is not None:
                 extra["foreign_dropped"] = foreign

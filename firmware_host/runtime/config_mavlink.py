@@ -10,9 +10,12 @@ from dataclasses import dataclass, field
 
 from drivers.mavlink import io as mio
 
-# The default unsigned pass-list: names of the dialect (checked by a test, not at each import,
-# so that loading a file without [mavlink] does not import pymavlink).
-DEFAULT_ALLOW_UNSIGNED = ("HEARTBEAT", "RADIO_STATUS")
+# The default unsigned pass-list of a signing link: ArduPilot's own (a telemetry radio's link
+# statistics, which the radio cannot sign). Names of the dialect (checked by a test, not at each
+# import, so that loading a file without [mavlink] does not import pymavlink). HEARTBEAT is not
+# in it: an unsigned heartbeat from anyone on the network would hold off the autopilot's GCS
+# failsafe.
+DEFAULT_ALLOW_UNSIGNED = ("RADIO_STATUS", "RADIO")
 
 
 @dataclass(frozen=True)
@@ -25,8 +28,10 @@ class EndpointConfig:
         default=False, metadata={"doc": "GCS links: only correctly signed packets pass"}
     )
     name: str = ""
-    # Unsigned messages a signing link still passes (they command nothing).
-    allow_unsigned: tuple[str, ...] = DEFAULT_ALLOW_UNSIGNED
+    # Unsigned messages a signing link still passes (they command nothing; they teach no route).
+    allow_unsigned: tuple[str, ...] = field(
+        default=DEFAULT_ALLOW_UNSIGNED,
+        metadata={"doc": "signing links: message names passed unsigned (never teach a route)"})
     peer_timeout_s: float = field(
         default=0.0, metadata={"ge": 0.0, "le": 86400.0,
                                 "doc": "udpin: forget a peer silent this long; 0 never"}
@@ -98,6 +103,10 @@ class MavlinkConfig:
         default=5.0, metadata={"ge": 0.1, "le": 3600.0,
                                 "doc": "serial links: longest wait between reopens"}
     )
+    route_timeout_s: float = field(
+        default=10.0, metadata={"ge": 0.0, "le": 3600.0,
+                                 "doc": "forget a (system, component) route silent "
+                                        "this long, s; 0 = never"})
 
     def __post_init__(self) -> None:
         if any(g.signing for g in self.gcs) and not self.signing_key_file:
