@@ -8,8 +8,9 @@ EKF's), or with ``heading = "raw_compass"`` the compass of RAW_IMU / SCALED_IMU*
 ATTITUDE's roll and pitch (:mod:`drivers.mavlink.compass`, ArduPilot's convention), with the
 autopilot's gyro as the FDI's witness where ``gyro`` says so. It sends its thrust as
 MANUAL_CONTROL (or, ``output = "rc_override"``, RC_CHANNELS_OVERRIDE on the RCMAP channels:
-:func:`rc_override_channels`) with the ground station's system id (``pilot_system_id``) and the
-vehicle as target: ArduSub takes pilot input only from its ground station (``SYSID_MYGCS``).
+:func:`rc_override_channels`) with the ground station's system id (``pilot_system_id``), the
+bridge's own component id and the vehicle as target: ArduSub takes pilot input only from its
+ground station's system id (``MAV_GCS_SYSID``, ``SYSID_MYGCS`` before 4.7; any component).
 
 The router's thread only queues the frames (:class:`Inbox`); each period's step decodes the
 ones that arrived, in order, so a recording of what each step took (the ``ardusub rx``
@@ -30,8 +31,9 @@ each detector event and for a telemetry dropout, with severities.
 ArduSub's rules (docs/rov-ardusub.md; ``[rov.ardusub]``,
 :class:`~firmware_host.runtime.config_rov.ArduSubConfig`):
 
-* ArduSub takes MANUAL_CONTROL only from its ground station (``SYSID_MYGCS``): the router sends
-  it from ``[mavlink] pilot_system_id``;
+* ArduSub takes MANUAL_CONTROL only from its ground station's system id (``MAV_GCS_SYSID``:
+  ``GCS_MAVLINK_Sub::handle_message``, ``GCS::sysid_is_gcs``; the component is not checked):
+  the router sends it from ``[mavlink] pilot_system_id`` and the bridge's ``component_id``;
 * ``steer = false``: detect only (the detector runs on the pilot's yaw, nothing is sent);
 * the bridge steers (:data:`STEERING`) only while the autopilot's HEARTBEAT is fresh
   (``heartbeat_timeout_s``), says it is armed, and its mode is one of ``modes`` (modes whose
@@ -41,15 +43,21 @@ ArduSub's rules (docs/rov-ardusub.md; ``[rov.ardusub]``,
   STATUSTEXT once;
 * the pilot's MANUAL_CONTROL from a ground station is intercepted by the router
   (:meth:`Router.intercept <firmware_host.mavlink.router.Router.intercept>`): while the bridge
-  steers, its ``x``, ``y``, ``z`` and buttons go out unchanged with the bridge's ``r``, at the
-  bridge's 5 Hz; a pilot ``|r|`` above ``yaw_dead_band`` takes over at once (the pilot's frames
-  pass unchanged, "pilot" in the records, logged), and after the stick has been back within the
-  dead band for ``pilot_release_s`` the bridge holds the heading the pilot left it on;
+  steers, its ``x``, ``y``, ``z``, buttons and extension fields (``buttons2``, ``s``, ``t``,
+  ``aux1-6``) go out unchanged with the bridge's ``r``, at the bridge's 5 Hz, and a frame that
+  changes the buttons is sent on at once (every button edge reaches ArduSub, in order:
+  :class:`PilotInput`); a pilot ``|r|`` above ``yaw_dead_band`` takes over at once (that
+  frame sent on with the pilot's ``r``, then the pilot's frames pass unchanged, "pilot" in the
+  records, logged), and after the stick has been back within the dead band for
+  ``pilot_release_s`` the bridge holds the heading the pilot left it on;
 * never mask ArduSub's pilot-input failsafe (``FS_PILOT_INPUT``, after ``FS_PILOT_TIMEOUT``,
   3 s by default): once a pilot has been seen, the bridge stops sending when the pilot's
-  MANUAL_CONTROL has been silent for ``pilot_timeout_s`` (< 3 s). Without a pilot at all (an
-  unattended heading hold) the bridge's own MANUAL_CONTROL keeps the autopilot's failsafe quiet
-  while the bridge is running and steering; it stops when the bridge stops;
+  MANUAL_CONTROL has been silent for ``pilot_timeout_s`` (< 3 s);
+* ArduSub counts the bridge's MANUAL_CONTROL as its GCS's heartbeat (``sysid_mygcs_seen``):
+  with ``send_without_pilot = false`` (the default) the bridge sends only while the pilot's
+  MANUAL_CONTROL or the GCS's HEARTBEAT came within ``pilot_timeout_s`` ("no_pilot"
+  otherwise), so the GCS failsafe (``FS_GCS_ENABLE``) is not masked; ``true`` is the
+  unattended hold, whose frames hide it while the bridge runs and steers;
 * heading silence (no ATTITUDE): the controller's dropout rule holds the last command for
   ``dropout_hold_s``, then neutral yaw (``r = 0``, the pilot's other axes still passed), with a
   STATUSTEXT; ATTITUDE back: resumes, said (:class:`RovOperatorSink`).
