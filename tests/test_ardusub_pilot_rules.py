@@ -174,6 +174,38 @@ def test_a_50_ms_tap_reaches_the_vehicle_press_then_release() -> None:
     assert summary["button_edges_sent"] == 2
 
 
+def test_a_press_during_the_step_is_not_undone() -> None:
+    """A press that arrives while the bridge computes a period (after it took the period's
+    frames, before it sends): the press goes on at once, and the period's frame carries it
+    too, not the released buttons of the frames it took (which would be a release and then a
+    second press at ArduSub). The arrival is placed there by taking the inbox, then sending."""
+    p = Peers()
+    try:
+        _steering(p)
+        p.report()
+        p.send_pilot()
+        take = p.loop.inbox.take
+
+        def take_then_press() -> list[bytes]:
+            frames = take()  # the step has its frames; the pilot presses now
+            p.send_pilot(buttons=4)
+            return frames
+
+        p.loop.inbox.take = take_then_press
+        n0 = p.drain()
+        rec = p.step()
+        p.loop.inbox.take = take
+        p.wait_got(n0 + 2, "the press and the period's frame")
+        p.report()
+        p.send_pilot(buttons=4)
+        p.step()
+        tail = [m.buttons for m in p.got[n0:]]
+    finally:
+        p.close()
+    assert rec["ardusub"] == "steer"
+    assert tail == [4, 4, 4], tail  # press (at once), the period's frame, the next one
+
+
 def test_every_edge_arrives_in_order_in_real_time() -> None:
     """Real time (the Runner paces 5 Hz; the pilot sends at 50 Hz in its own thread, seeded
     taps of 1-3 frames on buttons and buttons2): the button states the vehicle gets, with
