@@ -22,6 +22,7 @@ from firmware_host.devtools.rov_sim import RovPlant, parse_fault
 from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router
 from firmware_host.rov.ardusub import STAT_NAMES, RovAutopilotLoop, manual_control_axes
 from firmware_host.rov.config import RovConfig
+from firmware_host.runtime.config_rov import ArduSubConfig
 
 
 def _wait(cond: Callable[[], bool], what: str, deadline_s: float = 5.0) -> None:
@@ -48,7 +49,8 @@ class _Gcs(threading.Thread):
 
 
 def test_heading_hold_through_an_autopilot_with_a_compass_drift() -> None:
-    cfg = RovConfig()
+    # The FIR alone, as the in-process reference below (and ATTITUDE here has no rates).
+    cfg = RovConfig(ardusub=ArduSubConfig(gyro="none"))
     fault = parse_fault("drift:30@40")
     duration_s = 90.0
     router = Router(MavlinkConfig(
@@ -78,6 +80,10 @@ def test_heading_hold_through_an_autopilot_with_a_compass_drift() -> None:
             tel = plant.measure()
             truth.append(plant.heading_true)
             if k % 5 == 0:  # 1 Hz, armed in ALT_HOLD (2): the loop steers only then
+                assert loop.pilot is not None
+                seen = loop.pilot.gcs_heartbeats + 1  # the ground station is there, 1 Hz
+                gcs.ep.send_heartbeat()
+                _wait(lambda s=seen: loop.pilot.gcs_heartbeats >= s, "the GCS's HEARTBEAT")  # type: ignore[misc]
                 beats = loop.autopilot.received + 1
                 ap.send_vehicle_heartbeat(mio.MAV_TYPE_SUBMARINE,
                                           mio.MAV_MODE_FLAG_SAFETY_ARMED, 2)

@@ -59,6 +59,10 @@ class Bench:
         self.gcs = mio.MavEndpoint(f"udpout:127.0.0.1:{gcs_port}", source_system=255,
                                    source_component=190)
         self.gcs.send_heartbeat()  # the router learns the ground station
+        # The ground station's 1 Hz HEARTBEAT, every 5 periods (0: none); it counts as the
+        # pilot's presence only with the bridge's pilot_system_id (255, as this GCS's).
+        self.gcs_heartbeat_every = 5 if pilot_system_id == 255 else 0
+        self.periods = 0
         self.pilot = pilot
         self.texts: list[str] = []
         self.true: list[float] = []
@@ -86,6 +90,12 @@ class Bench:
                   and loop.autopilot.received >= sim.counters.heartbeat_sent
                   and (loop.compass is None or loop.compass.received >= sim.counters.imu_sent),
                   "ATTITUDE")
+        every = self.gcs_heartbeat_every
+        if every and self.periods % every == 0:  # the bridge sends only with a GCS or pilot
+            n = loop.pilot.gcs_heartbeats
+            self.gcs.send_heartbeat()
+            _wait(lambda: loop.pilot.gcs_heartbeats > n, "the ground station's HEARTBEAT")
+        self.periods += 1
         if pilot_axes is not None:
             n = loop.pilot.received
             self.gcs.send_manual_control(1, *pilot_axes)

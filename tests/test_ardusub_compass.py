@@ -33,6 +33,7 @@ from tests.ardusub_bench import BOUND_DEG, Bench, err
 
 def _cfg(**ardusub: Any) -> RovConfig:
     c, _ = load_rov_config(project_root() / "config" / "rov.toml")
+    ardusub.setdefault("gyro", "none")  # the FIR alone, unless a test says which gyro
     return replace(c, heading_source="mavlink", ardusub=replace(c.ardusub, **ardusub))
 
 

@@ -80,7 +80,7 @@ def test_auto_releases_the_channels_and_a_foreign_id_is_refused() -> None:
     assert all(r["r_sent"] is None for r in auto[5:])  # HEARTBEAT at 1 Hz
     assert b.sim.counters.rc_releases == 1 and summary["rc_releases"] == 1
     assert b.sim.last_rc is not None and b.sim.last_rc[3] == 0  # yaw back to the RC radio
-    b2 = Bench(_cfg(), pilot_system_id=42)
+    b2 = Bench(_cfg(send_without_pilot=True), pilot_system_id=42)  # no GCS 42 here
     try:
         for _ in range(3 * 5):
             b2.period()

@@ -111,6 +111,7 @@ def test_cli_run_recording_replays_byte_for_byte(tmp_path: Path) -> None:
     conf.write_text(
         '[rov]\nheading_source = "mavlink"\nsetpoint_deg = 110.0\n'
         '[rov.ardusub]\nheading = "raw_compass"\ngyro = "imu"\n'
+        'send_without_pilot = true\n'  # no ground station here: an unattended hold
         f'[mavlink]\n[mavlink.autopilot]\nurl = "udpin:127.0.0.1:{ap}"\n'
         f'[[mavlink.gcs]]\nurl = "udpin:127.0.0.1:{gcs}"\n')
     cfg = _cfg(heading="raw_compass", gyro="imu")

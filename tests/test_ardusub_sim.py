@@ -21,7 +21,7 @@ from tests.ardusub_bench import BOUND_DEG, Bench, _wait, err
 @pytest.fixture
 def cfg() -> RovConfig:
     c, _ = load_rov_config(project_root() / "config" / "rov.toml")
-    return replace(c, heading_source="mavlink")
+    return replace(c, heading_source="mavlink", ardusub=replace(c.ardusub, gyro="none"))
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -130,8 +130,10 @@ def test_other_modes_disarmed_and_a_foreign_gcs_id_are_not_commanded(cfg: RovCon
     assert all(r["r_sent"] is None for r in auto[5:] + disarmed[5:])
     assert auto[-1]["ardusub"] == "mode" and disarmed[-1]["ardusub"] == "disarmed"
     assert sum("mode AUTO not steered" in t for t in b.texts) == 1  # said once
-    # A bridge whose pilot id is not ArduSub's SYSID_MYGCS: everything it sends is refused.
-    b2 = Bench(cfg, pilot_system_id=42)
+    # A bridge whose pilot id is not ArduSub's MAV_GCS_SYSID: everything it sends is refused
+    # (it sends with no ground station of id 42 present: send_without_pilot).
+    b2 = Bench(replace(cfg, ardusub=replace(cfg.ardusub, send_without_pilot=True)),
+               pilot_system_id=42)
     try:
         for _ in range(3 * 5):
             b2.period()
@@ -142,7 +144,8 @@ def test_other_modes_disarmed_and_a_foreign_gcs_id_are_not_commanded(cfg: RovCon
 
 def test_real_time_run_through_the_runner(cfg: RovConfig) -> None:
     """A short real-time run (3 s): the sim serves in its own thread, Runner.run paces."""
-    b = Bench(replace(cfg, setpoint_deg=110.0))  # the plant starts at 110 deg
+    b = Bench(replace(cfg, setpoint_deg=110.0,  # the plant starts at 110 deg; unattended
+                      ardusub=replace(cfg.ardusub, send_without_pilot=True)))
     stop = threading.Event()
     th = threading.Thread(target=b.sim.serve, args=(stop,), daemon=True)
     th.start()

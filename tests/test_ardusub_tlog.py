@@ -57,6 +57,7 @@ def replay_vehicle(path: Path, drift_deg: float = 0.0, drift_at_s: float | None 
                    **ardusub: Any) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """``ardusub``: more ``[rov.ardusub]`` keys (the raw compass: RAW_IMU as logged)."""
     cfg, _ = load_rov_config(project_root() / "config" / "rov.toml")
+    ardusub.setdefault("gyro", "none")  # the FIR alone, unless a test says which gyro
     cfg = replace(cfg, heading_source="mavlink",
                   ardusub=replace(cfg.ardusub, steer=False, **ardusub))
     records: list[dict[str, Any]] = []

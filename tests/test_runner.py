@@ -33,6 +33,7 @@ from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.config import RovConfig
 from firmware_host.rover.vehicle import RoverVehicle
 from firmware_host.runtime.config import BridgeConfig, RoverConfig
+from firmware_host.runtime.config_rov import ArduSubConfig
 from firmware_host.runtime.loop import FakeClock
 from firmware_host.runtime.mavout import EncoderOutput, packer_output
 from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
@@ -272,7 +273,7 @@ def test_serial_mavlink_output_is_built_by_the_factory(tmp_path: Path) -> None:
 def test_ardusub_rov_on_the_runner_through_a_router() -> None:
     """The ROV with its heading from an autopilot (ATTITUDE in, MANUAL_CONTROL out), on the
     runtime with a router over UDP on 127.0.0.1 (real time, 20 Hz, 40 steps)."""
-    cfg = RovConfig(period_s=0.05)
+    cfg = RovConfig(period_s=0.05, ardusub=ArduSubConfig(send_without_pilot=True))  # no GCS
     mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
                         gcs=(EndpointConfig("udpin:127.0.0.1:0"),))
     records: list[dict[str, Any]] = []

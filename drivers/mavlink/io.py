@@ -31,7 +31,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, NamedTuple
 
 from drivers.mavlink.modes import mode_number
 from fdi.errors import PortError
@@ -256,6 +256,35 @@ def statustext_chunks(text: str) -> list[bytes]:
     return chunks
 
 
+class ManualControlExt(NamedTuple):
+    """MANUAL_CONTROL's MAVLink 2 extension fields, as a pilot's frame carries them.
+
+    ``buttons2`` (buttons 16-31), ``enabled_extensions`` (bit 0: ``s`` valid, bit 1: ``t``,
+    bits 2-7: ``aux1``-``aux6``), the ``s``/``t`` axes (pitch, roll; -1000..1000) and
+    ``aux1``-``aux6``. All 0 is a frame without extensions. ArduSub takes every one of them
+    (``Sub::transform_manual_control_to_rc_override``; buttons 16-31 act on their edges).
+    """
+
+    buttons2: int = 0
+    enabled_extensions: int = 0
+    s: int = 0
+    t: int = 0
+    aux: tuple[int, int, int, int, int, int] = (0, 0, 0, 0, 0, 0)
+
+    @classmethod
+    def of(cls, msg: Any) -> ManualControlExt:
+        """The extension fields of a decoded MANUAL_CONTROL (0 where a MAVLink 1 frame or an
+        older sender left them out)."""
+        aux = tuple(int(getattr(msg, f"aux{i}", 0)) for i in range(1, 7))
+        return cls(int(getattr(msg, "buttons2", 0)), int(getattr(msg, "enabled_extensions", 0)),
+                   int(getattr(msg, "s", 0)), int(getattr(msg, "t", 0)),
+                   (aux[0], aux[1], aux[2], aux[3], aux[4], aux[5]))
+
+    def values(self) -> tuple[int, ...]:
+        """The ten values in MANUAL_CONTROL's field order (after ``buttons``)."""
+        return (self.buttons2, self.enabled_extensions, self.s, self.t, *self.aux)
+
+
 class _Encoders:
     """Typed encoders shared by :class:`MavEndpoint` and :class:`MavPacker`.
 
@@ -405,10 +434,13 @@ class _Encoders:
         return self._emit(msg)
 
     def send_manual_control(
-        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0
+        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0,
+        ext: ManualControlExt | None = None,
     ) -> bytes:
-        """MANUAL_CONTROL (x/y/r in -1000..1000, z in 0..1000 on ArduSub, 500 = neutral)."""
-        msg = self._mav.manual_control_encode(target_system, x, y, z, r, buttons)
+        """MANUAL_CONTROL (x/y/r in -1000..1000, z in 0..1000 on ArduSub, 500 = neutral), with
+        the extension fields of ``ext`` (none: all 0)."""
+        more = () if ext is None else ext.values()
+        msg = self._mav.manual_control_encode(target_system, x, y, z, r, buttons, *more)
         return self._emit(msg)
 
     def send_attitude(

@@ -18,7 +18,9 @@ Checks, in order:
 6. with a MAVLink output: the GPS receiver's rate, read for ``--gps-probe-s`` seconds (a warning
    below 5 Hz: ArduPilot's ``AP_GPS::is_healthy`` wants a fix at least every ~215 ms); with a
    ``[mavlink]`` table, the tlog directory and the parameter file's directory are writable and
-   have room (a full disk stops them, not forwarding).
+   have room (a full disk stops them, not forwarding);
+7. an ROV: whether its heading FDI has a gyro witness; without one (the Outland link, or
+   ``[rov.ardusub] gyro = "none"``) a warning "compass only: slow drifts are not detectable".
 
 :func:`diagnose` returns a :class:`Report`; only :func:`run` prints. Exit status 1 when
 anything is wrong, 0 otherwise (warnings do not fail).
@@ -49,6 +51,7 @@ from fdi.errors import ConfigError, FdiBridgeError
 from firmware_host.commands.tables import table
 from firmware_host.runtime.config import load_bridge_file, run_mode
 from firmware_host.runtime.config_mavlink import MavlinkConfig
+from firmware_host.runtime.config_rov import COMPASS_ONLY, RovConfig, rov_gyro
 
 _SCHEMES = ("socket://", "rfc2217://", "loop://", "spy://", "alt://", "hwgrep://", "cp2110://")
 
@@ -273,6 +276,21 @@ def check_mavlink_disk(rep: Report, mc: MavlinkConfig) -> None:
             rep.ok.append(f"mavlink {what}: {d} writable ({free / 1e6:.0f} MB free)")
 
 
+def check_rov_gyro(rep: Report, rov: RovConfig) -> None:
+    """What the ROV's heading FDI can detect: with a gyro witness, or the compass alone."""
+    gyro = rov_gyro(rov)
+    if gyro is not None:
+        rep.ok.append(f"rov: heading FDI with a gyro witness ({gyro})")
+        return
+    if not rov.ft.gyro_enabled:
+        why = "[rov.ft] gyro_enabled = false"
+    elif rov.heading_source == "outland":
+        why = "the Outland link carries no gyro"
+    else:
+        why = '[rov.ardusub] gyro = "none"; the link carries one: "attitude" or "imu"'
+    rep.warnings.append(f"rov: {COMPASS_ONLY} ({why}; docs/rov.md)")
+
+
 def diagnose(
     config: str | Path,
     *,
@@ -306,11 +324,13 @@ def diagnose(
     if bf.rov is not None:
         if bf.rov.heading_source == "mavlink":
             rep.ok.append("rov: heading from the autopilot (ATTITUDE through [mavlink])")
+            check_rov_gyro(rep, bf.rov)
         elif mode == "mavlink":
             rep.warnings.append("rov: `run` on a file with [mavlink] runs the router and the "
                                 "rover only; the [rov] table is not used")
         else:
             check_device(rep, "ROV link", bf.rov.link.port.url, access=access)
+            check_rov_gyro(rep, bf.rov)
     if bf.mavlink is not None:
         mc = bf.mavlink
         check_mavlink_url(rep, "MAVLink autopilot", mc.autopilot.url)

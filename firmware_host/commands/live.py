@@ -22,6 +22,7 @@ from typing import Any, TextIO
 import firmware_host
 from firmware_host.commands.tables import fields, fmt, table
 from firmware_host.runtime.config import BridgeFile, presets_dir
+from firmware_host.runtime.config_rov import COMPASS_ONLY, rov_gyro
 from firmware_host.runtime.status import Banner, Snapshot
 
 log = logging.getLogger("fdi_bridge.status")
@@ -172,6 +173,10 @@ def console_status(config: str | Path | None, bf: BridgeFile) -> ConsoleStatus:
         header.append(("config", str(config)))
     if bf.name:
         header.append(("name", bf.name))
+    if bf.rov is not None and bf.rover is None:  # the ROV runs: what its FDI can see
+        gyro = rov_gyro(bf.rov)
+        header.append(("heading FDI", COMPASS_ONLY if gyro is None
+                       else f"compass FIR + gyro witness ({gyro})"))
     quiet = logging.getLogger().getEffectiveLevel() > logging.WARNING
     return ConsoleStatus(header, quiet=quiet)
 

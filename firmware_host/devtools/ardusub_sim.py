@@ -7,7 +7,7 @@ a real pymavlink endpoint (``udpout:127.0.0.1:PORT``, :mod:`drivers.mavlink.io`)
 * ATTITUDE at ``attitude_hz`` (10 Hz; ``yaw`` = the compass heading, faults included; none
   while a ``dropout`` fault is active or the link is unplugged) and HEARTBEAT at 1 Hz
   (``MAV_TYPE_SUBMARINE``, the armed flag, the custom mode);
-* MANUAL_CONTROL is accepted only from ``gcs_system_id`` (ArduSub's ``SYSID_MYGCS``) and for
+* MANUAL_CONTROL is accepted only from ``gcs_system_id`` (ArduSub's ``MAV_GCS_SYSID``) and for
   this vehicle (``target`` = its system id); others are counted in ``refused``;
 * the yaw command is ``r / 10`` % of the plant's yaw thrust while armed in a mode that takes the
   pilot's yaw (MANUAL, STABILIZE, ACRO, ALT_HOLD, POSHOLD); 0 otherwise;

@@ -491,7 +491,10 @@ class Router:
         self._offsets = mio.target_offsets()
         self._lock = threading.Lock()
         self._own = mio.MavPacker(cfg.system_id, cfg.component_id)
-        self._pilot = mio.MavPacker(cfg.pilot_system_id, 190)
+        # The bridge's MANUAL_CONTROL / RC_CHANNELS_OVERRIDE: ArduSub takes them only from its
+        # GCS's system id (GCS::sysid_is_gcs, MAV_GCS_SYSID); the component is the bridge's own,
+        # so the pilot's (GCS, 190) stream and the bridge's stay apart (sequence numbers).
+        self._pilot = mio.MavPacker(cfg.pilot_system_id, cfg.component_id)
         if any(g.signing for g in cfg.gcs) and signing_key is None:
             signing_key = load_signing_key(cfg.signing_key_file)
         self._key = signing_key
@@ -574,23 +577,25 @@ class Router:
         return raw
 
     def send_manual_control(
-        self, x: int, y: int, z: int, r: int, buttons: int = 0, target_system: int | None = None
+        self, x: int, y: int, z: int, r: int, buttons: int = 0, target_system: int | None = None,
+        ext: mio.ManualControlExt | None = None,
     ) -> bytes:
-        """MANUAL_CONTROL to the autopilot from the pilot's (GCS) system id (ArduSub).
+        """MANUAL_CONTROL to the autopilot from the pilot's (GCS) system id and the bridge's
+        component id (ArduSub), with a pilot's extension fields ``ext``.
 
         ``target_system`` is the vehicle's system id (default: the bridge's own, as on a
         companion computer that shares the vehicle's id).
         """
         target = self.cfg.system_id if target_system is None else target_system
         with self._lock:
-            raw = self._pilot.send_manual_control(target, x, y, z, r, buttons)
+            raw = self._pilot.send_manual_control(target, x, y, z, r, buttons, ext)
         self._post(raw, self.autopilot)
         return raw
 
     def send_rc_channels_override(self, channels: tuple[int, ...],
                                   target_system: int | None = None) -> bytes:
         """RC_CHANNELS_OVERRIDE (18 values) to the autopilot from the pilot's (GCS) system id:
-        ArduPilot takes it only from ``SYSID_MYGCS``, as MANUAL_CONTROL."""
+        ArduPilot takes it only from ``MAV_GCS_SYSID``, as MANUAL_CONTROL."""
         target = self.cfg.system_id if target_system is None else target_system
         with self._lock:
             raw = self._pilot.send_rc_channels_override(target, 1, channels)

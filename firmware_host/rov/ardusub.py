@@ -8,8 +8,9 @@ EKF's), or with ``heading = "raw_compass"`` the compass of RAW_IMU / SCALED_IMU*
 ATTITUDE's roll and pitch (:mod:`drivers.mavlink.compass`, ArduPilot's convention), with the
 autopilot's gyro as the FDI's witness where ``gyro`` says so. It sends its thrust as
 MANUAL_CONTROL (or, ``output = "rc_override"``, RC_CHANNELS_OVERRIDE on the RCMAP channels:
-:func:`rc_override_channels`) with the ground station's system id (``pilot_system_id``) and the
-vehicle as target: ArduSub takes pilot input only from its ground station (``SYSID_MYGCS``).
+:func:`rc_override_channels`) with the ground station's system id (``pilot_system_id``), the
+bridge's own component id and the vehicle as target: ArduSub takes pilot input only from its
+ground station's system id (``MAV_GCS_SYSID``, ``SYSID_MYGCS`` before 4.7; any component).
 
 The router's thread only queues the frames (:class:`Inbox`); each period's step decodes the
 ones that arrived, in order, so a recording of what each step took (the ``ardusub rx``
@@ -30,8 +31,9 @@ each detector event and for a telemetry dropout, with severities.
 ArduSub's rules (docs/rov-ardusub.md; ``[rov.ardusub]``,
 :class:`~firmware_host.runtime.config_rov.ArduSubConfig`):
 
-* ArduSub takes MANUAL_CONTROL only from its ground station (``SYSID_MYGCS``): the router sends
-  it from ``[mavlink] pilot_system_id``;
+* ArduSub takes MANUAL_CONTROL only from its ground station's system id (``MAV_GCS_SYSID``:
+  ``GCS_MAVLINK_Sub::handle_message``, ``GCS::sysid_is_gcs``; the component is not checked):
+  the router sends it from ``[mavlink] pilot_system_id`` and the bridge's ``component_id``;
 * ``steer = false``: detect only (the detector runs on the pilot's yaw, nothing is sent);
 * the bridge steers (:data:`STEERING`) only while the autopilot's HEARTBEAT is fresh
   (``heartbeat_timeout_s``), says it is armed, and its mode is one of ``modes`` (modes whose
@@ -41,15 +43,21 @@ ArduSub's rules (docs/rov-ardusub.md; ``[rov.ardusub]``,
   STATUSTEXT once;
 * the pilot's MANUAL_CONTROL from a ground station is intercepted by the router
   (:meth:`Router.intercept <firmware_host.mavlink.router.Router.intercept>`): while the bridge
-  steers, its ``x``, ``y``, ``z`` and buttons go out unchanged with the bridge's ``r``, at the
-  bridge's 5 Hz; a pilot ``|r|`` above ``yaw_dead_band`` takes over at once (the pilot's frames
-  pass unchanged, "pilot" in the records, logged), and after the stick has been back within the
-  dead band for ``pilot_release_s`` the bridge holds the heading the pilot left it on;
+  steers, its ``x``, ``y``, ``z``, buttons and extension fields (``buttons2``, ``s``, ``t``,
+  ``aux1-6``) go out unchanged with the bridge's ``r``, at the bridge's 5 Hz, and a frame that
+  changes the buttons is sent on at once (every button edge reaches ArduSub, in order:
+  :class:`PilotInput`); a pilot ``|r|`` above ``yaw_dead_band`` takes over at once (that
+  frame sent on with the pilot's ``r``, then the pilot's frames pass unchanged, "pilot" in the
+  records, logged), and after the stick has been back within the dead band for
+  ``pilot_release_s`` the bridge holds the heading the pilot left it on;
 * never mask ArduSub's pilot-input failsafe (``FS_PILOT_INPUT``, after ``FS_PILOT_TIMEOUT``,
   3 s by default): once a pilot has been seen, the bridge stops sending when the pilot's
-  MANUAL_CONTROL has been silent for ``pilot_timeout_s`` (< 3 s). Without a pilot at all (an
-  unattended heading hold) the bridge's own MANUAL_CONTROL keeps the autopilot's failsafe quiet
-  while the bridge is running and steering; it stops when the bridge stops;
+  MANUAL_CONTROL has been silent for ``pilot_timeout_s`` (< 3 s);
+* ArduSub counts the bridge's MANUAL_CONTROL as its GCS's heartbeat (``sysid_mygcs_seen``):
+  with ``send_without_pilot = false`` (the default) the bridge sends only while the pilot's
+  MANUAL_CONTROL or the GCS's HEARTBEAT came within ``pilot_timeout_s`` ("no_pilot"
+  otherwise), so the GCS failsafe (``FS_GCS_ENABLE``) is not masked; ``true`` is the
+  unattended hold, whose frames hide it while the bridge runs and steers;
 * heading silence (no ATTITUDE): the controller's dropout rule holds the last command for
   ``dropout_hold_s``, then neutral yaw (``r = 0``, the pilot's other axes still passed), with a
   STATUSTEXT; ATTITUDE back: resumes, said (:class:`RovOperatorSink`).
@@ -62,6 +70,7 @@ clockwise), ``y = 10 lateral``, ``z = 500 + 5 vertical`` (0..1000, 500 neutral),
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -104,6 +113,8 @@ STATE_TEXT: dict[str, tuple[int, str]] = {
     "mode": (mio.MAV_SEVERITY_WARNING, "FDI heading hold: mode {mode} not steered"),
     "pilot": (mio.MAV_SEVERITY_NOTICE, "FDI heading hold: pilot yaw, yielding"),
     "pilot_silent": (mio.MAV_SEVERITY_WARNING, "FDI heading hold: pilot input lost, not sending"),
+    "no_pilot": (mio.MAV_SEVERITY_WARNING,
+                 "FDI heading hold: no pilot or ground station, not sending"),
     "detect_only": (mio.MAV_SEVERITY_INFO, "FDI heading hold: detect only, not steering"),
     HANDBACK: (mio.MAV_SEVERITY_CRITICAL, "FDI heading: substitute untrusted, yaw to pilot"),
 }
@@ -223,21 +234,63 @@ class AutopilotListener:
         self.inbox.push(frame.raw)
 
 
-class PilotInput:
-    """The pilot's MANUAL_CONTROL from the ground stations, intercepted in the router.
+_HEARTBEAT_ID = mio.message_id("HEARTBEAT")
+_MANUAL_CONTROL_ID = mio.message_id("MANUAL_CONTROL")
+_NO_EXT = mio.ManualControlExt()
 
-    A frame passes unchanged when the bridge is not steering or the pilot's ``|r|`` is above the
-    dead band; otherwise it is kept (the bridge sends its axes with its own yaw). Frames for
-    this vehicle go to the inbox.
+
+def _source_and_id(raw: bytes) -> tuple[int, int, int] | None:
+    """``(system, component, message id)`` from a framed packet's header (MAVLink 2 or 1)."""
+    if len(raw) >= 10 and raw[0] == 0xFD:
+        return raw[5], raw[6], raw[7] | (raw[8] << 8) | (raw[9] << 16)
+    if len(raw) >= 6 and raw[0] == 0xFE:
+        return raw[3], raw[4], raw[5]
+    return None
+
+
+class PilotInput:
+    """The pilot's MANUAL_CONTROL and the ground station's HEARTBEAT, intercepted in the router.
+
+    Not steering: the pilot's frames pass unchanged. While the bridge steers, they are held
+    back (each period the bridge sends the pilot's axes with its own yaw), except, sent on at
+    once as the bridge's frame (:meth:`_resend`, in the router's thread, the pilot's fields):
+
+    * a frame whose ``buttons``/``buttons2`` differ from the buttons the vehicle last got,
+      with the bridge's current yaw: every button edge reaches ArduSub, in order and when the
+      pilot made it (ArduSub acts on edges: arm, disarm, mode, lights, gain); a tap shorter
+      than a period is a press and a release, both sent;
+    * a frame whose ``|r|`` is above the dead band, with the pilot's yaw (a takeover).
+
+    Every frame the bridge sends to the vehicle, here or each period
+    (:meth:`RovAutopilotLoop._send_command`), is composed and queued under :attr:`lock` and
+    carries the buttons the vehicle last got (:attr:`wire`): a period's frame never undoes an
+    edge sent a moment before it. Frames for this vehicle, and the HEARTBEATs of the ground
+    station (system ``gcs_system_id``: the pilot's presence), go to the inbox.
     """
 
-    def __init__(self, router: Router, vehicle: int, dead_band: int, inbox: Inbox) -> None:
+    def __init__(self, router: Router, vehicle: int, dead_band: int, inbox: Inbox,
+                 output: MavlinkOutput, gcs_system_id: int) -> None:
         self.vehicle = vehicle
         self.dead_band = dead_band
         self.inbox = inbox
-        self.steering = False  # set by the loop each period
+        self.output = output
+        self.gcs_system_id = gcs_system_id
+        self.lock = threading.Lock()
+        self.steering = False  # set by the loop under the lock
+        self.r = 0  # the bridge's current yaw, sent with an edge
+        self.wire = (0, 0)  # (buttons, buttons2) the vehicle last got, from the pilot or us
         self.received = 0
+        self.gcs_heartbeats = 0
+        self.edges_sent = 0
+        self.takeovers_sent = 0
         router.intercept("MANUAL_CONTROL", self._on_manual_control)
+        router.intercept("HEARTBEAT", self._on_heartbeat)
+
+    def _on_heartbeat(self, frame: MavFrame) -> bool:
+        if frame.sysid == self.gcs_system_id and frame.sysid != self.vehicle:
+            self.gcs_heartbeats += 1
+            self.inbox.push(frame.raw)
+        return True  # forwarded as it is
 
     def _on_manual_control(self, frame: MavFrame) -> bool:
         msg = mio.decode_packet(frame.raw)
@@ -245,7 +298,25 @@ class PilotInput:
             return True  # not for this vehicle (ArduSub ignores it too): forwarded as it is
         self.received += 1
         self.inbox.push(frame.raw)
-        return not self.steering or abs(int(msg.r)) > self.dead_band
+        ext = mio.ManualControlExt.of(msg)
+        buttons = (int(msg.buttons), ext.buttons2)
+        with self.lock:
+            if not self.steering:
+                self.wire = buttons
+                return True
+            if abs(int(msg.r)) > self.dead_band:
+                self.takeovers_sent += 1
+                self._resend(msg, int(msg.r), ext)
+            elif buttons != self.wire:
+                self.edges_sent += 1
+                self._resend(msg, self.r, ext)
+            return False
+
+    def _resend(self, msg: Any, r: int, ext: mio.ManualControlExt) -> None:
+        """The pilot's frame ``msg`` as the bridge's, with yaw ``r`` (under the lock)."""
+        self.output.send_manual_control(self.vehicle, int(msg.x), int(msg.y), int(msg.z), r,
+                                        int(msg.buttons), ext)
+        self.wire = (int(msg.buttons), ext.buttons2)
 
 
 UINT16_MAX = 0xFFFF
@@ -328,11 +399,13 @@ class RovAutopilotLoop:
             self.ahrs2 = AutopilotListener(router, "AHRS2", self.inbox, ap)
             if self._uses_compass:
                 self.compass = AutopilotListener(router, a.compass_message, self.inbox, ap)
-            self.pilot = PilotInput(router, vehicle_system_id, a.yaw_dead_band, self.inbox)
         if output is None:
             assert router is not None, "a replay gives its own output"
             output = RouterOutput(router)
         self.output = output
+        if router is not None:
+            self.pilot = PilotInput(router, vehicle_system_id, a.yaw_dead_band, self.inbox,
+                                    output, router.cfg.pilot_system_id)
         self.operator = RovOperatorSink(self.output)
         self.on_epoch = on_epoch
         self.t = 0.0
@@ -341,6 +414,8 @@ class RovAutopilotLoop:
         self._hb_age: float | None = None  # s since the last HEARTBEAT; None: none yet
         self._pilot_axes: tuple[int, int, int, int, int] | None = None
         self._pilot_age = 0.0
+        self._pilot_ext = _NO_EXT  # the newest pilot frame's extension fields
+        self._gcs_age: float | None = None  # s since the ground station's HEARTBEAT; None: none
         self._pilot_has = False  # the pilot is steering (yaw above the dead band)
         self._centred_s = 0.0
         self._attitude: tuple[float, float] | None = None  # the newest (roll, pitch), rad
@@ -462,7 +537,7 @@ class RovAutopilotLoop:
             if share < COMPASS_RATE_MIN:
                 hz = share / self.cfg.period_s
                 text = (f"FDI compass: {self.acfg.compass_message} at {hz:.1f} Hz, below "
-                        f"the hold's {1 / self.cfg.period_s:.0f} Hz (SRn_RAW_SENS)")
+                        f"the hold's {1 / self.cfg.period_s:.0f} Hz (MAVn_RAW_SENS)")
                 log.warning("%s", text)
                 self.output.send_statustext(mio.MAV_SEVERITY_WARNING, text)
                 self.compass_slow_hz = round(hz, 2)
@@ -483,7 +558,43 @@ class RovAutopilotLoop:
             return "mode"
         if self._pilot_axes is not None and self._pilot_age > a.pilot_timeout_s + 1e-9:
             return "pilot_silent"
+        if not a.send_without_pilot and not self._pilot_present():
+            return "no_pilot"
         return STEERING
+
+    def _pilot_fresh(self) -> bool:
+        """The pilot's MANUAL_CONTROL came within ``pilot_timeout_s``."""
+        return (self._pilot_axes is not None
+                and self._pilot_age <= self.acfg.pilot_timeout_s + 1e-9)
+
+    def _pilot_present(self) -> bool:
+        """A pilot or ground station is there: its MANUAL_CONTROL or the GCS's HEARTBEAT came
+        within ``pilot_timeout_s``."""
+        return self._pilot_fresh() or (
+            self._gcs_age is not None and self._gcs_age <= self.acfg.pilot_timeout_s + 1e-9)
+
+    def _scan_pilot(self, frames: list[bytes]) -> list[bytes]:
+        """The ground station's HEARTBEATs taken out of the period's frames (their age is the
+        pilot's presence: :meth:`_pilot_present`), and the extension fields of the newest pilot
+        MANUAL_CONTROL kept (passed on unchanged); the other frames, in order."""
+        rest: list[bytes] = []
+        gcs = False
+        for raw in frames:
+            head = _source_and_id(raw)
+            if head is not None and head[2] == _HEARTBEAT_ID and head[:2] != (self.vehicle, 1):
+                gcs = True
+                self.taken["GCS_HEARTBEAT"] += 1
+                continue
+            if head is not None and head[2] == _MANUAL_CONTROL_ID:
+                msg = mio.decode_packet(raw)
+                if msg is not None:
+                    self._pilot_ext = mio.ManualControlExt.of(msg)
+            rest.append(raw)
+        if gcs:
+            self._gcs_age = 0.0
+        elif self._gcs_age is not None:
+            self._gcs_age += self.cfg.period_s
+        return rest
 
     def _pilot_yaw(self, dt: float) -> bool:
         """True while the pilot steers the yaw (takeover, then ``pilot_release_s`` centred)."""
@@ -588,14 +699,32 @@ class RovAutopilotLoop:
         if self.router is not None:
             self.router.send_rc_channels_override(channels, target_system=self.vehicle)
 
-    def _send_command(self, x: int, y: int, z: int, r: int, buttons: int) -> None:
-        if self.acfg.output == "rc_override":
-            self._send_rc(rc_override_channels(self.acfg, (x, y, z, r)))
-        else:
-            self.tx.append(json.dumps({"mc": [x, y, z, r, buttons]},
-                                      separators=(",", ":")).encode())
-            self.output.send_manual_control(self.vehicle, x, y, z, r, buttons)
+    def _send_command(self, x: int, y: int, z: int, r: int, buttons: int,
+                      ext: mio.ManualControlExt) -> None:
+        """The period's command. Live, under :attr:`PilotInput.lock`: the bridge steers with
+        yaw ``r`` from now on, and the frame carries the buttons the vehicle last got (the
+        period's newest pilot frame's but for an edge sent on since: :class:`PilotInput`)."""
+        pilot = self.pilot
+        with pilot.lock if pilot is not None else contextlib.nullcontext():
+            if pilot is not None:
+                pilot.steering, pilot.r = True, r
+                buttons, b2 = pilot.wire
+                ext = ext._replace(buttons2=b2)
+            if self.acfg.output == "rc_override":
+                self._send_rc(rc_override_channels(self.acfg, (x, y, z, r)))
+            else:
+                line: dict[str, Any] = {"mc": [x, y, z, r, buttons]}
+                if ext != _NO_EXT:
+                    line["ext"] = list(ext.values())
+                self.tx.append(json.dumps(line, separators=(",", ":")).encode())
+                self.output.send_manual_control(self.vehicle, x, y, z, r, buttons, ext)
         self.sent += 1
+
+    def _yield_to_pilot(self) -> None:
+        """Not steering: the pilot's frames pass unchanged from now on."""
+        if self.pilot is not None:
+            with self.pilot.lock:
+                self.pilot.steering = False
 
     def step(self, frames: list[bytes] | None = None) -> dict[str, Any]:
         """One period: heading, heartbeat and pilot in (``frames``, default the inbox's);
@@ -603,8 +732,8 @@ class RovAutopilotLoop:
         docstring); operator telemetry."""
         dt = self.cfg.period_s
         self.tx = []
-        meas, yaw_att, rate, hb, pilot = self._absorb(
-            self.inbox.take() if frames is None else frames)
+        frames = self._scan_pilot(self.inbox.take() if frames is None else frames)
+        meas, yaw_att, rate, hb, pilot = self._absorb(frames)
         if hb is not None:
             self.armed, self.mode = hb
             self._hb_age = 0.0
@@ -628,20 +757,20 @@ class RovAutopilotLoop:
         state = "pilot" if gate == STEERING and pilot_yaw else gate
         self._set_state(state)
         steering = state == STEERING
-        if self.pilot is not None:
-            self.pilot.steering = steering
         x, y, z, r = manual_control_axes(cmd)
-        buttons = 0
-        if self._pilot_axes is not None and self._pilot_age <= self.acfg.pilot_timeout_s + 1e-9:
+        buttons, ext = 0, _NO_EXT
+        if self._pilot_axes is not None and self._pilot_fresh():
             x, y, z, pr, buttons = self._pilot_axes  # the pilot's other axes, unchanged
+            ext = self._pilot_ext  # and buttons2, s, t, aux1-6
             if not steering:
                 r = pr
         if steering:
-            self._send_command(x, y, z, r, buttons)
+            self._send_command(x, y, z, r, buttons, ext)
         else:
+            self._yield_to_pilot()
             # Not ours: the yaw the vehicle gets is the pilot's (0 without one), and that is
             # the detector's next input; the PID does not wind up meanwhile.
-            if self._pilot_axes is None or self._pilot_age > self.acfg.pilot_timeout_s + 1e-9:
+            if not self._pilot_fresh():
                 r = 0
             self.ctl.command = ThrusterCommand(r / 10.0, -r / 10.0)
             self.ctl.pid.reset()
@@ -679,7 +808,7 @@ class NullOutput:
         """Nothing."""
 
     def send_manual_control(self, target_system: int, x: int, y: int, z: int, r: int,
-                            buttons: int = 0) -> None:
+                            buttons: int = 0, ext: mio.ManualControlExt | None = None) -> None:
         """Nothing."""
 
     def counters(self) -> dict[str, int]:
@@ -796,6 +925,8 @@ class ArduSubRovVehicle:
                 out["attitude_received"] = lp.heading.received
                 out["heartbeat_received"] = lp.autopilot.received
                 out["pilot_received"] = lp.pilot.received
+                out["gcs_heartbeats_received"] = lp.pilot.gcs_heartbeats
+                out["button_edges_sent"] = lp.pilot.edges_sent
             if lp.compass is not None:
                 out["compass_received"] = lp.compass.received
             if lp.compass_slow_hz is not None:

@@ -7,7 +7,7 @@ changes. Loading and validation: :func:`firmware_host.runtime.config.load_bridge
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, cast
 
 from drivers.transport import SerialSettings
 from fdi.errors import ConfigError
@@ -44,12 +44,19 @@ CompassMessage = Literal["RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3"]
 ArduSubGyro = Literal["none", "imu", "attitude"]
 ArduSubOutput = Literal["manual_control", "rc_override"]
 
+GYRO_FOR_HEADING: dict[str, ArduSubGyro] = {"attitude": "attitude", "raw_compass": "imu"}
+"""``[rov.ardusub] gyro`` when not given: the link always carries a gyro (ATTITUDE's rates; the
+compass message's own gyro beside the raw compass)."""
+_GYRO_NOT_GIVEN = cast(ArduSubGyro, "")  # replaced in __post_init__, never seen outside
+
 
 @dataclass(frozen=True)
 class ArduSubConfig:
     """The ROV through an ArduSub autopilot (``[rov.ardusub]``, used when
     ``heading_source = "mavlink"``; docs/rov-ardusub.md). The GCS system id the commands carry
-    is ``[mavlink] pilot_system_id`` (ArduSub's ``SYSID_MYGCS``)."""
+    is ``[mavlink] pilot_system_id`` (ArduSub's ``MAV_GCS_SYSID``, ``SYSID_MYGCS`` before 4.7),
+    their component id the bridge's ``[mavlink] component_id``. ``gyro`` not given:
+    :data:`GYRO_FOR_HEADING` of ``heading`` (resolved here, so the object always holds one)."""
 
     vehicle_system_id: int = field(default=1, metadata={"ge": 1, "le": 255})
     steer: bool = field(
@@ -64,6 +71,11 @@ class ArduSubConfig:
     pilot_timeout_s: float = field(
         default=1.0, metadata={"ge": 0.05, "lt": 3.0,
                                "doc": "pilot MANUAL_CONTROL silent this long: stop sending"})
+    send_without_pilot: bool = field(
+        default=False, metadata={"doc": "true: steer with no pilot or ground station present "
+                                        "(neither the pilot's MANUAL_CONTROL nor the GCS's "
+                                        "HEARTBEAT within pilot_timeout_s); the bridge's frames "
+                                        "then hide ArduSub's GCS failsafe (FS_GCS_ENABLE)"})
     heartbeat_timeout_s: float = field(
         default=3.0, metadata={"ge": 0.1, "le": 3600.0,
                                 "doc": "autopilot HEARTBEAT older: not commanding"})
@@ -80,8 +92,11 @@ class ArduSubConfig:
         default=0.0, metadata={"ge": -180.0, "le": 180.0,
                                "doc": "raw_compass: added after the declination (mounting)"})
     gyro: ArduSubGyro = field(
-        default="none", metadata={"doc": "the gyro witness's yaw rate: none, imu (the "
-                                         "compass_message's gyro), attitude (yawspeed)"})
+        default=_GYRO_NOT_GIVEN,
+        metadata={"doc": "the gyro witness's yaw rate: none (the FIR alone: slow drifts are not "
+                         "detectable), imu (the compass_message's gyro), attitude (ATTITUDE's "
+                         "rates); default attitude with heading = attitude, imu with "
+                         "raw_compass"})
     output: ArduSubOutput = field(
         default="manual_control", metadata={"doc": "manual_control or rc_override"})
     rc_yaw_channel: int = field(
@@ -103,6 +118,8 @@ class ArduSubConfig:
                                  "long, then yaw is handed back to the pilot (0: no limit)"})
 
     def __post_init__(self) -> None:
+        if self.gyro == _GYRO_NOT_GIVEN:
+            object.__setattr__(self, "gyro", GYRO_FOR_HEADING[self.heading])
         bad = [m for m in self.modes if m not in ARDUSUB_YAW_MODES]
         if bad:
             raise ValueError(f"modes: {', '.join(bad)} do not take MANUAL_CONTROL yaw "
@@ -171,6 +188,22 @@ class RovConfig:
     sim: SimConfig = field(default_factory=SimConfig)
     ardusub: ArduSubConfig = field(default_factory=ArduSubConfig)
     recorder: RecorderConfig = field(default_factory=RecorderConfig, metadata={"toml": False})
+
+
+COMPASS_ONLY = "compass only: slow drifts are not detectable"
+"""What the banner and ``doctor`` say of an ROV without a gyro witness (docs/rov.md)."""
+
+
+def rov_gyro(rov: RovConfig) -> str | None:
+    """The yaw-rate gyro the ROV's fault detection gets, as the banner names it, or None when it
+    runs on the compass alone: the Outland link carries no gyro; ArduSub with
+    ``gyro = "none"``; or ``[rov.ft] gyro_enabled = false``."""
+    if not rov.ft.gyro_enabled or rov.heading_source == "outland":
+        return None
+    a = rov.ardusub
+    if a.gyro == "imu":
+        return f"{a.compass_message} gyro"
+    return "ATTITUDE rates" if a.gyro == "attitude" else None
 
 
 def heading_source_errors(rov: RovConfig | None, has_mavlink: bool, file: str) -> list[ConfigError]:

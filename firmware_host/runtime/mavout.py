@@ -1,8 +1,9 @@
 """The one MAVLink output of a vehicle: a typed :class:`MavlinkOutput`, built in one place.
 
 What the rover and the ROV send to an autopilot or a ground station -- GPS_INPUT, STATUSTEXT,
-the heartbeat, the mode command (HOLD), NAMED_VALUE_FLOAT statistics, MANUAL_CONTROL -- goes
-through a :class:`MavlinkOutput`. There are two kinds, and one factory each:
+the heartbeat, the mode command (HOLD), NAMED_VALUE_FLOAT statistics, MANUAL_CONTROL (with a
+pilot's extension fields: :class:`~drivers.mavlink.io.ManualControlExt`) -- goes through a
+:class:`MavlinkOutput`. There are two kinds, and one factory each:
 
 * :func:`open_mavlink_output` (a URL): ``udpout:``/``udpin:``/``tcp:`` through a pymavlink
   connection, a serial device through a :class:`~drivers.resilient.ResilientPort` (a lost
@@ -25,7 +26,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
 from drivers.mavlink import io as mio
-from drivers.mavlink.io import GpsInputFix, MavEndpoint, MavPacker, PortEndpoint
+from drivers.mavlink.io import GpsInputFix, ManualControlExt, MavEndpoint, MavPacker, PortEndpoint
 from drivers.mavlink.links import is_network_url
 from drivers.ratelog import RateLimitedLog
 from drivers.resilient import Opener, ResilientPort
@@ -61,7 +62,8 @@ class MavlinkOutput(Protocol):
     def send_named_value(self, name: str, value: float) -> None: ...
 
     def send_manual_control(
-        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0
+        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0,
+        ext: ManualControlExt | None = None,
     ) -> None: ...
 
     def counters(self) -> dict[str, int]: ...
@@ -125,9 +127,11 @@ class EncoderOutput:
         self._sent(lambda: self.encoder.send_named_value_float(name, value, t_ms))
 
     def send_manual_control(
-        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0
+        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0,
+        ext: ManualControlExt | None = None,
     ) -> None:
-        self._sent(lambda: self.encoder.send_manual_control(target_system, x, y, z, r, buttons))
+        self._sent(lambda: self.encoder.send_manual_control(target_system, x, y, z, r, buttons,
+                                                            ext))
 
     @property
     def command_stats(self) -> dict[str, int] | None:
@@ -174,10 +178,12 @@ class RouterOutput:
         self.router.set_named_value(name, value)  # sent at the router's stats_hz
 
     def send_manual_control(
-        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0
+        self, target_system: int, x: int, y: int, z: int, r: int, buttons: int = 0,
+        ext: ManualControlExt | None = None,
     ) -> None:
         self.packets += 1
-        self.router.send_manual_control(x, y, z, r, buttons, target_system=target_system)
+        self.router.send_manual_control(x, y, z, r, buttons, target_system=target_system,
+                                        ext=ext)
 
     def counters(self) -> dict[str, int]:
         return {"packets": self.packets}
