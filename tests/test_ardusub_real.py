@@ -175,8 +175,10 @@ def test_bluerov2_dive_confirms_nothing_before_the_magnetic_excursion(
 # -- a substitute that drifts is handed back -------------------------------------------------
 
 def _cfg(**ardusub: Any) -> RovConfig:
+    """No pilot in these tests: the bridge sends without one (``send_without_pilot``)."""
     cfg, _ = load_rov_config(project_root() / "config" / "rov-ardusub-example.toml")
-    return replace(cfg, ft=FtConfig(), ardusub=replace(cfg.ardusub, **ardusub))
+    return replace(cfg, ft=FtConfig(), ardusub=replace(cfg.ardusub, send_without_pilot=True,
+                                                       **ardusub))
 
 
 class _Out(NullOutput):
@@ -188,7 +190,8 @@ class _Out(NullOutput):
         self.texts.append((severity, text))
 
     def send_manual_control(self, target_system: int, x: int, y: int, z: int, r: int,
-                            buttons: int = 0) -> None:
+                            buttons: int = 0, ext: mio.ManualControlExt | None = None
+                            ) -> None:
         self.commands.append(r)
 
 
