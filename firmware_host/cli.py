@@ -368,9 +368,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _main(argv)
     except OSError as err:  # a path the command line names that cannot even be looked at
-        from firmware_host.commands.checks import os_error_text
-
-        print(f"fdi-bridge: error: {os_error_text('', err)}", file=sys.stderr)
+        checks = importlib.import_module("firmware_host.commands.checks")  # --help stays light
+        print(f"fdi-bridge: error: {checks.os_error_text('', err)}", file=sys.stderr)
         return 2
     except Exception as err:  # the last line of defence: one line, no traceback (issue 17)
         verbose = _verbose_argv(argv)

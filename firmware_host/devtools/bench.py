@@ -81,6 +81,7 @@ from firmware_host.commands.replay import (
     replay_through_pty,
 )
 from firmware_host.devtools.insgnss_sim import bench_insgnss_step
+from firmware_host.devtools.router_bench import FLOOD_GOAL_P99_MS
 from firmware_host.devtools.rover_sim import RoverScenario, generate, write_run
 from firmware_host.rov.app import bench_rov_step
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, gps_week_ms, unix_time
@@ -646,7 +647,7 @@ def flood_rows(res: dict[str, Any]) -> list[dict[str, Any]]:
     fl = res.get("gps_input_flood") or {}
     if "p99_ms" not in fl:
         return []
-    from firmware_host.devtools.router_bench import FLOOD_GOAL_P99_MS as goal  # pymavlink: lazily
+    goal = FLOOD_GOAL_P99_MS
     drops = fl.get("drops", {}).get("gcs0", {})
     lost = int(fl["flood_sent"]) - int(fl["flood_at_autopilot"])
     return [

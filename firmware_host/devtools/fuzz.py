@@ -80,7 +80,10 @@ from fdi.errors import CaptureFormatError, DecodeError
 from firmware_host.commands import tables
 from firmware_host.commands.checks import output_file_arg, positive_float, positive_int
 from firmware_host.devtools.rover_sim import RoverScenario, generate
-from firmware_host.runtime.config import resolve_protocol
+from firmware_host.rover.outputs import MavlinkGpsSink, encode_nmea
+from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime.config import load_config, resolve_protocol
+from firmware_host.runtime.mavout import packer_output
 
 CODECS = ("nmea", "outland", "mavlink", "capture")
 _quiet_logger = logging.getLogger("fdi_bridge.fuzz.rejects")
@@ -579,7 +582,6 @@ class _NmeaEcho:
     parsed back by the codec: the bridge's own output must be sentences it accepts."""
 
     def __init__(self) -> None:
-        from firmware_host.rover.outputs import encode_nmea
 
         self.encode = encode_nmea
         self.bad: list[str] = []
@@ -698,9 +700,6 @@ class PipelineCase:
     GPS_INPUT (encoded by the MAVLink sink, sent nowhere); and the checks on them."""
 
     def __init__(self, cfg: Any) -> None:
-        from firmware_host.rover.outputs import MavlinkGpsSink
-        from firmware_host.rover.pipeline import RoverPipeline
-        from firmware_host.runtime.mavout import packer_output
 
         self.records = _RecordCheck()
         self.echo = _NmeaEcho()
@@ -748,7 +747,6 @@ def field_table(seed: int = 0) -> dict[str, str]:
     """Each of :data:`NOT_NUMBERS` in each numeric field of every supported sentence, one
     sentence in each epoch of a clean session through the pipeline: the reason it was
     counted under, ``"accepted"``, or what went wrong (an exception, more than one count)."""
-    from firmware_host.runtime.config import load_config
 
     bursts = pipeline_sessions(seed)[0]
     case = PipelineCase(load_config(None))
@@ -801,7 +799,6 @@ def run_pipeline_fuzz(
     session, the configurations of :data:`PIPELINE_CONFIGS` in turn; until ``seconds`` or
     ``max_inputs``. Reports inputs, exceptions, broken invariants (records, own outputs,
     counts), and the inputs refused (by reason) and accepted."""
-    from firmware_host.runtime.config import load_config
 
     rng = np.random.default_rng(seed)
     sessions = pipeline_sessions(seed)
