@@ -98,6 +98,11 @@ _new = tuple.__new__
 # configured σ is used instead (`RoverIsolator._r`).
 _SD_MAX = math.sqrt(1.7976931348623157e308)
 
+TIME_RESET_EPOCHS = 3
+"""A receiver's clock that jumps back by more than ``max_gap_s`` is believed (the filter
+restarts on the new time base) once this many fixes in a row follow the new time, each after
+the last: one corrupt time cannot restart the filter on its fix."""
+
 
 # Bounds of the detector's parameters, in which it works as documented: the loader
 # (drivers/configload.py) checks a file against them and the MAVLink parameter table
@@ -291,6 +296,9 @@ class RoverIsolator:
         self._disp = [0.0, 0.0, 0.0]  # Doppler-integrated displacement
         self._last_v: tuple[float, float] | None = None
         self._last_t: float | None = None
+        # A jump back of the clock (see _step): the fixes that followed it, and the last's time
+        self._reset_run = 0
+        self._reset_t: float | None = None
         self._last_up = 0.0
         self._up_seen = False
         self._consec = 0
@@ -482,6 +490,19 @@ class RoverIsolator:
             # A stale or repeated epoch: its fix is not passed on.
             reason = "time_backwards" if dt < 0 else "duplicate_time"
             return self._decision("no_fix", False, reason, None, t)
+        if dt is not None and dt < 0.0:
+            # The clock jumped back by more than a gap: one such sentence (a corrupt time)
+            # must not restart the filter on its fix (the pipeline fuzzer's: 10:00:00 at 18 deg
+            # N in a track at 32 deg N was accepted, and the next fixes went out 166 km below
+            # the ground). The new time base is taken once TIME_RESET_EPOCHS fixes in a row
+            # follow it, each after the last; until then they are not passed on.
+            ok = (self._reset_t is not None and 0.0 < fix.t_s - self._reset_t <= p.max_gap_s)
+            self._reset_run = self._reset_run + 1 if ok else 1
+            self._reset_t = fix.t_s
+            if self._reset_run < TIME_RESET_EPOCHS:
+                return self._decision("no_fix", False, "time_backwards", None, t)
+        self._reset_run = 0
+        self._reset_t = None
         if (not self._inc_prior_set and p.doppler_test and dt is not None
                 and 0.0 < dt <= p.max_gap_s):
             self._set_inc_prior(dt)

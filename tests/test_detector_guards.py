@@ -17,7 +17,7 @@ import pytest
 
 from drivers.gps.nmea import with_checksum
 from fdi.drift import NO_TEST, DriftTest
-from fdi.rover import FixInput, RoverIsolator
+from fdi.rover import TIME_RESET_EPOCHS, FixInput, RoverIsolator
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import load_config
@@ -112,3 +112,35 @@ def test_a_2d_fix_after_a_refused_one_keeps_the_last_height_passed_on() -> None:
     # Every output altitude within the receiver's own (7.7-9.4 m), 0.5 m to spare.
     assert min(raw) - 0.5 <= min(out) and max(out) <= max(raw) + 0.5, (min(out), max(out))
     assert all(abs(r["lat"] - 32.021) < 0.001 for r in records if r["lat"] is not None)
+
+
+@pytest.mark.parametrize("cfg", CONFIGS)
+def test_one_sentence_whose_clock_jumped_back_does_not_restart_the_filter(cfg: str | None
+                                                                          ) -> None:
+    """The pipeline fuzzer's case (1 M inputs, seed 1): one GGA at 10:00:00 in a track at
+    10:01:36, its latitude 13 deg away (a checksum-valid corrupt sentence). It restarted the
+    filter on its fix and the next fixes went out 166 km below the ground. Now it is not
+    passed on; a clock that really jumped back is believed after TIME_RESET_EPOCHS fixes."""
+    iso = RoverIsolator(load_config(cfg).rover.detector)
+
+    def fix(t: float, enu: tuple[float, float, float]) -> FixInput:
+        return FixInput(t_s=t, enu=enu, speed_mps=0.316, course_deg=71.57,
+                        sd_enu_m=(0.3, 0.3, 0.6), num_sats=9, hdop=0.9)
+
+    rng = np.random.default_rng(3)
+    for k in range(200):
+        t = 0.1 * k
+        iso.step(fix(t, (0.3 * t + float(rng.normal(0.0, 0.05)), 0.1 * t, 0.0)))
+    far = iso.step(fix(19.9 - 96.0, (0.0, -1_457_000.0, -166_000.0)))
+    assert far.out_enu is None and far.reason == "time_backwards"
+    worst_up = 0.0
+    for k in range(200, 260):
+        t = 0.1 * k
+        d = iso.step(fix(t, (0.3 * t, 0.1 * t, 0.0)))
+        if d.out_enu is not None:
+            worst_up = max(worst_up, abs(d.out_enu[2]))
+    assert worst_up < 5.0
+    # a real jump back: the third fix in a row on the new time base is passed on
+    outs = [iso.step(fix(30.0 - 100.0 + 0.1 * i, (0.0, 0.0, 0.0))).out_enu
+            for i in range(TIME_RESET_EPOCHS)]
+    assert outs[:-1] == [None] * (TIME_RESET_EPOCHS - 1) and outs[-1] is not None
