@@ -91,14 +91,24 @@ def nmea_epoch(t_s: float, lla: tuple[float, float, float], v_enu: tuple[float, 
     return with_checksum(gga) + with_checksum(rmc)
 
 
+def nmea_no_fix(t_s: float) -> bytes:
+    """The epoch of a receiver that has lost its fix (a GNSS outage): GGA quality 0 and RMC
+    status V, the time but no position, as receivers send it."""
+    ts = format_time((UTC0 + t_s) % 86400.0)
+    return (with_checksum(f"GPGGA,{ts},,,,,0,00,99.99,,,,,,")
+            + with_checksum(f"GPRMC,{ts},V,,,,,,,{format_date(DATE0)},,,N"))
+
+
 def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGHRES_IMU",
                  decimate: int = 1, impair: LinkImpairment | None = None, seed: int = 0,
                  gnss_latency_s: float = 0.05, attitude_error_deg: float | None = None,
+                 outage: tuple[float, float] | None = None,
                  ) -> list[tuple[float, int, bytes]]:
     """Every packet with its send time (s of trajectory time) and link (0 IMU, 1 GNSS), in
     send order. ``attitude_error_deg``: also ATTITUDE at 10 Hz on the IMU link, the
     autopilot's own estimate, modelled as the attitude with a constant heading error of that
-    many degrees (a compass error)."""
+    many degrees (a compass error). ``outage``: the GNSS epochs with ``t0 <= t < t1``
+    (trajectory time) are no-fix epochs (:func:`nmea_no_fix`)."""
     imp = impair or LinkImpairment()
     rng = np.random.default_rng(seed)
     packer = MavPacker(source_system=1, source_component=1)
@@ -153,6 +163,10 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
                                             float(rpy[k, 2]) + math.radians(attitude_error_deg)))
     frame = frame_of(latitude_deg)
     for j in range(len(data.gnss_t)):
+        tj = float(data.gnss_t[j])
+        if outage is not None and outage[0] <= tj < outage[1]:
+            add(tj + gnss_latency_s, 1, nmea_no_fix(tj))
+            continue
         p = data.gnss_p[j]
         lla = frame.to_lla(float(p[0]), float(p[1]), float(p[2]))
         v = data.gnss_v[j]
@@ -216,17 +230,20 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              impair: LinkImpairment | None = None, seed: int = 0,
              speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "",
              record_dir: Path | None = None, via_router: bool = False,
-             attitude_error_deg: float | None = None) -> LiveRun:
+             attitude_error_deg: float | None = None,
+             outage: tuple[float, float] | None = None) -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
     ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
     the vehicle's GPS_INPUT and corrected NMEA outputs; ``record_dir``: a flight recorder there
     (both inputs, for ``fdi-bridge replay``); ``via_router``: the IMU over UDP on 127.0.0.1 to
     the autopilot link of a ``[mavlink]`` router, ``imu_url = "router"``, one datagram a
-    packet (GPS_INPUT then goes out through the router too)."""
+    packet (GPS_INPUT then goes out through the router too); ``outage``: a GNSS outage
+    (:func:`build_events`)."""
     lat = setup.filter.latitude_deg
     events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
-                          impair=impair, seed=seed, attitude_error_deg=attitude_error_deg)
+                          impair=impair, seed=seed, attitude_error_deg=attitude_error_deg,
+                          outage=outage)
     base = BridgeConfig()
     rc = base.rover
     rover = replace(rc, port=replace(rc.port, timeout_s=0.02),

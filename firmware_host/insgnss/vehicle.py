@@ -89,6 +89,7 @@ from firmware_host.rover.vehicle import rover_mavlink_spec
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.failsafe import RoverFailsafe
+from firmware_host.runtime.mavout import SEVERITY_WARNING
 from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
 log = logging.getLogger("fdi_bridge.insgnss")
@@ -205,6 +206,12 @@ class InsGnssVehicle:
         self._idle_s = 0.0
         self._prior_var = np.zeros(3)
         self.output_errors = 0
+        self._mav: Any | None = None  # the vehicle's MAVLink output (STATUSTEXT)
+        self._last_fix_t: float | None = None  # GNSS time of the last fix the filter used
+        self._coast_said = -1.0  # coast length (s) of the last "INS coasting" message
+        self._coast_ended = False  # this outage's coast passed its limit: no-fix until a fix
+        self.coast_epochs = 0  # epochs sent as the INS's coast (3D fix, its own accuracy)
+        self.coast_no_fix = 0  # epochs sent as no-fix past the coast limit
         self._router_q: deque[bytes] = deque()  # appended by the router's thread
         self._imu_tap: Callable[[bytes], None] | None = None
 
@@ -250,6 +257,7 @@ class InsGnssVehicle:
             rover = replace(rc, output=replace(out, mavlink_url=self.mavlink_url or "output"))
             self.sinks.append(InsGpsSink(rover, endpoint=ctx.mavlink))
         self.failsafe = RoverFailsafe(rc, ctx.mavlink, clock=ctx.clock)
+        self._mav = ctx.mavlink
         self.sinks.append(self.failsafe)
         if self.refused:
             log.warning("INS/GNSS: %s", self.refused)
@@ -461,6 +469,7 @@ class InsGnssVehicle:
             else:
                 self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
                 rep = kf.update(t_g, enu)
+                self._last_fix_t = t_g
             if still and not kf.bias_active:
                 kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
                 self.zupts += 1
@@ -559,6 +568,7 @@ class InsGnssVehicle:
         else:
             vel = (0.0, 0.0, 0.0)
         self.kf = InsGnssFilter(a.params(self.params), t_g, enu, vel, (a.roll, a.pitch, a.yaw))
+        self._last_fix_t = t_g
         if self._align_P is not None:  # at rest: the attitude error tied to the biases
             self.kf.P = self._align_P
             self._align_P = None
@@ -664,7 +674,7 @@ class InsGnssVehicle:
         used = rep is not None and all(d.action is Action.ACCEPT for d in rep.decisions[:3]) \
             and not kf.bias_active
         var = np.diag(P)[:3] + bias_var
-        if not used:
+        if rep is not None and not used:
             # the fix was not used as is: the output is (mostly) the INS prediction, and the
             # receiver disagreed with it; say so with the innovation's scale, P⁻_ii + R_ii
             prm = self.params
@@ -695,6 +705,19 @@ class InsGnssVehicle:
             lat, lon, h = frame.to_lla(float(p[0]), float(p[1]), float(p[2]))
             alt = h - (out.epoch.geoid_sep_m or 0.0)
             ins["lla"] = [round(lat, 9), round(lon, 9), round(h, 3)]
+        coast_s = t_g - (self._last_fix_t if self._last_fix_t is not None else t_g)
+        if rep is None:
+            ins["coast_s"] = round(coast_s, 3)
+            if not self._coast(coast_s, acc_h):
+                ins["output"] = "no fix"
+                record = self._base_record(out, t_g, "ins")
+                record["ins"] = ins
+                self.write_record(record)
+                self._send(out)  # the receiver's no-fix epoch: GPS_INPUT fix_type 1
+                return
+        else:
+            self._coast_ended = False
+            self._coast_said = -1.0
         record = self._base_record(out, t_g, "ins")
         record["ins"] = ins
         self.write_record(record)
@@ -703,6 +726,41 @@ class InsGnssVehicle:
         self._send(EpochOutcome(out.epoch, decision, lat, lon, alt, out.t_s,
                                 {**(out.record or {}), "ins": ins},
                                 heading_deg=out.heading_deg))
+
+    def _coast(self, coast_s: float, acc_h: float) -> bool:
+        """A GNSS outage (no fix this epoch): True while the INS's coast goes out as a 3D fix
+        with its own accuracy, False (no-fix, as the rover's failsafe sends) once it is past
+        ``coast_max_s`` or claims worse than ``coast_max_acc_h_m``, until a fix is used again.
+        While it goes out, the failsafe's silence watchdog is held (one message, not a no-fix
+        and a 3D fix in turn); past the limit the watchdog runs on and its own no-fix and
+        STATUSTEXT follow after ``silence_s``, in agreement."""
+        lv = self.live
+        if not self._coast_ended and (coast_s > lv.coast_max_s or acc_h > lv.coast_max_acc_h_m):
+            self._coast_ended = True
+            text = (f"FDI INS: coast limit, {coast_s:.0f} s, accuracy {acc_h:.1f} m: no fix")
+            log.warning("%s", text)
+            self._statustext(SEVERITY_WARNING, text)
+        if self._coast_ended:
+            self.coast_no_fix += 1
+            return False
+        if self.failsafe is not None and not self.failsafe.watchdog.silent:
+            self.failsafe.watchdog.valid()  # the INS's output is the valid data meanwhile
+        self.coast_epochs += 1
+        if self._coast_said < 0.0 or coast_s >= self._coast_said + 5.0:
+            self._coast_said = coast_s
+            text = f"INS coasting, {coast_s:.0f} s, accuracy {acc_h:.1f} m"
+            log.warning("%s", text)
+            self._statustext(SEVERITY_WARNING, "FDI " + text)
+        return True
+
+    def _statustext(self, severity: int, text: str) -> None:
+        if self._mav is None or not self.sending:
+            return
+        try:
+            self._mav.send_statustext(severity, text)
+        except Exception as err:  # an output failing must not stop the filter
+            self.output_errors += 1
+            self.ratelog.warning("output statustext", str(err))
 
     def _send(self, out: EpochOutcome) -> None:
         if not self.sending:
@@ -729,7 +787,8 @@ class InsGnssVehicle:
                 "method": self.alignment.method,
                 "sigma_tilt_deg": round(self.alignment.sigma_tilt_deg, 5),
                 "sigma_yaw_deg": round(self.alignment.sigma_yaw_deg, 5)},
-            "zupts": self.zupts,
+            "zupts": self.zupts, "coast_epochs": self.coast_epochs,
+            "coast_no_fix": self.coast_no_fix,
             "align_wait": dict(self.align_wait), "resets": dict(self.resets),
             "gate_actions": dict(self.gate_actions),
             "imu": {"received": st.received, "integrated": st.integrated,

@@ -1,0 +1,84 @@
+"""A GNSS outage at rest through the live INS/GNSS vehicle (issue G): while the INS coasts, the
+GPS_INPUT it sends carries its own accuracy (from the filter's covariance, not the configured
+GNSS sigma) and covers the true error; past the coast limit it sends no-fix, as the rover's
+failsafe does, and the two never contradict each other. The simulated autopilot
+(firmware_host/devtools/insgnss_live.py) plays over real ptys, GPS_INPUT goes over UDP on
+127.0.0.1."""
+
+from __future__ import annotations
+
+import calendar
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.mavlink.io import MavEndpoint
+from firmware_host.devtools import insgnss_sim as sim
+from firmware_host.devtools.insgnss_live import UTC0, LiveRun, frame_of, run_live
+
+GPS_EPOCH = calendar.timegm((1980, 1, 6, 0, 0, 0))
+LEAP_S = 18  # GPS - UTC (the bridge's gps_week_ms)
+
+
+def _outage_run(tmp_path: Path, setup: sim.InsGnssSetup, data: sim.NavData,
+                outage: tuple[float, float], **kw: Any) -> tuple[LiveRun, list[Any]]:
+    with MavEndpoint("udpin:127.0.0.1:0") as rx:
+        addr = rx.local_address
+        assert addr is not None
+        lr = run_live(setup, data, tmp_path, seed=1, outage=outage,
+                      mavlink_url=f"udpout:127.0.0.1:{addr[1]}", **kw)
+        got = []
+        while (msg := rx.recv(timeout_s=0.2)) is not None:
+            if msg.get_type() in ("GPS_INPUT", "STATUSTEXT"):
+                got.append(msg)
+    return lr, got
+
+
+def _t_of(msg: Any) -> float:
+    """Trajectory time (s) of a GPS_INPUT."""
+    unix = GPS_EPOCH + msg.time_week * 604800 + msg.time_week_ms * 1e-3 - LEAP_S
+    return float(unix - UTC0)
+
+
+def _truth_err(data: sim.NavData, lat_deg: float, msg: Any, rate: int) -> float:
+    e, n, _ = frame_of(lat_deg).to_enu(msg.lat * 1e-7, msg.lon * 1e-7, 0.0)
+    k = round((_t_of(msg) - float(data.traj.t[0])) * rate)
+    p = data.traj.p[k]
+    return float(np.hypot(e - p[0], n - p[1]))
+
+
+def test_a_coast_at_rest_is_honest_then_no_fix(tmp_path: Path) -> None:
+    """The paper preset's IMU at rest, a 20 s outage 40 s after the alignment: GPS_INPUT is
+    a 3D fix with the INS's accuracy (below the 3 m of the configured GNSS sigma, and at
+    least half the true error) for ``coast_max_s`` = 10 s, then no-fix to the outage's end;
+    never a 3D fix after a no-fix within the outage; the fixes return after it."""
+    base = sim.load_setup(None)
+    setup = replace(base, sim=replace(base.sim, epochs=20, rest_s=100,
+                                      random_faults=0))
+    data = sim.generate(setup, "clean", 1)
+    t0, t1 = -50.0, -30.0  # the rest is -120..-20 s; the alignment after 30 s of it
+    lr, got = _outage_run(tmp_path, setup, data, (t0, t1))
+    lat = setup.filter.latitude_deg
+    rate = setup.sim.imu_rate_hz
+    gps = [m for m in got if m.get_type() == "GPS_INPUT"]
+    inside = [m for m in gps if t0 <= _t_of(m) < t1 and m.time_week > 0]
+    # (the failsafe's no-fix carries the time of the last valid fix plus the clock's interval)
+    coast = [m for m in inside if m.fix_type == 3]
+    nofix = [m for m in inside if m.fix_type < 2]
+    assert 9 <= len(coast) <= 11, [(round(_t_of(m), 1), m.fix_type) for m in inside]
+    assert len(nofix) >= 8
+    last_coast = max(_t_of(m) for m in coast)
+    assert all(_t_of(m) > last_coast for m in nofix)  # no 3D fix after a no-fix
+    for m in coast:
+        assert m.horiz_accuracy < 3.0 - 0.05  # not the configured GNSS sigma
+        assert _truth_err(data, lat, m, rate) <= 2.0 * m.horiz_accuracy
+    after = [m for m in gps if t1 + 1.0 <= _t_of(m) < -20.0]
+    assert after and all(m.fix_type == 3 for m in after)
+    ins = lr.summary["ins"]
+    assert ins["coast_epochs"] == len(coast)
+    assert ins["coast_no_fix"] >= 9
+    texts = [m.text for m in got if m.get_type() == "STATUSTEXT"]
+    assert any(t.startswith("FDI INS coasting, 1 s") for t in texts), texts
+    assert any("coast limit" in t for t in texts), texts
