@@ -32,8 +32,9 @@ Alignment (:mod:`firmware_host.insgnss.align`, from the vehicle's own sensors): 
 specific force moved less than ``rest_max_accel_m_s2`` since the previous epoch. After
 ``rest_align_s`` at rest: level from the mean specific force, heading by gyrocompassing from
 the mean gyro when the configured gyro can (its heading 1σ at most
-``gyrocompass_max_sigma_deg``: navigation grade; or the autopilot's ATTITUDE yaw,
-``heading_source = "attitude"``), velocity zero, the initial covariance with the attitude error
+``gyrocompass_max_sigma_deg``: navigation grade), else (``heading_source = "auto"``, the
+default, once the link has carried one; always with ``"attitude"``) the autopilot's ATTITUDE
+yaw, velocity zero, the initial covariance with the attitude error
 tied to the biases that cause it; then a zero-velocity update (ZUPT, ``rest_sigma_vel_m_s``) on
 every epoch still at rest. Otherwise (moving, or a MEMS gyro), in steady motion: level from the
 specific force over ``align_s``, heading from the GNSS course once the speed exceeds
@@ -552,7 +553,7 @@ class InsGnssVehicle:
                 f = np.mean([s.accel_m_s2 for s in window], axis=0)
                 speed = float(out.epoch.speed_mps or 0.0)
                 course = float(out.epoch.course_deg or 0.0) * DEG
-                yaw = self.attitude_yaw if lv.heading_source == "attitude" else None
+                yaw = self.attitude_yaw if self._motion_heading(out) == "attitude" else None
                 a = align.in_motion(self.params, f, lv.align_s, speed, course,
                                     lv.course_sigma_deg, yaw, lv.attitude_sigma_deg)
         if a is None:
@@ -579,19 +580,38 @@ class InsGnssVehicle:
                  a.yaw / DEG, a.sigma_tilt_deg, a.sigma_yaw_deg)
         self._emit_rover(out, t_g, "aligned")
 
+    def _rest_heading(self) -> str:
+        """Where the heading of an alignment at rest comes from: "gyrocompass" (the configured
+        gyro can: navigation grade), "attitude" (the autopilot's ATTITUDE yaw), or "course"
+        (none at rest: the GNSS course once moving). ``heading_source``: "attitude" always
+        the ATTITUDE yaw; "gnss" gyrocompass or course; "auto" gyrocompass, else ATTITUDE
+        once the link has carried one, else course."""
+        lv = self.live
+        if lv.heading_source == "attitude":
+            return "attitude"
+        if align.gyrocompass_sigma(self.params, lv.rest_align_s) <= \
+                lv.gyrocompass_max_sigma_deg * DEG:
+            return "gyrocompass"
+        if lv.heading_source == "auto" and self.attitude_yaw is not None:
+            return "attitude"
+        return "course"
+
     def _align_at_rest(self, rest_s: float) -> tuple[align.Alignment | None, str]:
         lv = self.live
+        heading = self._rest_heading()
+        if heading == "course":
+            if lv.heading_source == "auto":
+                return None, ("at rest, the gyro cannot gyrocompass and no ATTITUDE: heading "
+                              "from the course")
+            return None, "at rest, the gyro cannot gyrocompass: heading from the course"
+        if heading == "attitude" and self.attitude_yaw is None:
+            return None, "at rest: no ATTITUDE yet (heading_source attitude)"
         if rest_s < lv.rest_align_s:
-            return None, "at rest: levelling and gyrocompassing"
+            return None, ("at rest: levelling and gyrocompassing" if heading == "gyrocompass"
+                          else "at rest: levelling (heading from ATTITUDE)")
         n = max(self._rest_n, 1)
         f, w = self._rest_f / n, self._rest_w / n
-        yaw: float | None = None
-        if lv.heading_source == "attitude":
-            if self.attitude_yaw is None:
-                return None, "no ATTITUDE yet"
-            yaw = self.attitude_yaw
-        elif align.gyrocompass_sigma(self.params, rest_s) > lv.gyrocompass_max_sigma_deg * DEG:
-            return None, "at rest, the gyro cannot gyrocompass: heading from the course"
+        yaw = self.attitude_yaw if heading == "attitude" else None
         a = align.at_rest(self.params, f, w, rest_s, yaw, lv.attitude_sigma_deg,
                           lv.rest_sigma_vel_m_s)
         self._align_P = align.rest_covariance(self.params, a, f, w, rest_s, yaw)
@@ -629,13 +649,32 @@ class InsGnssVehicle:
         if abs(float(np.linalg.norm(f.mean(axis=0))) - self.params.earth.g0) > \
                 lv.align_max_accel_dev_m_s2:
             return "accelerating"
-        if lv.heading_source == "attitude":
-            if self.attitude_yaw is None:
-                return "no ATTITUDE yet"
-        elif out.epoch.speed_mps is None or out.epoch.course_deg is None or \
-                out.epoch.speed_mps < lv.align_min_speed_m_s:
+        heading = self._motion_heading(out)
+        if heading == "attitude" and self.attitude_yaw is None:
+            return "no ATTITUDE yet"
+        speed = out.epoch.speed_mps
+        if heading == "attitude" and speed is not None and speed <= lv.rest_max_speed_m_s:
+            # slow enough to be at rest, not (yet) seen still: the alignment at rest levels
+            # over rest_align_s and ties the attitude error to the biases
+            return "at rest: levelling (heading from ATTITUDE)"
+        if heading == "none":
+            if lv.heading_source == "auto":
+                return "moving slower than align_min_speed_m_s, no ATTITUDE"
             return "not moving (heading from GNSS course)"
         return ""
+
+    def _motion_heading(self, out: EpochOutcome) -> str:
+        """In motion: "course" (GNSS course, fast enough), "attitude" (heading_source
+        attitude; auto below ``align_min_speed_m_s`` with ATTITUDE) or "none" yet."""
+        lv = self.live
+        if lv.heading_source == "attitude":
+            return "attitude"
+        sp, co = out.epoch.speed_mps, out.epoch.course_deg
+        if sp is not None and co is not None and sp >= lv.align_min_speed_m_s:
+            return "course"
+        if lv.heading_source == "auto" and self.attitude_yaw is not None:
+            return "attitude"
+        return "none"
 
     @staticmethod
     def _vel_en(out: EpochOutcome) -> tuple[float, float] | None:
