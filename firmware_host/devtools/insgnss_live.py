@@ -40,6 +40,7 @@ from drivers.ptypair import PtyPair
 from fdi.geodesy import LocalFrame
 from fdi.insgnss import InsGnssFilter, InsGnssParams, InsGnssStrategy
 from firmware_host.devtools.insgnss_sim import (
+    SIM_BOOT_S,
     MethodRun,
     NavData,
     Scenario,
@@ -57,7 +58,7 @@ from firmware_host.runtime.runner import Runner
 
 UTC0 = calendar.timegm((2026, 6, 1, 12, 0, 0))  # trajectory t = 0
 DATE0 = (2026, 6, 1)
-BOOT_S = 120.0  # autopilot uptime at t = 0
+BOOT_S = SIM_BOOT_S  # autopilot uptime at the data's start (gyro_drift counts from it)
 LON0_DEG = 8.5
 H0_M = 300.0
 KNOT_MPS = 1852.0 / 3600.0

@@ -84,6 +84,7 @@ from fdi.insgnss import (
 )
 from fdi.three_zone import Action
 from firmware_host.insgnss import align
+from firmware_host.insgnss.align import zaru_sigma
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
 from firmware_host.rover.vehicle import rover_mavlink_spec
@@ -192,12 +193,14 @@ class InsGnssVehicle:
         self.aligned_at: float | None = None
         self.alignment: align.Alignment | None = None
         self._last_f: np.ndarray | None = None  # the previous epoch's mean specific force
+        self._was_still = False  # the previous epoch was at rest
         self._prev_t: float | None = None  # the previous epoch's time
         self._rest_f = np.zeros(3)  # sums over the current rest (consecutive still epochs)
         self._rest_w = np.zeros(3)
         self._rest_n = 0
         self._rest_t0: float | None = None
         self.zupts = 0
+        self.zarus = 0  # zero-angular-rate updates at rest (the gyro biases)
         self._align_P: np.ndarray | None = None
         self.align_wait: Counter[str] = Counter()
         self.resets: Counter[str] = Counter()
@@ -475,6 +478,12 @@ class InsGnssVehicle:
                 kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
                 self.zupts += 1
                 zupt = True
+                # and ZARU: the mean gyro over the epoch is the gyro bias (plus Earth rate)
+                w = np.array([s.gyro_rad_s for _, s in samples])
+                seconds = len(w) / self.rate_hz if self.rate_hz else 0.0  # averaged over
+                if len(w) and kf.zero_rate(w.mean(axis=0), zaru_sigma(
+                        self.live.rest_sigma_gyro_deg_s * DEG, kf.params, seconds)):
+                    self.zarus += 1
         except EstimatorError as err:
             self.resets[str(err).split(" ")[0] or "error"] += 1
             self.ratelog.warning("ins reset", f"{err}; realigning, rover detector meanwhile")
@@ -493,15 +502,21 @@ class InsGnssVehicle:
         """At rest over this epoch's interval: GNSS speed at most ``rest_max_speed_m_s``, no
         rotation above ``align_max_gyro_deg_s``, ``|f|`` within ``align_max_accel_dev_m_s2``
         of g and the mean specific force within ``rest_max_accel_m_s2`` of the previous
-        epoch's (a start is seen by the accelerometers before the GNSS speed)."""
+        epoch's (a start is seen by the accelerometers before the GNSS speed). Without a fix
+        (an outage: no GNSS speed) a rest that was going on continues while the IMU says
+        still, so that the ZUPTs and ZARUs hold the coast."""
         lv = self.live
         if not window:
             self._last_f = None
+            self._was_still = False
             return False
         f_all = np.array([s.accel_m_s2 for s in window])
         f = f_all.mean(axis=0)
         last, self._last_f = self._last_f, f
         speed = out.epoch.speed_mps
+        was_still, self._was_still = self._was_still, False
+        if speed is None and not out.epoch.valid and was_still:
+            speed = 0.0  # no fix (an outage): a rest goes on while the IMU says still
         if speed is None or speed > lv.rest_max_speed_m_s or last is None:
             return False
         w = np.array([s.gyro_rad_s for s in window])
@@ -509,7 +524,8 @@ class InsGnssVehicle:
             return False
         if abs(float(np.linalg.norm(f)) - self.params.earth.g0) > lv.align_max_accel_dev_m_s2:
             return False
-        return float(np.linalg.norm(f - last)) <= lv.rest_max_accel_m_s2
+        self._was_still = float(np.linalg.norm(f - last)) <= lv.rest_max_accel_m_s2
+        return self._was_still
 
     def _rest_reset(self) -> None:
         self._rest_f = np.zeros(3)
@@ -826,7 +842,7 @@ class InsGnssVehicle:
                 "method": self.alignment.method,
                 "sigma_tilt_deg": round(self.alignment.sigma_tilt_deg, 5),
                 "sigma_yaw_deg": round(self.alignment.sigma_yaw_deg, 5)},
-            "zupts": self.zupts, "coast_epochs": self.coast_epochs,
+            "zupts": self.zupts, "zarus": self.zarus, "coast_epochs": self.coast_epochs,
             "coast_no_fix": self.coast_no_fix,
             "align_wait": dict(self.align_wait), "resets": dict(self.resets),
             "gate_actions": dict(self.gate_actions),

@@ -31,6 +31,12 @@ class InsGnssSimParams:
         default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the east/north fault"})
     table2_fault_v_m: float = field(
         default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the up fault"})
+    gyro_drift_deg_s_per_min: float = field(default=0.0, metadata={
+        "ge": 0.0, "doc": "a drift added to every gyro axis as ArduPilot's simulated IMU "
+                          "(SIM_DRIFT_SPEED, 0.05 there): it grows this fast from the "
+                          "autopilot's boot for gyro_drift_time_min, then falls back, and so on"})
+    gyro_drift_time_min: float = field(default=5.0, metadata={
+        "gt": 0.0, "doc": "SIM_DRIFT_TIME: minutes of rise (and of fall)"})
     rest_s: int = field(default=0, metadata={
         "ge": 0, "le": 3600, "doc": "lead-in before the paper's t = 0: this long at rest "
                                     "(a real vehicle's coarse alignment), no faults"})
