@@ -26,7 +26,12 @@ Error state (true minus estimate), 15 states ``δx = [δp, δv, φ, δb_a, δb_g
 (E1) ``δṗ = δv``
 (E2) ``δv̇ = G δp − 2 Ω_ie δv + [f^n×] φ − Ĉ δb_a + Ĉ w_a``,  ``G = (g0/R) diag(−1, −1, 2)``
 (E3) ``φ̇ = −Ω_ie φ + Ĉ δb_g − Ĉ w_g``
-(E4) ``δḃ_a = w_ba``,  ``δḃ_g = w_bg`` (random walks)
+(E4) ``δḃ_a = w_ba``,  ``δḃ_g = w_bg`` (random walks; ``w_bg`` covers the configured 1σ
+over an hour and a MEMS gyro's drift over a minute, ``ImuErrorModel.gyro_bias_rw_rad_s2``)
+
+At rest (the live vehicle, :mod:`firmware_host.insgnss.vehicle`): a zero-velocity update
+(ZUPT, ``H`` selects δv) and a zero-angular-rate update (ZARU, ``H`` selects δb_g: the mean
+gyro less the Earth's rate is the bias), which observes all three gyro biases.
 
 Discretised as ``Φ = I + FΔt + (FΔt)²/2``, ``Q_d = Q Δt``, propagated at ``cov_rate_hz``.
 
