@@ -140,3 +140,68 @@ def test_a_drifting_gyro_at_rest_knows_its_error(tmp_path: Path) -> None:
     for t, err_h, acc, _ in coast:
         assert err_h <= 2.0 * acc, (t, err_h, acc)
         assert err_h < 1.0, (t, err_h)
+
+
+def _coasts(lr: LiveRun, data: sim.NavData, lat_deg: float, rate: int
+            ) -> list[tuple[float, float, float, str]]:
+    """(t, true horizontal error, accuracy sent, "3d" / "no fix") of every coasted epoch."""
+    frame = frame_of(lat_deg)
+    day0 = UTC0 % 86400.0
+    out = []
+    for r in lr.records:
+        rec = r.get("ins")
+        if r["mode"] != "ins" or "coast_s" not in rec:
+            continue
+        t = float(r["t"]) - day0
+        k = round((t - float(data.traj.t[0])) * rate)
+        e, n, _ = frame.to_enu(*rec["lla"])
+        err = float(np.hypot(e - data.traj.p[k, 0], n - data.traj.p[k, 1]))
+        out.append((t, err, float(rec["acc_h_m"]), rec.get("output", "3d")))
+    return out
+
+
+def _flight(preset: str) -> tuple[sim.InsGnssSetup, sim.NavData]:
+    """The preset's filter in the simulator's flight (60 m/s, turns) with ArduPilot's gyro
+    drift on a MEMS IMU, aligned in flight by the GNSS course."""
+    base = sim.load_setup(CONFIG_DIR / preset)
+    setup = replace(base, sim=replace(base.sim, epochs=150, random_faults=0,
+                                      imu=replace(base.sim.imu, gyro_bias_deg_h=30.0),
+                                      gyro_drift_deg_s_per_min=0.05))
+    return setup, sim.generate(setup, "clean", 1)
+
+
+def test_a_coast_in_flight_is_within_twice_its_accuracy(tmp_path: Path) -> None:
+    """The live example's filter (a drifting MEMS gyro modelled) in flight, two 10 s outages:
+    every coasted epoch's true error is at most twice the accuracy it carries, the coast goes
+    out as a 3D fix only while that accuracy is within ``coast_max_acc_h_m`` (3 m), then
+    no-fix; the fix that ends each coast agrees with its claim."""
+    setup, data = _flight("insgnss-live-example.toml")
+    lr = run_live(setup, data, tmp_path, seed=1, outage=[(40.0, 50.0), (100.0, 110.0)])
+    coasts = _coasts(lr, data, setup.filter.latitude_deg, setup.sim.imu_rate_hz)
+    assert len(coasts) == 20
+    for t, err, acc, out in coasts:
+        assert err <= 2.0 * acc, (t, err, acc)
+        assert (out == "3d") == (acc <= setup.live.coast_max_acc_h_m), (t, acc, out)
+    assert sum(c[3] == "3d" for c in coasts) >= 2
+    ins = lr.summary["ins"]
+    assert ins["coast_checks"] == 2 and ins["coast_failed"] == 0
+    assert ins["coast_inflation"] == 1.0
+
+
+def test_a_failed_coast_claim_widens_the_next_coast(tmp_path: Path) -> None:
+    """The default preset's filter, which does not model the gyro's drift, in the same flight:
+    its first coast claims far less than its error (45 m against 5 m after 1 s); the fix
+    that ends it fails the check (NEES above 9.21), and the second coast's accuracies are
+    scaled so that they cover its error within a factor 2. Both coasts claim worse than
+    3 m: every epoch goes out as no-fix."""
+    setup, data = _flight("insgnss.toml")
+    lr = run_live(setup, data, tmp_path, seed=1, outage=[(40.0, 50.0), (100.0, 110.0)])
+    coasts = _coasts(lr, data, setup.filter.latitude_deg, setup.sim.imu_rate_hz)
+    assert len(coasts) == 20 and all(c[3] == "no fix" for c in coasts)
+    first, second = coasts[:10], coasts[10:]
+    assert any(err > 4.0 * acc for _, err, acc, _ in first)  # the claim that failed
+    for t, err, acc, _ in second:
+        assert err <= 2.0 * acc, (t, err, acc)
+    ins = lr.summary["ins"]
+    assert ins["coast_checks"] == 2 and ins["coast_failed"] >= 1
+    assert ins["coast_inflation"] > 3.0

@@ -24,7 +24,7 @@ import math
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -100,17 +100,28 @@ def nmea_no_fix(t_s: float) -> bytes:
             + with_checksum(f"GPRMC,{ts},V,,,,,,,{format_date(DATE0)},,,N"))
 
 
+def _spans(outage: tuple[float, float] | Sequence[tuple[float, float]] | None,
+           ) -> list[tuple[float, float]]:
+    if outage is None:
+        return []
+    if len(outage) == 2 and all(isinstance(x, float | int) for x in outage):
+        a, b = outage
+        return [(float(a), float(b))]  # type: ignore[arg-type]
+    return [(float(a), float(b)) for a, b in outage]  # type: ignore[misc]
+
+
 def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGHRES_IMU",
                  decimate: int = 1, impair: LinkImpairment | None = None, seed: int = 0,
                  gnss_latency_s: float = 0.05, attitude_error_deg: float | None = None,
-                 outage: tuple[float, float] | None = None,
+                 outage: tuple[float, float] | Sequence[tuple[float, float]] | None = None,
                  ) -> list[tuple[float, int, bytes]]:
     """Every packet with its send time (s of trajectory time) and link (0 IMU, 1 GNSS), in
     send order. ``attitude_error_deg``: also ATTITUDE at 10 Hz on the IMU link, the
     autopilot's own estimate, modelled as the attitude with a constant heading error of that
     many degrees (a compass error). ``outage``: the GNSS epochs with ``t0 <= t < t1``
-    (trajectory time) are no-fix epochs (:func:`nmea_no_fix`)."""
+    (trajectory time; or several such spans) are no-fix epochs (:func:`nmea_no_fix`)."""
     imp = impair or LinkImpairment()
+    spans = _spans(outage)
     rng = np.random.default_rng(seed)
     packer = MavPacker(source_system=1, source_component=1)
     events: list[tuple[float, int, int, bytes]] = []
@@ -165,7 +176,7 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
     frame = frame_of(latitude_deg)
     for j in range(len(data.gnss_t)):
         tj = float(data.gnss_t[j])
-        if outage is not None and outage[0] <= tj < outage[1]:
+        if any(a <= tj < b for a, b in spans):
             add(tj + gnss_latency_s, 1, nmea_no_fix(tj))
             continue
         p = data.gnss_p[j]
@@ -232,7 +243,8 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "",
              record_dir: Path | None = None, via_router: bool = False,
              attitude_error_deg: float | None = None,
-             outage: tuple[float, float] | None = None) -> LiveRun:
+             outage: tuple[float, float] | Sequence[tuple[float, float]] | None = None,
+             ) -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
     ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:

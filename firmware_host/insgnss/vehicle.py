@@ -96,6 +96,7 @@ from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
 log = logging.getLogger("fdi_bridge.insgnss")
 ROUTER = "router"  # [insgnss.live] imu_url: the IMU from the router's autopilot link
+_CHI2_2_99 = 9.2103  # χ²₂(0.99): a coast's claim checked by the fix that ends it
 
 
 class _Discard:
@@ -216,6 +217,10 @@ class InsGnssVehicle:
         self._coast_ended = False  # this outage's coast passed its limit: no-fix until a fix
         self.coast_epochs = 0  # epochs sent as the INS's coast (3D fix, its own accuracy)
         self.coast_no_fix = 0  # epochs sent as no-fix past the coast limit
+        self._coasting = False  # the previous epoch was coasted (no fix)
+        self.coast_checks = 0  # coasts ended by a fix: their claim checked against it
+        self.coast_failed = 0  # ... of which the fix was beyond the claim (NEES > χ²₂(0.99))
+        self.coast_inflation = 1.0  # factor on the coast's accuracy from the failed checks
         self._router_q: deque[bytes] = deque()  # appended by the router's thread
         self._imu_tap: Callable[[bytes], None] | None = None
 
@@ -471,9 +476,12 @@ class InsGnssVehicle:
                 kf.coast(t_g)
                 rep = None
             else:
+                if self._coasting:
+                    self._check_coast(enu)
                 self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
                 rep = kf.update(t_g, enu)
                 self._last_fix_t = t_g
+            self._coasting = rep is None
             if still and not kf.bias_active:
                 kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
                 self.zupts += 1
@@ -737,6 +745,9 @@ class InsGnssVehicle:
             var = np.maximum(var, self._prior_var + r)
         acc_h = math.sqrt(max(float(var[0]), float(var[1])))
         acc_v = math.sqrt(float(var[2]))
+        if rep is None:  # coasting: scaled by the coast checks that failed
+            acc_h *= self.coast_inflation
+            acc_v *= self.coast_inflation
         ins: dict[str, Any] = {
             "pos": [_r(x, 3) for x in p], "vel": [_r(x, 3) for x in kf.velocity],
             "rpy_deg": [_r(x / DEG, 3) for x in kf.attitude_rpy],
@@ -781,6 +792,38 @@ class InsGnssVehicle:
         self._send(EpochOutcome(out.epoch, decision, lat, lon, alt, out.t_s,
                                 {**(out.record or {}), "ins": ins},
                                 heading_deg=out.heading_deg))
+
+    def _check_coast(self, enu: tuple[float, float, float]) -> None:
+        """The first fix after a coast checks the coast's claim: the horizontal NEES
+        ``νᵀ (P + R)⁻¹ ν`` of the fix against the coasted position, before the update. Beyond
+        χ²₂(0.99) = 9.21 the claim failed: the coast's accuracy (GPS_INPUT, the records) is
+        scaled from now on by ``√k``, ``k`` the factor on ``P`` that would have made this
+        return typical (``νᵀ (k P + R)⁻¹ ν = 2``, its mean); the largest so far is kept. (The
+        filter's own ``P`` is not changed: the gate's readmission already pulls a drifted
+        state back.)"""
+        kf = self.kf
+        assert kf is not None
+        nu = np.array(enu[:2]) - kf.position[:2]
+        P = kf.P[:2, :2] + (kf._Pbb[:2, :2] if kf.bias_active else 0.0)
+        R = np.eye(2) * self.params.gnss_sigma_h_m**2
+        nees = float(nu @ np.linalg.solve(P + R, nu))
+        self.coast_checks += 1
+        if not nees > _CHI2_2_99:
+            return
+        self.coast_failed += 1
+        lo, hi = 1.0, 1e8  # ν'(kP + R)⁻¹ν falls with k: bisect (in log) for 2
+        for _ in range(60):
+            k = math.sqrt(lo * hi)
+            if float(nu @ np.linalg.solve(k * P + R, nu)) > 2.0:
+                lo = k
+            else:
+                hi = k
+        self.coast_inflation = max(self.coast_inflation, math.sqrt(hi))
+        claim = math.sqrt(max(float(P[0, 0]), float(P[1, 1])))
+        self.ratelog.warning(
+            "coast check", f"INS coast claimed {claim:.2f} m (1σ), the fix returned "
+            f"{float(np.hypot(*nu)):.2f} m away (NEES {nees:.1f}): coast accuracies are "
+            f"scaled by {self.coast_inflation:.2f} from now on")
 
     def _coast(self, coast_s: float, acc_h: float) -> bool:
         """A GNSS outage (no fix this epoch): True while the INS's coast goes out as a 3D fix
@@ -843,7 +886,9 @@ class InsGnssVehicle:
                 "sigma_tilt_deg": round(self.alignment.sigma_tilt_deg, 5),
                 "sigma_yaw_deg": round(self.alignment.sigma_yaw_deg, 5)},
             "zupts": self.zupts, "zarus": self.zarus, "coast_epochs": self.coast_epochs,
-            "coast_no_fix": self.coast_no_fix,
+            "coast_no_fix": self.coast_no_fix, "coast_checks": self.coast_checks,
+            "coast_failed": self.coast_failed,
+            "coast_inflation": round(self.coast_inflation, 3),
             "align_wait": dict(self.align_wait), "resets": dict(self.resets),
             "gate_actions": dict(self.gate_actions),
             "imu": {"received": st.received, "integrated": st.integrated,
