@@ -26,7 +26,12 @@ Error state (true minus estimate), 15 states ``δx = [δp, δv, φ, δb_a, δb_g
 (E1) ``δṗ = δv``
 (E2) ``δv̇ = G δp − 2 Ω_ie δv + [f^n×] φ − Ĉ δb_a + Ĉ w_a``,  ``G = (g0/R) diag(−1, −1, 2)``
 (E3) ``φ̇ = −Ω_ie φ + Ĉ δb_g − Ĉ w_g``
-(E4) ``δḃ_a = w_ba``,  ``δḃ_g = w_bg`` (random walks)
+(E4) ``δḃ_a = w_ba``,  ``δḃ_g = w_bg`` (random walks; ``w_bg`` covers the configured 1σ
+over an hour and a MEMS gyro's drift over a minute, ``ImuErrorModel.gyro_bias_rw_rad_s2``)
+
+At rest (the live vehicle, :mod:`firmware_host.insgnss.vehicle`): a zero-velocity update
+(ZUPT, ``H`` selects δv) and a zero-angular-rate update (ZARU, ``H`` selects δb_g: the mean
+gyro less the Earth's rate is the bias), which observes all three gyro biases.
 
 Discretised as ``Φ = I + FΔt + (FΔt)²/2``, ``Q_d = Q Δt``, propagated at ``cov_rate_hz``.
 
@@ -372,14 +377,15 @@ class InsGnssFilter:
         )
         self.P: FloatArray = np.diag(p0)
         self.x: FloatArray = np.zeros(N_STATES)
-        # Continuous white-noise PSDs of (E2)–(E4); bias random walk: the 1σ bias over an hour.
+        # Continuous white-noise PSDs of (E2)–(E4); bias random walk: the 1σ bias over an hour
+        # (gyro: and its drift over a minute, ImuErrorModel.gyro_bias_rw_rad_s2).
         self._q = np.concatenate(
             [
                 np.zeros(3),
                 np.full(3, max(imu.accel_vrw_m_s_sqrt_s, 1e-6) ** 2),
                 np.full(3, max(imu.gyro_arw_rad_sqrt_s, 1e-9) ** 2),
                 np.full(3, max(imu.accel_bias_m_s2, 1e-6) ** 2 / 3600.0),
-                np.full(3, max(imu.gyro_bias_rad_s, 1e-9) ** 2 / 3600.0),
+                np.full(3, max(imu.gyro_bias_rw_rad_s2, 1e-18 / 3600.0)),
             ]
         )
         self.y: FloatArray = np.zeros(0)
@@ -624,6 +630,30 @@ class InsGnssFilter:
         self.P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
         self.P = 0.5 * (self.P + self.P.T)
         self._inject(K @ y)
+
+    def zero_rate(self, gyro_mean_rad_s: VecLike, sigma_rad_s: float,
+                  gate: float = 21.108) -> bool:
+        """Zero-angular-rate update (ZARU): the vehicle is known not to turn, so the mean gyro
+        over the epoch is its bias plus the Earth's rate, ``z = ω̄ − Ĉᵀ ω_ie^n = b_g + w``,
+        1σ ``sigma_rad_s`` per axis; ``H`` selects the gyro bias states, (2)-(6) as
+        :meth:`zero_velocity` (after it, at the same time). Skipped (False) when the
+        innovation's ``νᵀ S⁻¹ ν`` exceeds ``gate`` (χ²₃ at 1 − 10⁻⁴: a slow turn the rest
+        detector let through is not a bias)."""
+        c = quat_to_dcm(self.nav.q)
+        w_ie_b = c.T @ np.array(self.earth.omega_ie_n)
+        y = np.array([float(v) for v in gyro_mean_rad_s[:3]]) - w_ie_b - np.array(self.b_g)
+        Rm = np.eye(3) * float(sigma_rad_s) ** 2
+        PHt = self.P[:, 12:15]
+        S = self.P[12:15, 12:15] + Rm
+        if float(y @ np.linalg.solve(S, y)) > gate:
+            return False
+        K = np.linalg.solve(S, PHt.T).T
+        IKH = np.eye(N_STATES)
+        IKH[:, 12:15] -= K
+        self.P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
+        self.P = 0.5 * (self.P + self.P.T)
+        self._inject(K @ y)
+        return True
 
     # ------------------------------------------------------------ strategy "fault_state"
 

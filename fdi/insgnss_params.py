@@ -104,10 +104,21 @@ class ImuErrorModel:
     accel_vrw_ug_sqrt_hz: float = field(
         default=70.0, metadata={"ge": 0.0, "doc": "accelerometer white noise density"}
     )
+    gyro_bias_drift_deg_s_per_min: float = field(
+        default=0.0, metadata={"ge": 0.0, "doc": "how fast the gyro bias may drift (a MEMS "
+                               "gyro warming up; ArduPilot's simulated IMU: 0.05): its random "
+                               "walk reaches this change in one minute at 1σ"})
 
     @property
     def gyro_bias_rad_s(self) -> float:
         return self.gyro_bias_deg_h * DEG / 3600.0
+
+    @property
+    def gyro_bias_rw_rad_s2(self) -> float:
+        """PSD of the gyro bias random walk, (rad/s)²/s: the configured 1σ over an hour, and
+        the drift's change over a minute, ``(r · 60 s)² / 60 s``."""
+        r = self.gyro_bias_drift_deg_s_per_min * DEG / 60.0  # rad/s²
+        return self.gyro_bias_rad_s**2 / 3600.0 + r * r * 60.0
 
     @property
     def gyro_arw_rad_sqrt_s(self) -> float:

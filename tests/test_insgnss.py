@@ -178,3 +178,31 @@ def test_bench_reports_percentiles() -> None:
     assert out["n"] == 300
     assert 0 < out["p50_ms"] <= out["p99_ms"]
     assert out["update_p50_ms"] > 0
+
+
+def test_zaru_estimates_every_gyro_bias_at_rest_and_rejects_a_turn() -> None:
+    """At rest (level, facing north) with a gyro bias of 0.1 deg/s on every axis (ArduPilot's
+    simulated drift after 2 minutes) and ZUPT + ZARU each second: after 60 s the estimated
+    bias is within 0.005 deg/s of it on every axis, yaw included (a ZUPT alone cannot see
+    the yaw gyro), the yaw stays within 0.05 deg and its claimed 1σ covers the error; a
+    slow turn of 1 deg/s is refused by the ZARU's gate."""
+    params = InsGnssParams()
+    params = replace(params, imu=replace(params.imu, gyro_bias_deg_h=900.0,
+                                         gyro_bias_drift_deg_s_per_min=0.05))
+    rpy = (0.0, 0.0, 0.0)
+    gyro, accel = _stationary_samples(params.earth, rpy)
+    b = math.radians(0.1)
+    g = tuple(x + b for x in gyro)
+    kf = InsGnssFilter(params, 0.0, (0, 0, 0), (0, 0, 0), rpy)
+    for k in range(1, 6001):
+        kf.propagate(k / 100.0, g, accel)
+        if k % 100 == 0:
+            kf.coast(k / 100.0)
+            kf.zero_velocity(0.01)
+            assert kf.zero_rate(g, math.radians(0.02))
+    assert np.abs(np.degrees(kf.gyro_bias) - 0.1).max() < 0.005
+    yaw_err = math.degrees(float(kf.attitude_rpy[2]))
+    assert abs(yaw_err) < 0.05
+    assert abs(yaw_err) < 3.0 * math.degrees(math.sqrt(float(kf.P[8, 8])))
+    turning = (g[0], g[1], g[2] - math.radians(1.0))  # 1 deg/s about down
+    assert not kf.zero_rate(turning, math.radians(0.02))

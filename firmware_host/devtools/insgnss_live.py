@@ -24,7 +24,7 @@ import math
 import socket
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -40,6 +40,7 @@ from drivers.ptypair import PtyPair
 from fdi.geodesy import LocalFrame
 from fdi.insgnss import InsGnssFilter, InsGnssParams, InsGnssStrategy
 from firmware_host.devtools.insgnss_sim import (
+    SIM_BOOT_S,
     MethodRun,
     NavData,
     Scenario,
@@ -57,7 +58,7 @@ from firmware_host.runtime.runner import Runner
 
 UTC0 = calendar.timegm((2026, 6, 1, 12, 0, 0))  # trajectory t = 0
 DATE0 = (2026, 6, 1)
-BOOT_S = 120.0  # autopilot uptime at t = 0
+BOOT_S = SIM_BOOT_S  # autopilot uptime at the data's start (gyro_drift counts from it)
 LON0_DEG = 8.5
 H0_M = 300.0
 KNOT_MPS = 1852.0 / 3600.0
@@ -91,15 +92,36 @@ def nmea_epoch(t_s: float, lla: tuple[float, float, float], v_enu: tuple[float, 
     return with_checksum(gga) + with_checksum(rmc)
 
 
+def nmea_no_fix(t_s: float) -> bytes:
+    """The epoch of a receiver that has lost its fix (a GNSS outage): GGA quality 0 and RMC
+    status V, the time but no position, as receivers send it."""
+    ts = format_time((UTC0 + t_s) % 86400.0)
+    return (with_checksum(f"GPGGA,{ts},,,,,0,00,99.99,,,,,,")
+            + with_checksum(f"GPRMC,{ts},V,,,,,,,{format_date(DATE0)},,,N"))
+
+
+def _spans(outage: tuple[float, float] | Sequence[tuple[float, float]] | None,
+           ) -> list[tuple[float, float]]:
+    if outage is None:
+        return []
+    if len(outage) == 2 and all(isinstance(x, float | int) for x in outage):
+        a, b = outage
+        return [(float(a), float(b))]  # type: ignore[arg-type]
+    return [(float(a), float(b)) for a, b in outage]  # type: ignore[misc]
+
+
 def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGHRES_IMU",
                  decimate: int = 1, impair: LinkImpairment | None = None, seed: int = 0,
                  gnss_latency_s: float = 0.05, attitude_error_deg: float | None = None,
+                 outage: tuple[float, float] | Sequence[tuple[float, float]] | None = None,
                  ) -> list[tuple[float, int, bytes]]:
     """Every packet with its send time (s of trajectory time) and link (0 IMU, 1 GNSS), in
     send order. ``attitude_error_deg``: also ATTITUDE at 10 Hz on the IMU link, the
     autopilot's own estimate, modelled as the attitude with a constant heading error of that
-    many degrees (a compass error)."""
+    many degrees (a compass error). ``outage``: the GNSS epochs with ``t0 <= t < t1``
+    (trajectory time; or several such spans) are no-fix epochs (:func:`nmea_no_fix`)."""
     imp = impair or LinkImpairment()
+    spans = _spans(outage)
     rng = np.random.default_rng(seed)
     packer = MavPacker(source_system=1, source_component=1)
     events: list[tuple[float, int, int, bytes]] = []
@@ -153,6 +175,10 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
                                             float(rpy[k, 2]) + math.radians(attitude_error_deg)))
     frame = frame_of(latitude_deg)
     for j in range(len(data.gnss_t)):
+        tj = float(data.gnss_t[j])
+        if any(a <= tj < b for a, b in spans):
+            add(tj + gnss_latency_s, 1, nmea_no_fix(tj))
+            continue
         p = data.gnss_p[j]
         lla = frame.to_lla(float(p[0]), float(p[1]), float(p[2]))
         v = data.gnss_v[j]
@@ -216,17 +242,21 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              impair: LinkImpairment | None = None, seed: int = 0,
              speed: float = 50.0, mavlink_url: str = "", nmea_url: str = "",
              record_dir: Path | None = None, via_router: bool = False,
-             attitude_error_deg: float | None = None) -> LiveRun:
+             attitude_error_deg: float | None = None,
+             outage: tuple[float, float] | Sequence[tuple[float, float]] | None = None,
+             ) -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
     ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
     the vehicle's GPS_INPUT and corrected NMEA outputs; ``record_dir``: a flight recorder there
     (both inputs, for ``fdi-bridge replay``); ``via_router``: the IMU over UDP on 127.0.0.1 to
     the autopilot link of a ``[mavlink]`` router, ``imu_url = "router"``, one datagram a
-    packet (GPS_INPUT then goes out through the router too)."""
+    packet (GPS_INPUT then goes out through the router too); ``outage``: a GNSS outage
+    (:func:`build_events`)."""
     lat = setup.filter.latitude_deg
     events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
-                          impair=impair, seed=seed, attitude_error_deg=attitude_error_deg)
+                          impair=impair, seed=seed, attitude_error_deg=attitude_error_deg,
+                          outage=outage)
     base = BridgeConfig()
     rc = base.rover
     rover = replace(rc, port=replace(rc.port, timeout_s=0.02),

@@ -61,6 +61,7 @@ from fdi.insgnss import (
 from fdi.three_zone import Action, Zone
 from firmware_host.commands.checks import input_file_arg, output_dir_arg
 from firmware_host.commands.tables import table
+from firmware_host.insgnss.align import zaru_sigma
 from firmware_host.runtime.config import CONFIG_DIR as CONFIG_DIR
 from firmware_host.runtime.config import insgnss_setup, load_bridge_file
 from firmware_host.runtime.config_insgnss import InsGnssSetup as InsGnssSetup
@@ -213,6 +214,7 @@ class NavData:
     lead: int = 0  # GNSS epochs of lead-in (``[sim] rest_s``) before the paper's t = 0
     rest: int = 0  # of which the first this many (after epoch 0) are at rest
     zupt_sigma_m_s: float = 0.01  # at rest: the zero-velocity update's 1σ ([insgnss.live])
+    zaru_sigma_rad_s: float = 0.02 * DEG  # at rest: the ZARU's floor ([insgnss.live])
 
     @property
     def flight(self) -> slice:
@@ -247,6 +249,19 @@ def fault_table(scenario: Scenario, sim: InsGnssSimParams,
     return fault
 
 
+SIM_BOOT_S = 120.0  # the simulated autopilot's uptime at the data's first sample
+
+
+def gyro_drift(t_s: FloatArray, sim: InsGnssSimParams) -> FloatArray:
+    """ArduPilot's simulated gyro drift (AP_InertialSensor_SITL::gyro_drift, rad/s, the same
+    on every axis) at the data's times ``t_s``: a triangle rising ``gyro_drift_deg_s_per_min``
+    per minute of the autopilot's uptime for ``gyro_drift_time_min``, then falling back."""
+    period = 2.0 * sim.gyro_drift_time_min
+    minutes = np.fmod((t_s - t_s[0] + SIM_BOOT_S) / 60.0, period)
+    ramp = np.where(minutes < 0.5 * period, minutes, period - minutes)
+    return np.asarray(ramp * sim.gyro_drift_deg_s_per_min * DEG, dtype=float)
+
+
 def generate(setup: InsGnssSetup, scenario: Scenario, seed: int) -> NavData:
     """Generate the data of one run (deterministic in ``seed``)."""
     sim, flt = setup.sim, setup.filter
@@ -263,6 +278,8 @@ def generate(setup: InsGnssSetup, scenario: Scenario, seed: int) -> NavData:
     b_g = rng_imu.normal(0.0, e.gyro_bias_rad_s, 3)
     b_a = rng_imu.normal(0.0, e.accel_bias_m_s2, 3)
     gyro = gyro + b_g + rng_imu.normal(0.0, e.gyro_arw_rad_sqrt_s / math.sqrt(dt), (n, 3))
+    if sim.gyro_drift_deg_s_per_min > 0.0:
+        gyro = gyro + gyro_drift(traj.t, sim)[:, None]
     accel = accel + b_a + rng_imu.normal(0.0, e.accel_vrw_m_s_sqrt_s / math.sqrt(dt), (n, 3))
     m = sim.epochs + lead
     idx = np.arange(m) * rate
@@ -287,6 +304,7 @@ def generate(setup: InsGnssSetup, scenario: Scenario, seed: int) -> NavData:
         lead=lead,
         rest=sim.rest_s if lead else 0,
         zupt_sigma_m_s=setup.live.rest_sigma_vel_m_s,
+        zaru_sigma_rad_s=setup.live.rest_sigma_gyro_deg_s * DEG,
     )
 
 
@@ -312,6 +330,16 @@ class MethodRun:
     # median over the epochs of the innovation's 1σ per position axis, sqrt(S_ii) (m), of the
     # epochs whose position was used as is: what the paper's §2.2 DM statistics measure
     innovation_sigma: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+
+
+def _at_rest(kf: InsGnssFilter, data: NavData, j: int, rate: int) -> None:
+    """The live vehicle's updates at rest after GNSS epoch ``j``: ZUPT, and ZARU on the mean
+    gyro of the epoch (as firmware_host/insgnss/vehicle.py)."""
+    if kf.bias_active:
+        return
+    kf.zero_velocity(data.zupt_sigma_m_s)
+    w = data.gyro[(j - 1) * rate + 1:j * rate + 1]
+    kf.zero_rate(w.mean(axis=0), zaru_sigma(data.zaru_sigma_rad_s, kf.params, len(w) / rate))
 
 
 def _counters(kf: InsGnssFilter, strategy: InsGnssStrategy) -> dict[str, Any]:
@@ -356,7 +384,7 @@ def run_method(data: NavData, params: InsGnssParams, strategy: InsGnssStrategy) 
             kf.propagate(t_list[k], gyro[k], accel[k])
         rep = kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
         if j <= data.rest:  # the lead-in's rest: known, as the live vehicle detects it
-            kf.zero_velocity(data.zupt_sigma_m_s)
+            _at_rest(kf, data, j, rate)
         flagged[j - 1] = any(d.zone is not Zone.NO_FAULT for d in rep.decisions[:3])
         faulted[j - 1] = kf.bias_active
         if j > lead and kf.S.shape[0] >= 3 and \
@@ -418,7 +446,7 @@ def run_coast(data: NavData, params: InsGnssParams) -> CoastRun:
         else:
             kf.update(float(data.gnss_t[j]), data.gnss_p[j], data.gnss_v[j])
         if j <= data.rest:
-            kf.zero_velocity(data.zupt_sigma_m_s)
+            _at_rest(kf, data, j, rate)
         pos_err[j - 1] = kf.position - traj.p[j * rate]
         sigma_h[j - 1] = math.sqrt(float(kf.P[0, 0] + kf.P[1, 1]))
     return CoastRun(pos_err[data.lead:], sigma_h[data.lead:])

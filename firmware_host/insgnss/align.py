@@ -84,6 +84,13 @@ def gyrocompass_sigma(params: InsGnssParams, seconds: float) -> float:
     return math.hypot(gyro, tilt_sigma(params, seconds) * math.tan(abs(lat)))
 
 
+def zaru_sigma(floor_rad_s: float, params: InsGnssParams, seconds: float) -> float:
+    """1σ (rad/s) of a zero-angular-rate update on the mean gyro over ``seconds`` at rest: the
+    configured floor (quantisation, vibration) and the white noise (ARW) over that time."""
+    arw = params.imu.gyro_arw_rad_sqrt_s
+    return math.sqrt(floor_rad_s**2 + arw * arw / max(seconds, 1e-3))
+
+
 def at_rest(params: InsGnssParams, f: np.ndarray, w: np.ndarray, seconds: float,
             yaw: float | None, yaw_sigma_deg: float, rest_sigma_vel_m_s: float) -> Alignment:
     """The alignment at rest from the mean specific force ``f`` and gyro ``w`` over

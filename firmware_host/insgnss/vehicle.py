@@ -32,8 +32,9 @@ Alignment (:mod:`firmware_host.insgnss.align`, from the vehicle's own sensors): 
 specific force moved less than ``rest_max_accel_m_s2`` since the previous epoch. After
 ``rest_align_s`` at rest: level from the mean specific force, heading by gyrocompassing from
 the mean gyro when the configured gyro can (its heading 1σ at most
-``gyrocompass_max_sigma_deg``: navigation grade; or the autopilot's ATTITUDE yaw,
-``heading_source = "attitude"``), velocity zero, the initial covariance with the attitude error
+``gyrocompass_max_sigma_deg``: navigation grade), else (``heading_source = "auto"``, the
+default, once the link has carried one; always with ``"attitude"``) the autopilot's ATTITUDE
+yaw, velocity zero, the initial covariance with the attitude error
 tied to the biases that cause it; then a zero-velocity update (ZUPT, ``rest_sigma_vel_m_s``) on
 every epoch still at rest. Otherwise (moving, or a MEMS gyro), in steady motion: level from the
 specific force over ``align_s``, heading from the GNSS course once the speed exceeds
@@ -83,16 +84,19 @@ from fdi.insgnss import (
 )
 from fdi.three_zone import Action
 from firmware_host.insgnss import align
+from firmware_host.insgnss.align import zaru_sigma
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
 from firmware_host.rover.vehicle import rover_mavlink_spec
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.failsafe import RoverFailsafe
+from firmware_host.runtime.mavout import SEVERITY_WARNING
 from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
 log = logging.getLogger("fdi_bridge.insgnss")
 ROUTER = "router"  # [insgnss.live] imu_url: the IMU from the router's autopilot link
+_CHI2_2_99 = 9.2103  # χ²₂(0.99): a coast's claim checked by the fix that ends it
 
 
 class _Discard:
@@ -190,12 +194,14 @@ class InsGnssVehicle:
         self.aligned_at: float | None = None
         self.alignment: align.Alignment | None = None
         self._last_f: np.ndarray | None = None  # the previous epoch's mean specific force
+        self._was_still = False  # the previous epoch was at rest
         self._prev_t: float | None = None  # the previous epoch's time
         self._rest_f = np.zeros(3)  # sums over the current rest (consecutive still epochs)
         self._rest_w = np.zeros(3)
         self._rest_n = 0
         self._rest_t0: float | None = None
         self.zupts = 0
+        self.zarus = 0  # zero-angular-rate updates at rest (the gyro biases)
         self._align_P: np.ndarray | None = None
         self.align_wait: Counter[str] = Counter()
         self.resets: Counter[str] = Counter()
@@ -205,6 +211,16 @@ class InsGnssVehicle:
         self._idle_s = 0.0
         self._prior_var = np.zeros(3)
         self.output_errors = 0
+        self._mav: Any | None = None  # the vehicle's MAVLink output (STATUSTEXT)
+        self._last_fix_t: float | None = None  # GNSS time of the last fix the filter used
+        self._coast_said = -1.0  # coast length (s) of the last "INS coasting" message
+        self._coast_ended = False  # this outage's coast passed its limit: no-fix until a fix
+        self.coast_epochs = 0  # epochs sent as the INS's coast (3D fix, its own accuracy)
+        self.coast_no_fix = 0  # epochs sent as no-fix past the coast limit
+        self._coasting = False  # the previous epoch was coasted (no fix)
+        self.coast_checks = 0  # coasts ended by a fix: their claim checked against it
+        self.coast_failed = 0  # ... of which the fix was beyond the claim (NEES > χ²₂(0.99))
+        self.coast_inflation = 1.0  # factor on the coast's accuracy from the failed checks
         self._router_q: deque[bytes] = deque()  # appended by the router's thread
         self._imu_tap: Callable[[bytes], None] | None = None
 
@@ -250,6 +266,7 @@ class InsGnssVehicle:
             rover = replace(rc, output=replace(out, mavlink_url=self.mavlink_url or "output"))
             self.sinks.append(InsGpsSink(rover, endpoint=ctx.mavlink))
         self.failsafe = RoverFailsafe(rc, ctx.mavlink, clock=ctx.clock)
+        self._mav = ctx.mavlink
         self.sinks.append(self.failsafe)
         if self.refused:
             log.warning("INS/GNSS: %s", self.refused)
@@ -459,12 +476,22 @@ class InsGnssVehicle:
                 kf.coast(t_g)
                 rep = None
             else:
+                if self._coasting:
+                    self._check_coast(enu)
                 self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
                 rep = kf.update(t_g, enu)
+                self._last_fix_t = t_g
+            self._coasting = rep is None
             if still and not kf.bias_active:
                 kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
                 self.zupts += 1
                 zupt = True
+                # and ZARU: the mean gyro over the epoch is the gyro bias (plus Earth rate)
+                w = np.array([s.gyro_rad_s for _, s in samples])
+                seconds = len(w) / self.rate_hz if self.rate_hz else 0.0  # averaged over
+                if len(w) and kf.zero_rate(w.mean(axis=0), zaru_sigma(
+                        self.live.rest_sigma_gyro_deg_s * DEG, kf.params, seconds)):
+                    self.zarus += 1
         except EstimatorError as err:
             self.resets[str(err).split(" ")[0] or "error"] += 1
             self.ratelog.warning("ins reset", f"{err}; realigning, rover detector meanwhile")
@@ -483,15 +510,21 @@ class InsGnssVehicle:
         """At rest over this epoch's interval: GNSS speed at most ``rest_max_speed_m_s``, no
         rotation above ``align_max_gyro_deg_s``, ``|f|`` within ``align_max_accel_dev_m_s2``
         of g and the mean specific force within ``rest_max_accel_m_s2`` of the previous
-        epoch's (a start is seen by the accelerometers before the GNSS speed)."""
+        epoch's (a start is seen by the accelerometers before the GNSS speed). Without a fix
+        (an outage: no GNSS speed) a rest that was going on continues while the IMU says
+        still, so that the ZUPTs and ZARUs hold the coast."""
         lv = self.live
         if not window:
             self._last_f = None
+            self._was_still = False
             return False
         f_all = np.array([s.accel_m_s2 for s in window])
         f = f_all.mean(axis=0)
         last, self._last_f = self._last_f, f
         speed = out.epoch.speed_mps
+        was_still, self._was_still = self._was_still, False
+        if speed is None and not out.epoch.valid and was_still:
+            speed = 0.0  # no fix (an outage): a rest goes on while the IMU says still
         if speed is None or speed > lv.rest_max_speed_m_s or last is None:
             return False
         w = np.array([s.gyro_rad_s for s in window])
@@ -499,7 +532,8 @@ class InsGnssVehicle:
             return False
         if abs(float(np.linalg.norm(f)) - self.params.earth.g0) > lv.align_max_accel_dev_m_s2:
             return False
-        return float(np.linalg.norm(f - last)) <= lv.rest_max_accel_m_s2
+        self._was_still = float(np.linalg.norm(f - last)) <= lv.rest_max_accel_m_s2
+        return self._was_still
 
     def _rest_reset(self) -> None:
         self._rest_f = np.zeros(3)
@@ -543,7 +577,7 @@ class InsGnssVehicle:
                 f = np.mean([s.accel_m_s2 for s in window], axis=0)
                 speed = float(out.epoch.speed_mps or 0.0)
                 course = float(out.epoch.course_deg or 0.0) * DEG
-                yaw = self.attitude_yaw if lv.heading_source == "attitude" else None
+                yaw = self.attitude_yaw if self._motion_heading(out) == "attitude" else None
                 a = align.in_motion(self.params, f, lv.align_s, speed, course,
                                     lv.course_sigma_deg, yaw, lv.attitude_sigma_deg)
         if a is None:
@@ -559,6 +593,7 @@ class InsGnssVehicle:
         else:
             vel = (0.0, 0.0, 0.0)
         self.kf = InsGnssFilter(a.params(self.params), t_g, enu, vel, (a.roll, a.pitch, a.yaw))
+        self._last_fix_t = t_g
         if self._align_P is not None:  # at rest: the attitude error tied to the biases
             self.kf.P = self._align_P
             self._align_P = None
@@ -569,19 +604,38 @@ class InsGnssVehicle:
                  a.yaw / DEG, a.sigma_tilt_deg, a.sigma_yaw_deg)
         self._emit_rover(out, t_g, "aligned")
 
+    def _rest_heading(self) -> str:
+        """Where the heading of an alignment at rest comes from: "gyrocompass" (the configured
+        gyro can: navigation grade), "attitude" (the autopilot's ATTITUDE yaw), or "course"
+        (none at rest: the GNSS course once moving). ``heading_source``: "attitude" always
+        the ATTITUDE yaw; "gnss" gyrocompass or course; "auto" gyrocompass, else ATTITUDE
+        once the link has carried one, else course."""
+        lv = self.live
+        if lv.heading_source == "attitude":
+            return "attitude"
+        if align.gyrocompass_sigma(self.params, lv.rest_align_s) <= \
+                lv.gyrocompass_max_sigma_deg * DEG:
+            return "gyrocompass"
+        if lv.heading_source == "auto" and self.attitude_yaw is not None:
+            return "attitude"
+        return "course"
+
     def _align_at_rest(self, rest_s: float) -> tuple[align.Alignment | None, str]:
         lv = self.live
+        heading = self._rest_heading()
+        if heading == "course":
+            if lv.heading_source == "auto":
+                return None, ("at rest, the gyro cannot gyrocompass and no ATTITUDE: heading "
+                              "from the course")
+            return None, "at rest, the gyro cannot gyrocompass: heading from the course"
+        if heading == "attitude" and self.attitude_yaw is None:
+            return None, "at rest: no ATTITUDE yet (heading_source attitude)"
         if rest_s < lv.rest_align_s:
-            return None, "at rest: levelling and gyrocompassing"
+            return None, ("at rest: levelling and gyrocompassing" if heading == "gyrocompass"
+                          else "at rest: levelling (heading from ATTITUDE)")
         n = max(self._rest_n, 1)
         f, w = self._rest_f / n, self._rest_w / n
-        yaw: float | None = None
-        if lv.heading_source == "attitude":
-            if self.attitude_yaw is None:
-                return None, "no ATTITUDE yet"
-            yaw = self.attitude_yaw
-        elif align.gyrocompass_sigma(self.params, rest_s) > lv.gyrocompass_max_sigma_deg * DEG:
-            return None, "at rest, the gyro cannot gyrocompass: heading from the course"
+        yaw = self.attitude_yaw if heading == "attitude" else None
         a = align.at_rest(self.params, f, w, rest_s, yaw, lv.attitude_sigma_deg,
                           lv.rest_sigma_vel_m_s)
         self._align_P = align.rest_covariance(self.params, a, f, w, rest_s, yaw)
@@ -619,13 +673,32 @@ class InsGnssVehicle:
         if abs(float(np.linalg.norm(f.mean(axis=0))) - self.params.earth.g0) > \
                 lv.align_max_accel_dev_m_s2:
             return "accelerating"
-        if lv.heading_source == "attitude":
-            if self.attitude_yaw is None:
-                return "no ATTITUDE yet"
-        elif out.epoch.speed_mps is None or out.epoch.course_deg is None or \
-                out.epoch.speed_mps < lv.align_min_speed_m_s:
+        heading = self._motion_heading(out)
+        if heading == "attitude" and self.attitude_yaw is None:
+            return "no ATTITUDE yet"
+        speed = out.epoch.speed_mps
+        if heading == "attitude" and speed is not None and speed <= lv.rest_max_speed_m_s:
+            # slow enough to be at rest, not (yet) seen still: the alignment at rest levels
+            # over rest_align_s and ties the attitude error to the biases
+            return "at rest: levelling (heading from ATTITUDE)"
+        if heading == "none":
+            if lv.heading_source == "auto":
+                return "moving slower than align_min_speed_m_s, no ATTITUDE"
             return "not moving (heading from GNSS course)"
         return ""
+
+    def _motion_heading(self, out: EpochOutcome) -> str:
+        """In motion: "course" (GNSS course, fast enough), "attitude" (heading_source
+        attitude; auto below ``align_min_speed_m_s`` with ATTITUDE) or "none" yet."""
+        lv = self.live
+        if lv.heading_source == "attitude":
+            return "attitude"
+        sp, co = out.epoch.speed_mps, out.epoch.course_deg
+        if sp is not None and co is not None and sp >= lv.align_min_speed_m_s:
+            return "course"
+        if lv.heading_source == "auto" and self.attitude_yaw is not None:
+            return "attitude"
+        return "none"
 
     @staticmethod
     def _vel_en(out: EpochOutcome) -> tuple[float, float] | None:
@@ -664,7 +737,7 @@ class InsGnssVehicle:
         used = rep is not None and all(d.action is Action.ACCEPT for d in rep.decisions[:3]) \
             and not kf.bias_active
         var = np.diag(P)[:3] + bias_var
-        if not used:
+        if rep is not None and not used:
             # the fix was not used as is: the output is (mostly) the INS prediction, and the
             # receiver disagreed with it; say so with the innovation's scale, P⁻_ii + R_ii
             prm = self.params
@@ -672,6 +745,9 @@ class InsGnssVehicle:
             var = np.maximum(var, self._prior_var + r)
         acc_h = math.sqrt(max(float(var[0]), float(var[1])))
         acc_v = math.sqrt(float(var[2]))
+        if rep is None:  # coasting: scaled by the coast checks that failed
+            acc_h *= self.coast_inflation
+            acc_v *= self.coast_inflation
         ins: dict[str, Any] = {
             "pos": [_r(x, 3) for x in p], "vel": [_r(x, 3) for x in kf.velocity],
             "rpy_deg": [_r(x / DEG, 3) for x in kf.attitude_rpy],
@@ -695,6 +771,19 @@ class InsGnssVehicle:
             lat, lon, h = frame.to_lla(float(p[0]), float(p[1]), float(p[2]))
             alt = h - (out.epoch.geoid_sep_m or 0.0)
             ins["lla"] = [round(lat, 9), round(lon, 9), round(h, 3)]
+        coast_s = t_g - (self._last_fix_t if self._last_fix_t is not None else t_g)
+        if rep is None:
+            ins["coast_s"] = round(coast_s, 3)
+            if not self._coast(coast_s, acc_h):
+                ins["output"] = "no fix"
+                record = self._base_record(out, t_g, "ins")
+                record["ins"] = ins
+                self.write_record(record)
+                self._send(out)  # the receiver's no-fix epoch: GPS_INPUT fix_type 1
+                return
+        else:
+            self._coast_ended = False
+            self._coast_said = -1.0
         record = self._base_record(out, t_g, "ins")
         record["ins"] = ins
         self.write_record(record)
@@ -703,6 +792,73 @@ class InsGnssVehicle:
         self._send(EpochOutcome(out.epoch, decision, lat, lon, alt, out.t_s,
                                 {**(out.record or {}), "ins": ins},
                                 heading_deg=out.heading_deg))
+
+    def _check_coast(self, enu: tuple[float, float, float]) -> None:
+        """The first fix after a coast checks the coast's claim: the horizontal NEES
+        ``νᵀ (P + R)⁻¹ ν`` of the fix against the coasted position, before the update. Beyond
+        χ²₂(0.99) = 9.21 the claim failed: the coast's accuracy (GPS_INPUT, the records) is
+        scaled from now on by ``√k``, ``k`` the factor on ``P`` that would have made this
+        return typical (``νᵀ (k P + R)⁻¹ ν = 2``, its mean); the largest so far is kept. (The
+        filter's own ``P`` is not changed: the gate's readmission already pulls a drifted
+        state back.)"""
+        kf = self.kf
+        assert kf is not None
+        nu = np.array(enu[:2]) - kf.position[:2]
+        P = kf.P[:2, :2] + (kf._Pbb[:2, :2] if kf.bias_active else 0.0)
+        R = np.eye(2) * self.params.gnss_sigma_h_m**2
+        nees = float(nu @ np.linalg.solve(P + R, nu))
+        self.coast_checks += 1
+        if not nees > _CHI2_2_99:
+            return
+        self.coast_failed += 1
+        lo, hi = 1.0, 1e8  # ν'(kP + R)⁻¹ν falls with k: bisect (in log) for 2
+        for _ in range(60):
+            k = math.sqrt(lo * hi)
+            if float(nu @ np.linalg.solve(k * P + R, nu)) > 2.0:
+                lo = k
+            else:
+                hi = k
+        self.coast_inflation = max(self.coast_inflation, math.sqrt(hi))
+        claim = math.sqrt(max(float(P[0, 0]), float(P[1, 1])))
+        self.ratelog.warning(
+            "coast check", f"INS coast claimed {claim:.2f} m (1σ), the fix returned "
+            f"{float(np.hypot(*nu)):.2f} m away (NEES {nees:.1f}): coast accuracies are "
+            f"scaled by {self.coast_inflation:.2f} from now on")
+
+    def _coast(self, coast_s: float, acc_h: float) -> bool:
+        """A GNSS outage (no fix this epoch): True while the INS's coast goes out as a 3D fix
+        with its own accuracy, False (no-fix, as the rover's failsafe sends) once it is past
+        ``coast_max_s`` or claims worse than ``coast_max_acc_h_m``, until a fix is used again.
+        While it goes out, the failsafe's silence watchdog is held (one message, not a no-fix
+        and a 3D fix in turn); past the limit the watchdog runs on and its own no-fix and
+        STATUSTEXT follow after ``silence_s``, in agreement."""
+        lv = self.live
+        if not self._coast_ended and (coast_s > lv.coast_max_s or acc_h > lv.coast_max_acc_h_m):
+            self._coast_ended = True
+            text = (f"FDI INS: coast limit, {coast_s:.0f} s, accuracy {acc_h:.1f} m: no fix")
+            log.warning("%s", text)
+            self._statustext(SEVERITY_WARNING, text)
+        if self._coast_ended:
+            self.coast_no_fix += 1
+            return False
+        if self.failsafe is not None and not self.failsafe.watchdog.silent:
+            self.failsafe.watchdog.valid()  # the INS's output is the valid data meanwhile
+        self.coast_epochs += 1
+        if self._coast_said < 0.0 or coast_s >= self._coast_said + 5.0:
+            self._coast_said = coast_s
+            text = f"INS coasting, {coast_s:.0f} s, accuracy {acc_h:.1f} m"
+            log.warning("%s", text)
+            self._statustext(SEVERITY_WARNING, "FDI " + text)
+        return True
+
+    def _statustext(self, severity: int, text: str) -> None:
+        if self._mav is None or not self.sending:
+            return
+        try:
+            self._mav.send_statustext(severity, text)
+        except Exception as err:  # an output failing must not stop the filter
+            self.output_errors += 1
+            self.ratelog.warning("output statustext", str(err))
 
     def _send(self, out: EpochOutcome) -> None:
         if not self.sending:
@@ -729,7 +885,10 @@ class InsGnssVehicle:
                 "method": self.alignment.method,
                 "sigma_tilt_deg": round(self.alignment.sigma_tilt_deg, 5),
                 "sigma_yaw_deg": round(self.alignment.sigma_yaw_deg, 5)},
-            "zupts": self.zupts,
+            "zupts": self.zupts, "zarus": self.zarus, "coast_epochs": self.coast_epochs,
+            "coast_no_fix": self.coast_no_fix, "coast_checks": self.coast_checks,
+            "coast_failed": self.coast_failed,
+            "coast_inflation": round(self.coast_inflation, 3),
             "align_wait": dict(self.align_wait), "resets": dict(self.resets),
             "gate_actions": dict(self.gate_actions),
             "imu": {"received": st.received, "integrated": st.integrated,

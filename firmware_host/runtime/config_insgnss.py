@@ -31,6 +31,12 @@ class InsGnssSimParams:
         default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the east/north fault"})
     table2_fault_v_m: float = field(
         default=20.0, metadata={"ge": 0.0, "doc": "table2-calibrated: 1σ of the up fault"})
+    gyro_drift_deg_s_per_min: float = field(default=0.0, metadata={
+        "ge": 0.0, "doc": "a drift added to every gyro axis as ArduPilot's simulated IMU "
+                          "(SIM_DRIFT_SPEED, 0.05 there): it grows this fast from the "
+                          "autopilot's boot for gyro_drift_time_min, then falls back, and so on"})
+    gyro_drift_time_min: float = field(default=5.0, metadata={
+        "gt": 0.0, "doc": "SIM_DRIFT_TIME: minutes of rise (and of fall)"})
     rest_s: int = field(default=0, metadata={
         "ge": 0, "le": 3600, "doc": "lead-in before the paper's t = 0: this long at rest "
                                     "(a real vehicle's coarse alignment), no faults"})
@@ -71,7 +77,10 @@ class InsGnssLiveParams:
     align_max_accel_dev_m_s2: float = field(default=0.5, metadata={"gt": 0.0})
     align_min_speed_m_s: float = field(default=3.0, metadata={
         "gt": 0.0, "doc": "GNSS speed from which its course is the heading"})
-    heading_source: Literal["gnss", "attitude"] = "gnss"
+    heading_source: Literal["auto", "gnss", "attitude"] = field(default="auto", metadata={
+        "doc": "auto: gyrocompass when the configured gyro can, else the autopilot's ATTITUDE "
+               "yaw when the link carries it, else the GNSS course once moving; gnss: the "
+               "course (or gyrocompass); attitude: the ATTITUDE yaw only"})
     attitude_sigma_deg: float = field(default=3.0, metadata={
         "gt": 0.0, "doc": "heading_source = attitude: 1σ of the autopilot's yaw"})
     course_sigma_deg: float = field(default=1.0, metadata={
@@ -90,6 +99,17 @@ class InsGnssLiveParams:
     gyrocompass_max_sigma_deg: float = field(default=1.0, metadata={
         "gt": 0.0, "doc": "gyrocompass only when the configured gyro gives this heading 1σ "
                           "(navigation grade); else heading from the GNSS course once moving"})
+    rest_sigma_gyro_deg_s: float = field(default=0.02, metadata={
+        "gt": 0.0, "doc": "at rest: 1σ of the zero-angular-rate update (ZARU) of the gyro "
+                          "biases on the epoch's mean gyro, beside the white noise (RAW_IMU's "
+                          "1 mrad/s steps, vibration)"})
+    coast_max_s: float = field(default=10.0, metadata={
+        "ge": 0.0, "le": 600.0,
+        "doc": "GNSS outage: the INS's coast goes out as a 3D fix (its own accuracy) for at "
+               "most this long, then no-fix (ArduPilot: ~10 s of useful inertial position)"})
+    coast_max_acc_h_m: float = field(default=3.0, metadata={
+        "gt": 0.0, "doc": "GNSS outage: no-fix as soon as the coast's claimed horizontal "
+                          "accuracy is worse than this (no better than a plain fix)"})
 
 
 @dataclass(frozen=True)
