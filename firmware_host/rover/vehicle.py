@@ -88,7 +88,11 @@ class RoverVehicle:
                                  backoff_max_s=rc.reconnect_max_s,
                                  opener=open_port_nonblocking, tap=tap)
             sinks.append(self.nmea)
-        pipeline = self.pipeline = RoverPipeline(rc, jsonl=ctx.epochs.stream, sinks=sinks)
+        # The receiver's sentences at its rate against the line's baud rate: said once in the
+        # log and shown on the status line (a network URL has no baud rate: not judged).
+        baud = 0 if "://" in rc.port.url and not rc.port.url.startswith("rfc2217://") else None
+        pipeline = self.pipeline = RoverPipeline(rc, jsonl=ctx.epochs.stream, sinks=sinks,
+                                                 baudrate=baud, warn_link=True)
         if ctx.router is not None:
             attach_rover(pipeline, ctx.router)  # GPS_INPUT, statistics, live parameters
         elif ctx.mavlink is not None:
@@ -111,6 +115,14 @@ class RoverVehicle:
         wait = max(self.cfg.rover.port.timeout_s, 0.01)
         self._idle_s = max(0.0, wait - (self.clock() - t0))
         return 0
+
+    def status_fields(self) -> dict[str, Any]:
+        """What the status line adds for the rover (the runner's Snapshot ``extra``)."""
+        out: dict[str, Any] = {}
+        fit = self.pipeline.link.result if self.pipeline is not None else None
+        if fit is not None and not fit.fits:
+            out["LINK"] = f"{fit.load:.1f}x {fit.baudrate} baud, max {fit.max_rate_hz:.2f} Hz"
+        return out
 
     def check(self, now: float) -> None:
         if self.failsafe is not None:

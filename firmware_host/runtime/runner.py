@@ -306,6 +306,9 @@ class Runner:
         actions = vs.get("actions")
         if faults is None and isinstance(actions, dict):  # the ROV: its control actions
             extra = {k: actions[k] for k in sorted(actions) if actions[k]}
+        more = getattr(self.vehicle, "status_fields", None)  # the vehicle's own fields
+        if callable(more):
+            extra.update(more())
         return Snapshot(
             elapsed_s=now - self.t0,
             epochs=int(epochs) if isinstance(epochs, int) else self.records,
