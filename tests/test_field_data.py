@@ -1,0 +1,126 @@
+"""Issue E: data a real autopilot accepts, and a journal worth reading.
+
+* a no-fix GPS_INPUT carries ``satellites_visible = 0`` (ArduPilot's GPS_RAW_INT otherwise
+  shows "no fix, 10 satellites");
+* ``sim rover`` dates its NMEA after 2022-01-01 (AP_GPS refuses earlier GPS times);
+* on the project's own healthy receiver the default preset logs no gate-health line at ``-v``,
+  while a gate that really cannot see the minimum jump is said once, not every 10 s.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from drivers.capture import CaptureReader
+from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
+from drivers.ratelog import RateLimitedLog
+from firmware_host.cli import main
+from firmware_host.devtools.rover_sim import RoverScenario, generate
+from firmware_host.rover.outputs import MavlinkGpsSink
+from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.runtime.config import BridgeConfig
+
+
+class _Endpoint:
+    """Records what the sink sends (the sink under test is real)."""
+
+    def __init__(self) -> None:
+        self.fixes: list[Any] = []
+
+    def send_heartbeat(self) -> bytes:
+        return b""
+
+    def send_gps_input(self, fix: Any) -> bytes:
+        self.fixes.append(fix)
+        return b""
+
+    def send_statustext(self, severity: int, text: str) -> bytes:
+        return b""
+
+    def request_mode(self, *args: Any) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _epoch(k: int, quality: int, sats: int) -> bytes:
+    ts = format_time(36000.0 + 0.1 * k)
+    la, ns = format_lat(32.02 + 1e-6 * k)
+    lo, ew = format_lon(118.85)
+    pos = f"{la},{ns},{lo},{ew}" if quality else ",,,"
+    gga = with_checksum(f"GPGGA,{ts},{pos},{quality},{sats:02d},0.9,10.0,M,3.0,M,,")
+    rmc = with_checksum(f"GPRMC,{ts},{'A' if quality else 'V'},{pos},0.0,0.0,"
+                        f"{format_date((2025, 5, 12))},,,{'D' if quality else 'N'}")
+    return gga + rmc
+
+
+@pytest.mark.parametrize(("quality", "sats_sent"), [(2, 10), (0, 0), (6, 0), (7, 0)])
+def test_no_fix_gps_input_has_no_satellites(quality: int, sats_sent: int) -> None:
+    cfg = BridgeConfig().rover
+    ep = _Endpoint()
+    pipe = RoverPipeline(cfg, sinks=[MavlinkGpsSink(cfg, endpoint=ep)])  # type: ignore[arg-type]
+    data = b"".join(_epoch(k, 2, 10) for k in range(5)) + _epoch(5, quality, 10) + _epoch(
+        6, 2, 10)
+    pipe.feed(data)
+    pipe.finish()
+    fix = ep.fixes[5]
+    assert fix.fix_type == (4 if quality == 2 else 1)
+    assert fix.satellites_visible == sats_sent
+    assert ep.fixes[4].satellites_visible == 10
+
+
+def test_simulated_receiver_is_dated_after_2022(tmp_path: Path) -> None:
+    _t, data, _truth = next(generate(RoverScenario(duration_s=1.0)))
+    rmc = next(line for line in data.split(b"\r\n") if line.startswith(b"$GPRMC"))
+    ddmmyy = rmc.split(b",")[9].decode()
+    assert 2000 + int(ddmmyy[4:]) >= 2022, rmc
+    assert main(["sim", "rover", "--duration", "2", "--zda", "--out", str(tmp_path)]) == 0
+    text = (tmp_path / "rover.nmea").read_bytes()
+    zda = next(line for line in text.split(b"\r\n") if line.startswith(b"$GPZDA"))
+    assert int(zda.split(b",")[4]) >= 2022
+    first = next(iter(CaptureReader(tmp_path / "rover.cap")))
+    assert first.t_us >= 1_640_995_200_000_000  # 2022-01-01T00:00:00Z
+
+
+def _gate_records(caplog: pytest.LogCaptureFixture) -> list[logging.LogRecord]:
+    return [r for r in caplog.records if "gate health" in r.getMessage()
+            and r.levelno >= logging.INFO]
+
+
+def test_healthy_receiver_logs_no_gate_health_at_info(caplog: pytest.LogCaptureFixture) -> None:
+    """10 minutes of the simulator's clean receiver at 10 Hz, the default preset: on main this
+    logged an INFO "gate health: ... S is much larger ..." every 100 epochs (60 lines here,
+    8 640 a day); now none."""
+    sc = RoverScenario(duration_s=600.0, seed=3, kinds=())
+    pipe = RoverPipeline(BridgeConfig().rover)
+    with caplog.at_level(logging.INFO, logger="fdi_bridge"):
+        for _t, data, _truth in generate(sc):
+            pipe.feed(data)
+        pipe.finish()
+    assert pipe.epochs == 6000
+    assert pipe.summary()["gate_health"]["status"] != "ok"  # still in the summary
+    assert _gate_records(caplog) == []
+
+
+def test_gate_that_cannot_see_the_minimum_jump_is_said_once(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """The chi-square test alone (no grey test to cover it) with R far too wide: inert for
+    1.05 m jumps, a warning -- once, not every 10 s of the run."""
+    base = BridgeConfig().rover
+    cfg = replace(base, detector=replace(base.detector, strategy="chi2", sigma_m=3.0))
+    now = [0.0]  # the receiver's time: the rate limit of the old code let one through a 10 s
+    ratelog = RateLimitedLog(logging.getLogger("fdi_bridge.rover"), clock=lambda: now[0])
+    pipe = RoverPipeline(cfg, ratelog=ratelog)
+    with caplog.at_level(logging.INFO, logger="fdi_bridge"):
+        for t, data, _truth in generate(RoverScenario(duration_s=300.0, seed=3, kinds=())):
+            now[0] = t
+            pipe.feed(data)
+    warnings = [r for r in _gate_records(caplog) if r.levelno == logging.WARNING]
+    assert len(warnings) == 1, [r.getMessage()[:80] for r in _gate_records(caplog)]
+    assert "far below" in warnings[0].getMessage()
