@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import threading
 import time
 from dataclasses import replace
@@ -147,3 +148,16 @@ def test_doctor_reports_it(baud: int, warns: bool) -> None:
         assert "at most 4 Hz fits" in text
     else:
         assert any("GPS link" in m and "38400 baud" in m for m in rep.ok), rep.lines()
+
+
+def test_the_readme_walk_through_fits_its_baud_rate() -> None:
+    """The README's walk-through: the status line's byte rate fits the banner's baud rate, the
+    config it writes says that baud rate, and its pty path is the user's own (not /tmp/...)."""
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    banner = re.search(r"port gps  (\S+) at (\d+) baud", text)
+    status = re.search(r"\| gps up ([\d.]+) kB/s \|", text)
+    assert banner is not None and status is not None
+    baud = int(banner.group(2))
+    assert float(status.group(1)) * 1000.0 <= baud / 10.0, (status.group(0), baud)
+    assert f"baudrate = {baud}" in text
+    assert "/tmp/fdi-gps" not in text and "pty:$GPS" in text
