@@ -10,6 +10,9 @@
 from __future__ import annotations
 
 import logging
+import os
+import socket
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -18,12 +21,16 @@ import pytest
 
 from drivers.capture import CaptureReader
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
+from drivers.ptypair import PtyPair
 from drivers.ratelog import RateLimitedLog
+from drivers.transport import SerialSettings
 from firmware_host.cli import main
+from firmware_host.commands.live import status_line
+from firmware_host.commands.run import RoverBridge
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.rover.outputs import MavlinkGpsSink
 from firmware_host.rover.pipeline import RoverPipeline
-from firmware_host.runtime.config import BridgeConfig
+from firmware_host.runtime.config import BridgeConfig, RoverConfig
 
 
 class _Endpoint:
@@ -124,3 +131,46 @@ def test_gate_that_cannot_see_the_minimum_jump_is_said_once(
     warnings = [r for r in _gate_records(caplog) if r.levelno == logging.WARNING]
     assert len(warnings) == 1, [r.getMessage()[:80] for r in _gate_records(caplog)]
     assert "far below" in warnings[0].getMessage()
+
+
+def test_status_line_shows_the_fix_under_a_pty(tmp_path: Path) -> None:
+    """The rover's status line, from a receiver on a pty to GPS_INPUT on a real UDP socket on
+    127.0.0.1: the receiver's fix (quality, satellites, HDOP), the output's position from the
+    first fix and its speed, what was sent (the decision, GPS_INPUT's fix type, accuracy) and
+    the receiver's sentences."""
+    sc = RoverScenario(rate_hz=10.0, duration_s=4.0, seed=2, kinds=())
+    epochs = [data for _t, data, _truth in generate(sc)]
+    sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sink.bind(("127.0.0.1", 0))
+    pty = PtyPair(link=tmp_path / "gps")
+    rc = RoverConfig()
+    cfg = BridgeConfig(rover=replace(
+        rc, port=SerialSettings(url=pty.url, baudrate=38400, timeout_s=0.02),
+        output=replace(rc.output, mavlink_url=f"udpout:127.0.0.1:{sink.getsockname()[1]}")))
+    bridge = RoverBridge(cfg)
+    try:
+        deadline = time.monotonic() + 20.0
+        sent = 0
+        while bridge.pipeline.epochs < 30 and time.monotonic() < deadline:
+            if sent < len(epochs) and sent - bridge.pipeline.epochs < 10:
+                os.write(pty.master_fd, epochs[sent])
+                sent += 1
+            bridge.step()
+        line = status_line(bridge.runner.snapshot())
+        last = bridge.pipeline.last_outcome
+    finally:
+        bridge.close()
+        pty.close()
+        sink.close()
+    assert last is not None and last.decision.out_enu is not None
+    e = last.epoch
+    sections = line.split(" | ")
+    assert sections[0].startswith("0:00:") and "LINK" not in sections[0], line
+    assert sections[1].startswith("gps up "), line
+    east, north = last.decision.out_enu[0], last.decision.out_enu[1]
+    assert sections[3] == (f"DGPS {e.num_sats}sv HDOP {e.hdop:.1f} {east:+.1f}E {north:+.1f}N "
+                           f"m {e.speed_mps:.1f} m/s"), line
+    # Without GST: h_acc = sigma sqrt(2) max(1, HDOP), sigma 0.35 m (firmware_host/rover/outputs).
+    h_acc = 0.35 * 2 ** 0.5 * max(1.0, e.hdop or 1.0)
+    assert sections[4] == f"out accept DGPS {h_acc:.2f} m", line
+    assert sections[5] == "GGA+RMC+VTG", line

@@ -278,6 +278,7 @@ class MavlinkGpsSink:
         self._next_heartbeat: float | None = None
         self._was_alarm = False
         self._gps = _GpsInputState()
+        self.last_fix: Any | None = None  # the last GPS_INPUT sent (the status line shows it)
 
     def emit(self, out: EpochOutcome) -> None:
         d = out.decision
@@ -290,6 +291,7 @@ class MavlinkGpsSink:
         if fix is not None:
             self.endpoint.send_gps_input(fix)
             self.sent += 1
+            self.last_fix = fix
         if d.alarm_raised:
             self.endpoint.send_statustext(
                 2, f"FDI GPS: {self.cfg.detector.max_consecutive}+ faults in a row, auto-nav stop"
