@@ -174,3 +174,29 @@ def test_status_line_shows_the_fix_under_a_pty(tmp_path: Path) -> None:
     h_acc = 0.35 * 2 ** 0.5 * max(1.0, e.hdop or 1.0)
     assert sections[4] == f"out accept DGPS {h_acc:.2f} m", line
     assert sections[5] == "GGA+RMC+VTG", line
+
+
+@pytest.mark.parametrize(("root_level", "shown"), [(logging.WARNING, False),
+                                                    (logging.INFO, True)])
+def test_demo_insgnss_expected_alarms_only_at_v(root_level: int, shown: bool,
+                                                caplog: pytest.LogCaptureFixture) -> None:
+    """``demo insgnss`` injects GPS faults: its alarm, gate-health and unacknowledged-HOLD
+    warnings (its GPS_INPUT goes to a UDP socket, not an autopilot) are the demo working, said
+    at ``-v`` only; errors always."""
+    from firmware_host.commands.demo_insgnss import expected_quiet
+
+    root = logging.getLogger()
+    old = root.level
+    root.setLevel(root_level)
+    try:
+        with caplog.at_level(root_level), expected_quiet():
+            logging.getLogger("fdi_bridge.rover").warning("GPS alarm at utc 1.0")
+            logging.getLogger("fdi_bridge.mavlink").warning("no COMMAND_ACK for mode HOLD")
+            logging.getLogger("fdi_bridge.rover").error("a real error")
+    finally:
+        root.setLevel(old)
+    texts = [r.getMessage() for r in caplog.records]
+    assert ("GPS alarm at utc 1.0" in texts) is shown
+    assert ("no COMMAND_ACK for mode HOLD" in texts) is shown
+    assert "a real error" in texts
+    assert logging.getLogger("fdi_bridge.rover").level == logging.NOTSET  # restored
