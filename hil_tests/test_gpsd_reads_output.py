@@ -113,7 +113,7 @@ def test_gpsd_reports_the_corrected_positions(tmp_path: Path) -> None:
 
 
 def _sod(iso: str) -> float | None:
-    """'2010-05-12T10:00:01.000Z' -> seconds of day."""
+    """'2025-05-12T10:00:01.000Z' -> seconds of day."""
     if "T" not in iso:
         return None
     hms = iso.split("T", 1)[1].rstrip("Z")

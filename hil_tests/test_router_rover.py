@@ -136,7 +136,7 @@ def test_gps_input_through_the_router_at_the_gps_rate(tmp_path: Path) -> None:
     # replaced fixes: without GST, h_acc = σ √2 max(1, HDOP), σ = 0.35 m.
     replaced = 0
     for e, m in zip(epochs, gps, strict=True):
-        week, ms = gps_week_ms(unix_time((2010, 5, 12), e["utc"]))
+        week, ms = gps_week_ms(unix_time(RoverScenario().date, e["utc"]))
         assert (m.time_week, m.time_week_ms) == (week, ms)
         assert (m.lat, m.lon) == (round(e["lat"] * 1e7), round(e["lon"] * 1e7))
         assert m.get_srcSystem() == 1 and m.get_srcComponent() == 191

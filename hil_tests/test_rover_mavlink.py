@@ -76,7 +76,7 @@ def test_gps_input_per_epoch_with_raised_accuracy_on_replaced(tmp_path: Path) ->
     assert any(m.get_type() == "HEARTBEAT" for m in msgs)
     acc_ok, acc_rep = set(), set()
     for e, m in zip(epochs, gps, strict=True):
-        week, ms = gps_week_ms(unix_time((2010, 5, 12), e["utc"]))
+        week, ms = gps_week_ms(unix_time(RoverScenario().date, e["utc"]))
         assert (m.time_week, m.time_week_ms) == (week, ms)
         assert m.lat == round(e["lat"] * 1e7) and m.lon == round(e["lon"] * 1e7)
         if e["action"] == "accept":
@@ -88,9 +88,10 @@ def test_gps_input_per_epoch_with_raised_accuracy_on_replaced(tmp_path: Path) ->
             acc_rep.add(round(m.horiz_accuracy, 3))
     assert acc_rep, "the run should contain replaced fixes"
     assert min(acc_rep) >= 2.9 * max(acc_ok)
-    # 2010-05-12 10:00:00 UTC is GPS week 1583; GPS - UTC was 15 s then.
-    assert gps[0].time_week == 1583
-    assert gps[0].time_week_ms == (3 * 86400 + 10 * 3600 + 15) * 1000
+    # The simulator's 2025-05-12 (a Monday) 10:00:00 UTC is GPS week 2366; GPS - UTC is 18 s.
+    assert RoverScenario().date == (2025, 5, 12)
+    assert gps[0].time_week == 2366
+    assert gps[0].time_week_ms == (1 * 86400 + 10 * 3600 + 18) * 1000
 
 
 def test_alarm_sends_statustext_and_hold(tmp_path: Path) -> None:

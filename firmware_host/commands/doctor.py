@@ -15,8 +15,10 @@ Checks, in order:
    127.0.0.1 only (never on a public interface) to find a port already in use;
 5. the flight recorder's directory: it exists or can be created, is writable, and its disk has
    room for the configured cap;
-6. with a MAVLink output: the GPS receiver's rate, read for ``--gps-probe-s`` seconds (a warning
-   below 5 Hz: ArduPilot's ``AP_GPS::is_healthy`` wants a fix at least every ~215 ms); with a
+6. the GPS receiver, read for ``--gps-probe-s`` seconds: whether its sentences at its rate fit
+   the port's baud rate (a warning naming the largest rate that fits, :mod:`drivers.gps.link`);
+   with a MAVLink output, its rate (a warning below 5 Hz: ArduPilot's ``AP_GPS::is_healthy``
+   wants a fix at least every ~215 ms); with a
    ``[mavlink]`` table, the tlog directory and the parameter file's directory are writable and
    have room (a full disk stops them, not forwarding);
 7. an ROV: whether its heading FDI has a gyro witness; without one (the Outland link, or
@@ -44,6 +46,7 @@ from typing import Any
 
 from serial.tools import list_ports
 
+from drivers.gps.link import LinkFit, bits_per_byte
 from drivers.gps.stream import NmeaStream
 from drivers.mavlink.links import is_network_url
 from drivers.transport import SerialSettings, open_port
@@ -216,16 +219,22 @@ GPS_HEALTHY_PERIOD_S = 0.215  # ArduPilot AP_GPS::is_healthy: updates faster tha
 
 
 def check_gps_rate(rep: Report, url: str, baudrate: int, seconds: float,
-                   opener: Callable[..., Any] | None = None) -> None:
-    """Read the receiver for ``seconds`` and warn when its epochs are slower than ArduPilot's
-    GPS health check accepts (a 1 Hz receiver feeding GPS_INPUT). A port that cannot be opened
-    (in use by the running bridge, absent) is skipped: the device check reports it."""
+                   opener: Callable[..., Any] | None = None, *, bits: float = 10.0,
+                   autopilot: bool = True) -> None:
+    """Read the receiver for ``seconds``; warn when its sentences at its rate do not fit
+    ``baudrate`` (:mod:`drivers.gps.link`: the largest rate that fits, the fixes), and, with
+    an ``autopilot`` (a MAVLink output), when its epochs are slower than ArduPilot's GPS health
+    check accepts (a 1 Hz receiver feeding GPS_INPUT). A port that cannot be opened (in use by
+    the running bridge, absent) is skipped: the device check reports it."""
     try:
         port = (opener or open_port)(SerialSettings(url=url, baudrate=baudrate, timeout_s=0.1))
     except (FdiBridgeError, OSError, ValueError):
         return
     stream = NmeaStream()
     times: list[float] = []
+    kinds: tuple[str, ...] = ()
+    first_bytes: int | None = None  # bytes_in when the first epoch closed
+    last_bytes = 0
     try:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
@@ -233,6 +242,10 @@ def check_gps_rate(rep: Report, url: str, baudrate: int, seconds: float,
             for e in stream.feed(data or b""):
                 if e.utc_s is not None:
                     times.append(e.utc_s)
+                    kinds = e.sentences
+                    if first_bytes is None:
+                        first_bytes = stream.bytes_in
+                    last_bytes = stream.bytes_in
     except (OSError, ValueError) as err:
         rep.warnings.append(f"GPS rate: could not read {url}: {err}")
         return
@@ -240,9 +253,20 @@ def check_gps_rate(rep: Report, url: str, baudrate: int, seconds: float,
         port.close()
     gaps = sorted(b - a for a, b in itertools.pairwise(times) if b > a)
     if not gaps:
-        rep.warnings.append(f"GPS rate: fewer than two epochs from {url} in {seconds:g} s")
+        if autopilot:
+            rep.warnings.append(f"GPS rate: fewer than two epochs from {url} in {seconds:g} s")
         return
     period = gaps[len(gaps) // 2]
+    if len(times) >= 3 and first_bytes is not None and last_bytes > first_bytes:
+        fit = LinkFit(baudrate, (last_bytes - first_bytes) / (len(times) - 1), 1.0 / period,
+                      kinds, bits)
+        if not fit.fits:
+            rep.warnings.append(fit.message())
+        else:
+            rep.ok.append(f"GPS link: {fit.need_bytes_s:.0f} B/s of {fit.capacity_bytes_s:.0f} "
+                          f"at {baudrate} baud ({fit.load:.0%})")
+    if not autopilot:
+        return
     if period > GPS_HEALTHY_PERIOD_S:
         rep.warnings.append(
             f"GPS rate: the receiver sends a fix every {period:.2f} s ({1 / period:.1f} Hz); "
@@ -337,9 +361,12 @@ def diagnose(
         for i, gcs in enumerate(mc.gcs):
             check_mavlink_url(rep, f"MAVLink gcs {gcs.name or i}", gcs.url)
         check_mavlink_disk(rep, mc)
-    if gps_probe_s > 0 and bf.rover is not None and (
-            bf.mavlink is not None or mavlink_url or bf.rover.output.mavlink_url):
-        check_gps_rate(rep, bf.rover.port.url, bf.rover.port.baudrate, gps_probe_s)
+    if gps_probe_s > 0 and bf.rover is not None and mode != "rov":
+        gp = bf.rover.port
+        check_gps_rate(rep, gp.url, gp.baudrate, gps_probe_s,
+                       bits=bits_per_byte(gp.bytesize, gp.parity, gp.stopbits),
+                       autopilot=bool(bf.mavlink is not None or mavlink_url
+                                      or bf.rover.output.mavlink_url))
     rc_rec = bf.recorder
     check_recorder(rep, record_dir if record_dir is not None else rc_rec.dir,
                    rc_rec.dir_max_mb, rc_rec.file_max_mb, access=access)
@@ -349,7 +376,8 @@ def diagnose(
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", required=True, help="config file or preset name")
     parser.add_argument("--gps-probe-s", type=float, default=3.0,
-                        help="with a MAVLink output, read the GPS this long to check its rate "
+                        help="read the GPS this long to check that its rate fits the baud rate "
+                             "(and, with a MAVLink output, ArduPilot's health check) "
                              "(0: do not)")
     parser.add_argument("--mavlink", default=None,
                         help="the MAVLink URL `run` will be given (default: the config's)")

@@ -49,7 +49,9 @@ def _clock(s: float) -> str:
 
 def status_line(s: Snapshot) -> str:
     """``0:01:05 epochs 650 faults 3 alarms 1 | gps up 812 B/s | last epoch 0.1 s ago`` (the
-    last epoch is the rover's last fix, the ROV's last control step)."""
+    last epoch is the rover's last fix, the ROV's last control step), then the vehicle's
+    ``detail`` (the rover: ``| DGPS 9sv HDOP 0.8 +0.3E +13.3N m 2.0 m/s | out accept DGPS
+    0.49 m | GGA+RMC+VTG``, its fix as cgps shows one)."""
     head = [_clock(s.elapsed_s), f"epochs {s.epochs}"]
     if s.faults is not None:
         head.append(f"faults {s.faults}")
@@ -65,6 +67,7 @@ def status_line(s: Snapshot) -> str:
             since = "" if p.down_s is None else f" {p.down_s:.1f} s"
             parts.append(f"{p.name} WAITING{since}")
     parts.append(f"last epoch {_age(s.last_record_age_s)}")
+    parts += s.detail
     return " | ".join(parts)
 
 

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from drivers.capture import CaptureReader, is_capture
+from drivers.gps.link import LinkFit
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port, read_some
 from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
@@ -283,7 +284,9 @@ def run_replay(
     inp = load_input(capture)
     out_dir.mkdir(parents=True, exist_ok=True)
     with open(out_dir / "epochs.jsonl", "w", encoding="utf-8") as jsonl:
-        pipeline = RoverPipeline(cfg.rover, jsonl=jsonl, sinks=sinks)
+        # A capture's header says its line's baud rate; a plain log's is unknown (not judged).
+        pipeline = RoverPipeline(cfg.rover, jsonl=jsonl, sinks=sinks,
+                                 baudrate=inp.baudrate if inp.kind == "capture" else 0)
         t0 = time.perf_counter()
         partial = ""
         try:
@@ -351,6 +354,17 @@ def signals_interrupt(signums: tuple[int, ...] = (signal.SIGTERM, signal.SIGHUP)
             signal.signal(s, h)
 
 
+def link_warnings(summary: dict[str, Any]) -> list[str]:
+    """The capture's receiver against its line's baud rate (its header's): a recording whose
+    sentences at its rate do not fit could not have come from that line as recorded."""
+    link = summary.get("link")
+    if not isinstance(link, dict) or link.get("fits", True):
+        return []
+    fit = LinkFit(int(link["baudrate"]), float(link["bytes_per_epoch"]), float(link["rate_hz"]),
+                  tuple(link["sentences"]))
+    return [f"{summary['input'].get('file', 'input')}: {fit.message()}"]
+
+
 def print_summary(s: dict[str, Any], stream: TextIO) -> None:
     stream.write(replay_text(s) + "\n")
 
@@ -401,6 +415,7 @@ def _run(args: argparse.Namespace) -> int:
         for sink in sinks:
             sink.close()
     useless, warnings = replay_problems(summary)
+    warnings += link_warnings(summary)
     for w in warnings:
         print(f"fdi-bridge replay: warning: {w}", file=sys.stderr)
     if args.json:

@@ -4,7 +4,10 @@
 
 * ``DIR/rover.nmea``: the receiver's NMEA stream (GGA, RMC, VTG per epoch; GST and ZDA with
   ``--gst`` / ``--zda``), a plain log with ``#`` header comments, as an AgGPS 132 would send it;
-* ``DIR/rover.cap``: the same bytes in the project's capture format, timestamped at the epochs;
+* ``DIR/rover.cap``: the same bytes in the project's capture format, timestamped at the epochs,
+  its header's baud rate the smallest standard one from 9600 up that carries the sentences at
+  the rate (10 Hz GGA+RMC+VTG: 38400; 5 Hz: 19200; 1 Hz: 9600), as the receiver would have to
+  be set;
 * ``DIR/truth.jsonl``: per epoch the true position, the DGPS error and the injected fault;
 * ``DIR/scenario.json``: the parameters.
 
@@ -45,6 +48,7 @@ speed the tractor has, stops included), ``multipath`` and ``outage``.
 from __future__ import annotations
 
 import argparse
+import calendar
 import json
 import math
 from collections.abc import Iterator
@@ -55,6 +59,7 @@ from typing import Literal
 import numpy as np
 
 from drivers.capture import CaptureWriter, Channel
+from drivers.gps.link import STANDARD_BAUDS, smallest_baud
 from drivers.gps.nmea import (
     KNOT_MPS,
     format_date,
@@ -106,7 +111,9 @@ class RoverScenario:
     gst: bool = False
     zda: bool = False
     start_utc_s: float = 10 * 3600.0
-    date: tuple[int, int, int] = (2010, 5, 12)
+    # A date ArduPilot accepts: AP_GPS refuses GPS times before 2022-01-01 (SYSTEM_TIME stays
+    # 0 on a date of 2010). Fixed, so that a seed gives the same bytes on any day.
+    date: tuple[int, int, int] = (2025, 5, 12)
     error_model: str = "gm"  # one of ERROR_MODELS; "gm" is the model of the module docstring
     # The field models' receiver and tractor are drawn from this seed (None: ``seed``): the
     # same receiver on another day is another ``seed`` with the same ``receiver_seed``.
@@ -584,14 +591,17 @@ def _nmea_epoch(
 def write_run(sc: RoverScenario, out_dir: Path) -> dict[str, object]:
     """Write rover.nmea, rover.cap, truth.jsonl and scenario.json; return a short summary."""
 
+    baud = link_baudrate(sc)
     out_dir.mkdir(parents=True, exist_ok=True)
     n_epochs = n_fault = 0
     header = (
         "# fdi-bridge generated rover run (Trimble AgGPS 132 style NMEA, DGPS)\n"
-        f"# rate_hz: {sc.rate_hz}  duration_s: {sc.duration_s}  seed: {sc.seed}\n"
+        f"# rate_hz: {sc.rate_hz}  duration_s: {sc.duration_s}  seed: {sc.seed}  "
+        f"baud: {baud}\n"
         "# faults: see truth.jsonl; parameters: scenario.json\n"
     )
-    channel = Channel(name="gps", url="/dev/ttyUSB0", baudrate=9600, direction="rx")
+    channel = Channel(name="gps", url="/dev/ttyUSB0", baudrate=baud, direction="rx")
+    t0_us = calendar.timegm((*sc.date, 0, 0, 0)) * 1_000_000
     with (
         open(out_dir / "rover.nmea", "wb") as nmea,
         open(out_dir / "truth.jsonl", "w", encoding="utf-8") as truth_f,
@@ -600,13 +610,32 @@ def write_run(sc: RoverScenario, out_dir: Path) -> dict[str, object]:
         nmea.write(header.encode("ascii"))
         for t, data, truth in generate(sc):
             nmea.write(data)
-            cap.write(0, data, t_us=round((t - sc.start_utc_s) * 1e6) + 1_273_622_400_000_000)
+            cap.write(0, data, t_us=round((t - sc.start_utc_s) * 1e6) + t0_us)
             truth_f.write(json.dumps(truth) + "\n")
             n_epochs += 1
             n_fault += bool(truth["fault"])
     params = asdict(sc)
     (out_dir / "scenario.json").write_text(json.dumps(params, indent=2) + "\n", encoding="utf-8")
-    return {"epochs": n_epochs, "faulty_epochs": n_fault, "out": str(out_dir)}
+    return {"epochs": n_epochs, "faulty_epochs": n_fault, "baud": baud, "out": str(out_dir)}
+
+
+SIM_MIN_BAUD = 9600  # the AgGPS 132's default; a slower line is never chosen for a run
+SIZE_MARGIN = 1.1  # epochs differ by a few bytes (signs, digits, a no-fix epoch): 10 % spare
+
+
+def link_baudrate(sc: RoverScenario) -> int:
+    """The baud rate the run's capture says: the smallest standard rate from 9600 up that
+    carries its sentences at its rate (the first epoch's bytes + 10 %; drivers/gps/link.py).
+    Raises UsageError when none does (not even 115200)."""
+    first = next(generate(sc))[1]
+    need = len(first) * SIZE_MARGIN
+    baud = smallest_baud(need, sc.rate_hz)
+    if baud is not None and baud < SIM_MIN_BAUD:
+        baud = SIM_MIN_BAUD
+    if baud is None:
+        raise UsageError(f"--rate {sc.rate_hz:g}: {len(first)} bytes an epoch at {sc.rate_hz:g}"
+                         f" Hz do not fit even {STANDARD_BAUDS[-1]} baud")
+    return baud
 
 
 # --------------------------------------------------------------------------- CLI

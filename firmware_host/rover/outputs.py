@@ -200,7 +200,9 @@ class NmeaSink:
 
 
 # GGA quality -> GPS_FIX_TYPE. 6 (dead reckoning), 7 (manual input) and 8 (simulator) are not
-# here: ArduPilot's own NMEA driver (AP_GPS_NMEA) reports them as no fix, and so do we.
+# here: we send them as no fix, because none is a measured position the EKF should fuse.
+# ArduPilot's own NMEA driver (AP_GPS_NMEA) is laxer: it treats only 0 and 6 as no fix and
+# takes 7 and 8 (its switch's default) as a 3D fix.
 _FIX_TYPE = {1: 3, 2: 4, 3: 3, 4: 6, 5: 5, 9: 4}
 NO_FIX_QUALITIES = frozenset({6, 7, 8})
 
@@ -241,7 +243,9 @@ class MavlinkGpsSink:
 
     * **fix type**: from the receiver's GGA quality (DGPS 4, RTK float 5, fixed 6); a replaced
       fix is 3 (3D); quality 6/7/8 (dead reckoning, manual, simulator) and the alarm are no fix
-      (type 1, position 0), as ArduPilot's NMEA driver treats them;
+      (type 1, position 0, ``satellites_visible`` 0: GPS_RAW_INT must not show "no fix, 10
+      satellites"); ArduPilot's NMEA driver treats only 0 and 6 as no fix, 7 and 8 as 3D, but
+      neither is a measurement;
     * **altitude**: the fix's; an epoch without one (RMC-only, a lost GGA) holds the last good
       altitude for :data:`ALT_HOLD_S` with a growing vertical accuracy, then goes out as a 2D
       fix with the ALT ignore flag -- never 0 m as a 3D fix;
@@ -274,6 +278,7 @@ class MavlinkGpsSink:
         self._next_heartbeat: float | None = None
         self._was_alarm = False
         self._gps = _GpsInputState()
+        self.last_fix: Any | None = None  # the last GPS_INPUT sent (the status line shows it)
 
     def emit(self, out: EpochOutcome) -> None:
         d = out.decision
@@ -286,6 +291,7 @@ class MavlinkGpsSink:
         if fix is not None:
             self.endpoint.send_gps_input(fix)
             self.sent += 1
+            self.last_fix = fix
         if d.alarm_raised:
             self.endpoint.send_statustext(
                 2, f"FDI GPS: {self.cfg.detector.max_consecutive}+ faults in a row, auto-nav stop"
@@ -359,7 +365,7 @@ class MavlinkGpsSink:
             speed_accuracy_mps=s_acc,
             horiz_accuracy_m=h_acc,
             vert_accuracy_m=v_acc,
-            satellites_visible=e.num_sats or 0,
+            satellites_visible=(e.num_sats or 0) if valid else 0,
             gps_id=self.cfg.output.gps_id,
             yaw_deg=out.heading_deg if valid else None,
         )

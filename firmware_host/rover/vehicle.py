@@ -46,6 +46,23 @@ def rover_mavlink_spec(cfg: BridgeConfig, url: str | None) -> MavlinkSpec | None
                        rc.reconnect_max_s)
 
 
+GGA_QUALITY = {0: "no fix", 1: "GPS", 2: "DGPS", 3: "PPS", 4: "RTK", 5: "RTK float",
+               6: "DR", 7: "manual", 8: "sim", 9: "SBAS"}
+"""GGA quality indicator -> a short name (NMEA 0183 4.x), as the status line shows it."""
+FIX_TYPE_NAMES = {0: "none", 1: "no fix", 2: "2D", 3: "3D", 4: "DGPS", 5: "RTK float",
+                  6: "RTK"}
+"""GPS_FIX_TYPE of the GPS_INPUT sent -> a short name."""
+
+
+def _last_gps_input(pipeline: RoverPipeline) -> Any | None:
+    """The last GPS_INPUT the pipeline's MAVLink output sent (direct or through the router)."""
+    for sink in pipeline.sinks:
+        gps = sink if isinstance(sink, MavlinkGpsSink) else getattr(sink, "gps", None)
+        if isinstance(gps, MavlinkGpsSink):
+            return gps.last_fix
+    return None
+
+
 class RoverVehicle:
     """See the module docstring. ``nmea_url``/``mavlink_url`` override the config's."""
 
@@ -88,7 +105,11 @@ class RoverVehicle:
                                  backoff_max_s=rc.reconnect_max_s,
                                  opener=open_port_nonblocking, tap=tap)
             sinks.append(self.nmea)
-        pipeline = self.pipeline = RoverPipeline(rc, jsonl=ctx.epochs.stream, sinks=sinks)
+        # The receiver's sentences at its rate against the line's baud rate: said once in the
+        # log and shown on the status line (a network URL has no baud rate: not judged).
+        baud = 0 if "://" in rc.port.url and not rc.port.url.startswith("rfc2217://") else None
+        pipeline = self.pipeline = RoverPipeline(rc, jsonl=ctx.epochs.stream, sinks=sinks,
+                                                 baudrate=baud, warn_link=True)
         if ctx.router is not None:
             attach_rover(pipeline, ctx.router)  # GPS_INPUT, statistics, live parameters
         elif ctx.mavlink is not None:
@@ -111,6 +132,45 @@ class RoverVehicle:
         wait = max(self.cfg.rover.port.timeout_s, 0.01)
         self._idle_s = max(0.0, wait - (self.clock() - t0))
         return 0
+
+    def status_fields(self) -> dict[str, Any]:
+        """Counters the status line adds after the rover's (the runner's Snapshot ``extra``):
+        ``LINK`` when the receiver's sentences at its rate do not fit the port's baud rate."""
+        fit = self.pipeline.link.result if self.pipeline is not None else None
+        if fit is not None and not fit.fits:
+            return {"LINK": f"{fit.load:.1f}x {fit.baudrate} baud, max {fit.max_rate_hz:.2f} Hz"}
+        return {}
+
+    def status_detail(self) -> tuple[str, ...]:
+        """The fix, compact as cgps shows it, after the ports on the status line (Snapshot
+        ``detail``): the receiver's last fix and the output's position from the first fix
+        with the speed (``DGPS 9sv HDOP 0.8 +0.3E +13.3N m 2.0 m/s``), what was sent and its
+        accuracy (``out replace 3D 1.49 m``: the decision, GPS_INPUT's fix type and
+        horizontal accuracy, when a MAVLink output is up), and the sentences the receiver
+        sends (``GGA+RMC+VTG``)."""
+        pipeline = self.pipeline
+        last = pipeline.last_outcome if pipeline is not None else None
+        if pipeline is None or last is None:
+            return ()
+        e, d = last.epoch, last.decision
+        if e.valid:
+            sats = "" if e.num_sats is None else f" {e.num_sats}sv"
+            hdop = "" if e.hdop is None else f" HDOP {e.hdop:.1f}"
+            fix_text = f"{GGA_QUALITY.get(e.quality, str(e.quality))}{sats}{hdop}"
+        else:
+            fix_text = "no fix"
+        if d.out_enu is not None:
+            speed = "" if e.speed_mps is None else f" {e.speed_mps:.1f} m/s"
+            fix_text += f" {d.out_enu[0]:+.1f}E {d.out_enu[1]:+.1f}N m{speed}"
+        sent = ""
+        fix = _last_gps_input(pipeline)
+        if fix is not None:
+            kind = FIX_TYPE_NAMES.get(int(fix.fix_type), str(fix.fix_type))
+            sent = f" {kind} {fix.horiz_accuracy_m:.2f} m" if fix.fix_type >= 2 else f" {kind}"
+        parts = [fix_text, f"out {d.action}{sent}"]
+        if e.sentences:
+            parts.append("+".join(dict.fromkeys(e.sentences)))
+        return tuple(parts)
 
     def check(self, now: float) -> None:
         if self.failsafe is not None:

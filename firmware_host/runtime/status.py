@@ -62,6 +62,9 @@ class Snapshot:
     ports: tuple[PortStatus, ...] = ()
     last_record_age_s: float | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
+    # The vehicle's state in words, after the ports (the rover: its fix, its output, its
+    # receiver's sentences), one section each.
+    detail: tuple[str, ...] = ()
 
 
 class StatusSink(Protocol):
