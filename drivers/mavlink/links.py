@@ -124,20 +124,26 @@ def udp_socket_drops(sock: socket.socket) -> int | None:
         inode = str(os.fstat(sock.fileno()).st_ino)
     except (OSError, ValueError):
         return None
-    for table in ("/proc/net/udp", "/proc/net/udp6"):
+    for cols in _proc_net_rows("udp"):
+        if len(cols) >= 13 and cols[9] == inode:
+            try:
+                return int(cols[12])
+            except ValueError:
+                return None
+    return None
+
+
+def _proc_net_rows(proto: str) -> Iterator[list[str]]:
+    """The socket rows of ``/proc/net/<proto>`` and ``/proc/net/<proto>6``, split into
+    columns (Linux; none where a table cannot be read)."""
+    for table in (f"/proc/net/{proto}", f"/proc/net/{proto}6"):
         try:
             with open(table, encoding="ascii") as f:
                 lines = f.read().splitlines()[1:]
         except OSError:
             continue
         for line in lines:
-            cols = line.split()
-            if len(cols) >= 13 and cols[9] == inode:
-                try:
-                    return int(cols[12])
-                except ValueError:
-                    return None
-    return None
+            yield line.split()
 
 
 def port_holder(proto: str, port: int) -> str:
@@ -147,26 +153,19 @@ def port_holder(proto: str, port: int) -> str:
     user's process, whose descriptors are not readable, ``"a process of uid 1000"``; ``""``
     when nothing is found."""
     inodes: dict[str, int] = {}
-    for table in (f"/proc/net/{proto}", f"/proc/net/{proto}6"):
-        try:
-            with open(table, encoding="ascii") as f:
-                lines = f.read().splitlines()[1:]
-        except OSError:
+    for cols in _proc_net_rows(proto):
+        if len(cols) < 10 or ":" not in cols[1]:
             continue
-        for line in lines:
-            cols = line.split()
-            if len(cols) < 10 or ":" not in cols[1]:
-                continue
-            try:
-                local_port = int(cols[1].rsplit(":", 1)[1], 16)
-            except ValueError:
-                continue
-            if local_port != port or (proto == "tcp" and cols[3] != "0A"):  # 0A: LISTEN
-                continue
-            try:
-                inodes[cols[9]] = int(cols[7])
-            except ValueError:
-                continue
+        try:
+            local_port = int(cols[1].rsplit(":", 1)[1], 16)
+        except ValueError:
+            continue
+        if local_port != port or (proto == "tcp" and cols[3] != "0A"):  # 0A: LISTEN
+            continue
+        try:
+            inodes[cols[9]] = int(cols[7])
+        except ValueError:
+            continue
     inodes.pop("0", None)
     if not inodes:
         return ""
