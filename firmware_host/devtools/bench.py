@@ -305,45 +305,38 @@ def bench_loop(rate_hz: float, duration_s: float) -> dict[str, Any]:
                         "max": s.get("proc_max_ms")}}
 
 
-def bench_forwarding_figures(rate_pps: int = 200, seconds: float = 5.0) -> dict[str, Any]:
-    """:func:`firmware_host.devtools.router_bench.bench_forwarding` in a child interpreter, with a
-    deadline: it spawns its own sender/receiver processes, which need an importable main
-    module, and a failing child must not hang this command."""
-    import subprocess
-    import sys
-
-    code = ("import json, sys\n"
-            "from firmware_host.devtools.router_bench import bench_forwarding\n"
+def _router_bench_in_child(call: str, timeout_s: float) -> dict[str, Any]:
+    """``firmware_host.devtools.router_bench.<call>`` in a child interpreter, with a deadline:
+    the benches spawn their own sender/receiver processes, which need an importable main
+    module, and a failing child must not hang this command; its JSON result, or ``error``."""
+    name = call.split("(", 1)[0]
+    code = ("import json\n"
+            f"from firmware_host.devtools.router_bench import {name}\n"
             "if __name__ == '__main__':\n"
-            f"    print(json.dumps(bench_forwarding({int(rate_pps)}, {float(seconds)!r})))\n")
+            f"    print(json.dumps({call}))\n")
     try:
         proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                              timeout=4 * seconds + 60.0, check=False)
+                              timeout=timeout_s, check=False)
     except subprocess.TimeoutExpired:
         return {"error": "timed out"}
     if proc.returncode != 0:
         tail = (proc.stderr.strip().splitlines() or ["?"])[-1]
         return {"error": f"failed: {tail}"}
     return dict(json.loads(proc.stdout.strip().splitlines()[-1]))
+
+
+def bench_forwarding_figures(rate_pps: int = 200, seconds: float = 5.0) -> dict[str, Any]:
+    """:func:`firmware_host.devtools.router_bench.bench_forwarding` in a child interpreter
+    (:func:`_router_bench_in_child`)."""
+    return _router_bench_in_child(f"bench_forwarding({int(rate_pps)}, {float(seconds)!r})",
+                                  4 * seconds + 60.0)
 
 
 def bench_flood_figures(rate_pps: int = 20000, seconds: float = 20.0) -> dict[str, Any]:
     """:func:`firmware_host.devtools.router_bench.bench_gps_input_under_flood` in a child
-    interpreter with a deadline (as :func:`bench_forwarding_figures`)."""
-    code = ("import json\n"
-            "from firmware_host.devtools.router_bench import bench_gps_input_under_flood\n"
-            "if __name__ == '__main__':\n"
-            f"    print(json.dumps(bench_gps_input_under_flood({int(rate_pps)}, "
-            f"{float(seconds)!r})))\n")
-    try:
-        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                              timeout=2 * seconds + 90.0, check=False)
-    except subprocess.TimeoutExpired:
-        return {"error": "timed out"}
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["?"])[-1]
-        return {"error": f"failed: {tail}"}
-    return dict(json.loads(proc.stdout.strip().splitlines()[-1]))
+    interpreter (:func:`_router_bench_in_child`)."""
+    return _router_bench_in_child(
+        f"bench_gps_input_under_flood({int(rate_pps)}, {float(seconds)!r})", 2 * seconds + 90.0)
 
 
 def bench_replay_memory(long_s: float = 86400.0, short_s: float = 60.0, rate_hz: float = 1.0,
