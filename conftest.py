@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import shutil
 import signal
 import tempfile
@@ -19,6 +20,25 @@ def corpus() -> Path:
     if not CORPUS.is_dir():
         pytest.skip(f"shared corpus not found at {CORPUS} (a fresh clone without shared/)")
     return CORPUS
+
+
+_OUR_LOGGERS = ("fdi_bridge", "firmware_host", "drivers", "fdi")
+
+
+@pytest.fixture(autouse=True)
+def _logger_levels() -> Iterator[None]:
+    """Every test starts with the project's logger levels as the last test found them, and
+    leaves them so: commands run in-process (bench, eval, fleet, the harnesses, demo insgnss)
+    set ``fdi_bridge.rover`` to ERROR for their run, and a later test in the same worker that
+    expects a warning then saw none (4 failures with a CPU hog beside the suite, where xdist
+    gave the files to the workers in another order)."""
+    manager = logging.Logger.manager
+    saved = {name: lg.level for name, lg in manager.loggerDict.items()
+             if isinstance(lg, logging.Logger) and name.startswith(_OUR_LOGGERS)}
+    yield
+    for name, lg in list(manager.loggerDict.items()):
+        if isinstance(lg, logging.Logger) and name.startswith(_OUR_LOGGERS):
+            lg.setLevel(saved.get(name, logging.NOTSET))
 
 
 @pytest.fixture
