@@ -110,7 +110,8 @@ def is_pty(path: str) -> bool:
     return os.path.realpath(path).startswith("/dev/pts/")
 
 
-def _command(pid: int) -> str:
+def command(pid: int) -> str:
+    """A process's command line, shortened to 80 characters (its name if it has none)."""
     try:
         raw = (_PROC / str(pid) / "cmdline").read_bytes()
     except OSError:
@@ -139,8 +140,9 @@ def _lock_owners(st: os.stat_result) -> list[int]:
     return pids
 
 
-def _openers(real: str) -> list[int]:
-    """pids with a descriptor on ``real`` (what gpsd's ``fusercount`` counts)."""
+def openers(target: str) -> list[int]:
+    """pids with a descriptor whose link is ``target``: a device's real path (what gpsd's
+    ``fusercount`` counts), or a socket's ``socket:[INODE]``."""
     pids: list[int] = []
     try:
         procs = [p for p in _PROC.iterdir() if p.name.isdigit()]
@@ -153,7 +155,7 @@ def _openers(real: str) -> list[int]:
             continue  # gone, or not ours to read
         for fd in fds:
             try:
-                if os.readlink(fd) == real:
+                if os.readlink(fd) == target:
                     pids.append(int(proc.name))
                     break
             except OSError:
@@ -168,15 +170,15 @@ def holders(path: str) -> list[Holder]:
         st = os.stat(path)
     except OSError:
         return []
-    pids = _lock_owners(st) or _openers(os.path.realpath(path))
-    return [Holder(pid, _command(pid)) for pid in dict.fromkeys(pids)]
+    pids = _lock_owners(st) or openers(os.path.realpath(path))
+    return [Holder(pid, command(pid)) for pid in dict.fromkeys(pids)]
 
 
 def other_openers(path: str) -> list[Holder]:
     """The processes other than this one with ``path`` open (gpsd's ``fusercount`` less one)."""
     me = os.getpid()
-    pids = [p for p in _openers(os.path.realpath(path)) if p != me]
-    return [Holder(pid, _command(pid)) for pid in pids]
+    pids = [p for p in openers(os.path.realpath(path)) if p != me]
+    return [Holder(pid, command(pid)) for pid in pids]
 
 
 def describe(found: list[Holder]) -> str:

@@ -38,6 +38,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Hashable, Iterator
 
+from drivers import devices
 from drivers.resilient import ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
 from fdi.errors import EndpointError
@@ -169,41 +170,12 @@ def port_holder(proto: str, port: int) -> str:
     inodes.pop("0", None)
     if not inodes:
         return ""
-    wanted = {f"socket:[{inode}]": inode for inode in inodes}
-    try:
-        pids = [d for d in os.listdir("/proc") if d.isdigit()]
-    except OSError:
-        pids = []
-    for pid in pids:
-        try:
-            fds = os.listdir(f"/proc/{pid}/fd")
-        except OSError:
-            continue  # another user's process, or gone
-        for fd in fds:
-            try:
-                target = os.readlink(f"/proc/{pid}/fd/{fd}")
-            except OSError:
-                continue
-            if target in wanted:
-                return f"pid {pid} ({_command(pid)})"
+    for inode in inodes:
+        pids = devices.openers(f"socket:[{inode}]")
+        if pids:
+            return str(devices.Holder(pids[0], devices.command(pids[0])))
     uid = next(iter(inodes.values()))
     return f"a process of uid {uid}"
-
-
-def _command(pid: str) -> str:
-    try:
-        with open(f"/proc/{pid}/cmdline", "rb") as f:
-            argv = [a.decode(errors="replace") for a in f.read().split(b"\0") if a]
-    except OSError:
-        argv = []
-    if not argv:
-        try:
-            with open(f"/proc/{pid}/comm", encoding="utf-8", errors="replace") as f:
-                return f.read().strip()
-        except OSError:
-            return "?"
-    text = " ".join(" ".join([os.path.basename(argv[0]), *argv[1:]]).split())
-    return text if len(text) <= 80 else text[:77] + "..."
 
 
 class Link(ABC):
