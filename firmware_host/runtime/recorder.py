@@ -44,6 +44,7 @@ from drivers.capture import (
     encode_record,
 )
 from fdi.errors import FdiBridgeError
+from firmware_host.runtime.disk_outage import DiskOutage
 
 log = logging.getLogger("fdi_bridge.recorder")
 
@@ -66,7 +67,7 @@ class RecorderError(FdiBridgeError):
     """The recorder's directory cannot be written."""
 
 
-class FlightRecorder:
+class FlightRecorder(DiskOutage):
     """See the module docstring. Add channels first, then ``write``; ``poll`` every loop.
 
     A full or read-only disk never raises out of :meth:`write`, :meth:`poll` or :meth:`flush`:
@@ -75,6 +76,10 @@ class FlightRecorder:
     bytes again it says so once and records on. No file keeps a partial record in its middle
     (:class:`drivers.capture.AppendFile` cuts a failed write back to the last whole record).
     """
+
+    _outage_log = log
+    _outage_stopped = "recording stopped"
+    _outage_unit = "records"
 
     def __init__(
         self,
@@ -106,15 +111,11 @@ class FlightRecorder:
         self.files_opened = 0
         self.files_deleted = 0
         self.syncs = 0
-        self.write_errors = 0  # failed attempts (write, create, fsync)
         self.lost_records = 0  # records handed to write() that never reached a file
         self.lost_bytes = 0
-        self.outages = 0  # times recording stopped for a disk error
         self.max_buffered = 0
         self.max_flush_s = 0.0  # the longest flush() the loop waited for (perf counter)
-        self._failing_since: float | None = None  # the current outage began (clock)
-        self._lost_in_outage = 0
-        self.last_error = ""
+        self._init_outage()  # write_errors, outages, last_error (DiskOutage)
         # fsync in a helper thread: the loop hands the bytes to the kernel (all a SIGKILL
         # needs) and never waits for the disk; the thread makes them durable (power loss).
         self._sync_lock = threading.Lock()
@@ -148,7 +149,7 @@ class FlightRecorder:
     @property
     def recording(self) -> bool:
         """False while a disk error keeps the recorder from writing."""
-        return self._failing_since is None
+        return self._writing
 
     # ------------------------------------------------------------------ writing
 
@@ -241,24 +242,13 @@ class FlightRecorder:
         n = count_records(blob)
         self.lost_records += n
         self.lost_bytes += len(blob)
-        self._lost_in_outage += n
+        self._lost_now(n)
 
-    def _failed(self, why: str) -> None:
-        self.write_errors += 1
-        self.last_error = why
-        if self._failing_since is None:
-            self._failing_since = self.clock()
-            self.outages += 1
-            log.warning("%s; recording stopped (detection and outputs go on), retrying every "
-                        "%.1f s", why, self.cfg.flush_interval_s)
+    def _outage_name(self) -> str:
+        return f"recorder: writing again to {self.path}"
 
-    def _recovered(self) -> None:
-        if self._failing_since is None:
-            return
-        log.warning("recorder: writing again to %s after %.1f s (%d records lost)", self.path,
-                    self.clock() - self._failing_since, self._lost_in_outage)
-        self._failing_since = None
-        self._lost_in_outage = 0
+    def _outage_retry_s(self) -> float:
+        return self.cfg.flush_interval_s
 
     # ------------------------------------------------------------------ files
 

@@ -27,6 +27,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TextIO, cast
 
+from firmware_host.runtime.disk_outage import DiskOutage
+
 try:  # the ``fast`` extra: a compiled encoder (no wheel on every platform, so optional)
     import orjson as _orjson
 except ImportError:  # pragma: no cover - exercised by the tests with the encoder disabled
@@ -191,7 +193,7 @@ def write_json_atomic(path: Path, obj: Any) -> None:
             os.close(dfd)
 
 
-class JsonlFile:
+class JsonlFile(DiskOutage):
     """A JSON Lines file that a full or read-only disk never stops, kill-safe to 0.25 s.
 
     :meth:`write` takes whole lines (a ``TextIO``'s ``write``, for the rover pipeline) and keeps
@@ -214,6 +216,11 @@ class JsonlFile:
     is created (empty, then appended to) as soon as it can be.
     """
 
+    _outage_log = log
+    _outage_stopped = "records are not written"
+    _outage_unit = "lines"
+    _outage_retry_fmt = "%.2f"
+
     def __init__(self, path: Path, *, clock: Callable[[], float] = time.monotonic,
                  flush_interval_s: float = 0.25, buffer_max: int = 256 * 1024) -> None:
         self.path = path
@@ -227,22 +234,18 @@ class JsonlFile:
         self._fd: int | None = None
         self._size = 0
         self._last_flush = clock()
-        self._failing_since: float | None = None
-        self._lost_in_outage = 0
         self.closed = False
         # Counters.
         self.lines_written = 0  # lines the file holds
         self.lost_lines = 0
         self.lost_bytes = 0
-        self.write_errors = 0  # failed tries (create, write)
-        self.outages = 0
-        self.last_error = ""
+        self._init_outage()  # write_errors, outages, last_error (DiskOutage)
         self._open()
 
     @property
     def writing(self) -> bool:
         """False while a disk error keeps the lines out of the file."""
-        return self._failing_since is None
+        return self._writing
 
     # ------------------------------------------------------------------ TextIO's part
 
@@ -359,24 +362,13 @@ class JsonlFile:
         n = self._held.count(b"\n")
         self.lost_lines += n
         self.lost_bytes += len(self._held)
-        self._lost_in_outage += n
+        self._lost_now(n)
 
-    def _failed(self, why: str) -> None:
-        self.write_errors += 1
-        self.last_error = why
-        if self._failing_since is None:
-            self._failing_since = self.clock()
-            self.outages += 1
-            log.warning("%s; records are not written (detection and outputs go on), retrying "
-                        "every %.2f s", why, self.flush_interval_s)
+    def _outage_name(self) -> str:
+        return f"{self.path}: writing again"
 
-    def _recovered(self) -> None:
-        if self._failing_since is None:
-            return
-        log.warning("%s: writing again after %.1f s (%d lines lost)", self.path,
-                    self.clock() - self._failing_since, self._lost_in_outage)
-        self._failing_since = None
-        self._lost_in_outage = 0
+    def _outage_retry_s(self) -> float:
+        return self.flush_interval_s
 
     def counters(self) -> dict[str, Any]:
         return {
