@@ -599,7 +599,7 @@ class GyroWitness:
                 self.maneuvers += 1
             self._man_left = p.maneuver_settle + 1
             self._man_bound += dt * dr
-        elif self._man_left > 0 and self._man_bound > 0.0:
+        elif self._man_left > 0:  # settling: its rate changes still add to the bound
             self._man_bound += dt * dr
         if self._man_left > 0:
             self._man_left -= 1

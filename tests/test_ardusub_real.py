@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import math
 import random
-import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -31,12 +30,13 @@ from typing import Any
 import pytest
 
 from drivers.mavlink import io as mio
-from fdi.gyro_witness import GyroWitness, WitnessParams
+from fdi.gyro_witness import GyroWitness
 from fdi.heading_ft import FtConfig
 from firmware_host.rov.ardusub import HANDBACK, STEERING, NullOutput, RovAutopilotLoop
 from firmware_host.rov.config import RovConfig, load_rov_config, project_root
 from firmware_host.rov.replay import replay_ardusub
 from firmware_host.runtime.config import load_bridge_file, rov_config
+from tests.test_ardusub_tlog import DEC_DEG, _ticks
 
 
 def _capture(corpus: Path, name: str) -> tuple[Path, Path]:
@@ -122,18 +122,12 @@ def test_a_fast_turn_with_a_lagging_compass_is_not_a_fault() -> None:
     assert _fast_turn(GyroWitness(replace(p, maneuver_deg=0.0)))
 
 
-def test_witness_params_cover_the_ft_keys() -> None:
-    assert isinstance(FtConfig().witness_params(), WitnessParams)
-
-
 # -- the BlueROV2 dive in every heading/gyro combination -------------------------------------
 
 def _dive_records(corpus: Path, heading: str, gyro: str) -> list[dict[str, Any]]:
     path = corpus / "ardusub" / "small.tlog"
     if not path.exists():
         pytest.skip(f"the ArduSub dive is not in the corpus ({path})")
-    sys.path.insert(0, str(project_root()))
-    from tests.test_ardusub_tlog import DEC_DEG, _ticks
     cfg, _ = load_rov_config(project_root() / "config" / "rov-ardusub-example.toml")
     kw: dict[str, Any] = {"heading": heading, "gyro": gyro, "steer": False}
     if heading == "raw_compass":
