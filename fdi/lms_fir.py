@@ -26,7 +26,7 @@ a turn on a non-linear plant).
 
 Measured traps this design avoids are listed in ``../shared/FINDINGS.md`` ("Adaptive FIR with
 LMS"). Plain Python floats with a doubled ring buffer and running sums: one step costs a few
-microseconds (see ``firmware_host.rov.app.bench_rov_step``).
+microseconds (see ``firmware_host.devtools.sim_rov.bench_rov_step``).
 """
 
 from __future__ import annotations
@@ -132,6 +132,7 @@ class AdaptiveFir:
         self._x_sum += x - dropped
 
     def regressor(self) -> list[float]:
+        """The regressor u(k): the last M inputs, newest first (plus 1.0 with the bias tap)."""
         x = self._buf[self._pos : self._pos + self.M]
         if self.bias_tap:
             x.append(1.0)
@@ -139,6 +140,7 @@ class AdaptiveFir:
 
     def predict(self, C: list[float] | None = None) -> float:
         # eq. (3): d(k) = sum_i C_i u(k + 1 - i), shifted one step back (strictly causal)
+        """The FIR output d(k) with weights ``C`` (default: the current weights), eq. (3)."""
         w = self.C if C is None else C
         d = sum(map(operator.mul, w, self._buf[self._pos : self._pos + self.M]))
         if self.bias_tap:
@@ -148,6 +150,7 @@ class AdaptiveFir:
     def train(self, e: float) -> None:
         # eq. (5): C_{k+1} = C_k + 2 mu e(k) u(k), with e = y - d (the sign that descends e^2;
         # the paper's eq. (4) writes e = d - y, which with this update would ascend it).
+        """One LMS update with the error ``e = y - d``, eq. (5)."""
         g = 2.0 * self.mu * e
         x = self._buf[self._pos : self._pos + self.M]
         C = self.C
@@ -163,6 +166,7 @@ class AdaptiveFir:
             self.C_avg = [ca + a * (c - ca) for ca, c in zip(self.C_avg, self.C, strict=True)]
 
     def set_weights(self, C: list[float]) -> None:
+        """Replace the weights (and their running average) by ``C``."""
         self.C = list(C)
         self.C_avg = list(C)
         self.w_sum = math.fsum(self.C)
@@ -198,6 +202,7 @@ class WeightDriftSnr:
             self.s[-i] = w_sum
 
     def reset(self) -> None:
+        """Forget the weight-sum history."""
         self.s.clear()
         self.V_last = 0.0
 
@@ -279,6 +284,8 @@ class DualCriterionDetector:
 
     @property
     def suspect_open(self) -> bool:
+        """Whether criterion 1 (e² over its threshold, eq. (7)) has opened a suspicion
+        still being judged."""
         return self._suspect_age >= 0
 
     def push_command(self, u: float) -> None:
@@ -286,6 +293,7 @@ class DualCriterionDetector:
         self.fir.push(u)
 
     def predict_deg(self) -> float:
+        """The FIR's predicted heading increment for this period, deg."""
         return self.fir.predict() * self.cfg.y_scale
 
     def step(self, dy_deg: float | None, flagged: bool = False) -> DetectorStep:
@@ -374,6 +382,8 @@ class DualCriterionDetector:
         self._suspect_age = -1
 
     def freeze(self) -> None:
+        """Stop adapting: the weights and the operating point are held (while a fault is
+        handled)."""
         self.frozen = True
         self.fir.track_op = False
 

@@ -14,6 +14,12 @@ type it); ``--version`` prints the installed version.
 
 Only this module configures logging, prints and chooses the exit status: 0 success, 1 failure
 of the job, 2 bad configuration or usage.
+
+It is also the one door to the developer tools (:mod:`firmware_host.devtools`: simulators,
+harnesses, eval, bench, fuzz, soak, fleet, the demos): nothing else of the product imports them.
+Before it imports a command whose module is under ``firmware_host.devtools`` (or a product
+command's option that runs one, :data:`DEV_OPTIONS`) it checks that the ``dev`` extra is
+installed (:data:`DEV_EXTRA_MODULES`); without it, one line says how to get it, exit 2.
 """
 
 from __future__ import annotations
@@ -21,15 +27,19 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import importlib.util
 import logging
 import os
 import sys
 import traceback
 from collections.abc import Sequence
-from typing import NoReturn, Protocol
+from typing import TYPE_CHECKING, NoReturn, Protocol
 
 import firmware_host
 from fdi.errors import ConfigError, ConfigErrors, FdiBridgeError, UsageError
+
+if TYPE_CHECKING:  # imported by name when asked for: --help imports no command module
+    from firmware_host.commands.docgen import ParserTree
 
 log = logging.getLogger("fdi_bridge")
 
@@ -110,7 +120,7 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
         "firmware_host.devtools.ramp_oracle",
         "rover: the most any detector can find of a slow ramp in time, per receiver",
     ),
-    "rov": ("firmware_host.rov.app", "ROV compass faults and fault-tolerant heading hold"),
+    "rov": ("firmware_host.devtools.sim_rov", "ROV compass faults and fault-tolerant heading hold"),
     "rov-harness": (
         "firmware_host.devtools.rov_harness",
         "ROV done-means: both plants x seeds, with and without the gyro (issue 14)",
@@ -128,11 +138,11 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
 # ``fdi-bridge demo KIND``: KIND -> module with ``run(args) -> int`` and ``add_arguments``.
 DEMO_COMMANDS: dict[str, tuple[str, str]] = {
     "rover": (
-        "firmware_host.commands.demo_rover",
+        "firmware_host.devtools.demo_rover",
         "GPS fault isolation on a generated 10-minute rover run",
     ),
-    "rov": ("firmware_host.commands.demo_rov", "ROV compass drift 30 deg with and without FT"),
-    "insgnss": ("firmware_host.commands.demo_insgnss",
+    "rov": ("firmware_host.devtools.demo_rov", "ROV compass drift 30 deg with and without FT"),
+    "insgnss": ("firmware_host.devtools.demo_insgnss",
                 "live INS/GNSS against a simulated autopilot, compared with sim insgnss"),
 }
 
@@ -170,12 +180,40 @@ EXAMPLES: dict[str, str] = {
     "sim insgnss-report": "fdi-bridge sim insgnss-report --seeds 1-2 --out insgnss.md",
 }
 
+# The developer tools and what they need: the ``dev`` extra of pyproject.toml (tqdm, matplotlib,
+# dask[distributed]), found by name without importing it.
+DEVTOOLS = "firmware_host.devtools."
+DEV_EXTRA_MODULES = ("tqdm", "matplotlib", "dask", "distributed")
+# A product command's option that runs a developer tool: (command, option's dest) -> module
+# with ``run(args) -> int`` (the options are the command's own).
+DEV_OPTIONS: dict[tuple[str, str], str] = {
+    ("mavlink", "bench"): "firmware_host.devtools.router_bench",
+}
+
 LOG_LEVELS = ("debug", "info", "warning", "error", "critical")
 _VALUE_OPTIONS = ("--log-level",)  # global options that take a value
 
 
 def _load(module: str) -> Command:
     return importlib.import_module(module)
+
+
+def is_dev(spec: str) -> bool:
+    """Whether a table's module spec (``"ARGS:RUN"`` or one module) is a developer tool."""
+    return any(m.startswith(DEVTOOLS) for m in spec.split(":"))
+
+
+def dev_extra_missing() -> list[str]:
+    """The modules of the ``dev`` extra that are not installed (looked up, not imported)."""
+    return [m for m in DEV_EXTRA_MODULES if importlib.util.find_spec(m) is None]
+
+
+def _require_dev(name: str, spec: str) -> None:
+    """Before importing a developer tool: without the ``dev`` extra, say how to get it, exit 2."""
+    if is_dev(spec) and dev_extra_missing():
+        print(f"fdi-bridge {name} is a developer tool: pip install 'fdi-bridge[dev]'",
+              file=sys.stderr)
+        raise SystemExit(2)
 
 
 def _args_module(spec: str) -> str:
@@ -275,6 +313,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     ``argv=None``: every command's (imports all of them; for documentation tools)."""
     command, kind = _command_of(argv) if argv is not None else (None, None)
     everything = argv is None
+    no_dev = everything and bool(dev_extra_missing())  # documents: the product's commands
     parser = _Parser(
         prog="fdi-bridge",
         description="Fault detection and isolation between navigation sensors and a controller.",
@@ -296,6 +335,9 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
                            help="the demo's own options (see: fdi-bridge demo KIND -h)")
             continue
         if everything or name == command:
+            if no_dev and is_dev(module):
+                continue
+            _require_dev(name, module)
             _logging_options(p, sub=True)
             p.set_defaults(_module=_run_module(module))
             _load(_args_module(module)).add_arguments(p)
@@ -304,6 +346,9 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     for skind, (smod, shelp) in SIM_COMMANDS.items():
         sp = _subparser(ssub, skind, shelp, key=f"sim {skind}")
         if everything or (command == "sim" and skind == kind):
+            if no_dev and is_dev(smod):
+                continue
+            _require_dev(f"sim {skind}", smod)
             _logging_options(sp, sub=True)
             sp.set_defaults(_module=_run_module(smod))
             _load(_args_module(smod)).add_arguments(sp)
@@ -320,6 +365,17 @@ def demo_parser(kind: str) -> argparse.ArgumentParser:
     _logging_options(dparser, sub=True)
     _load(_args_module(dmod)).add_arguments(dparser)
     return dparser
+
+
+def parser_tree() -> ParserTree:
+    """The whole command line for the documents generated from it (``completion``, ``man``):
+    every command; without the dev extra, the product's only (the developer tools' options
+    and the demos left out)."""
+    docgen = importlib.import_module("firmware_host.commands.docgen")
+    demos = {} if dev_extra_missing() else {k: demo_parser(k) for k in DEMO_COMMANDS}
+    tree: ParserTree = docgen.ParserTree(top=build_parser(None), demos=demos,
+                                         formatter=_HelpFormatter, version=version())
+    return tree
 
 
 def _demo_args(argv: list[str]) -> argparse.Namespace | None:
@@ -340,6 +396,7 @@ def _demo_args(argv: list[str]) -> argparse.Namespace | None:
         print(f"fdi-bridge demo: error: unknown demo {kind!r} (known: {known})", file=sys.stderr)
         raise SystemExit(2)
     dmod = DEMO_COMMANDS[kind][0]
+    _require_dev("demo" if kind == "rover" else f"demo {kind}", dmod)
     args = demo_parser(kind).parse_args(rest)
     for key, value in vars(glob).items():
         setattr(args, key, value)
@@ -403,9 +460,14 @@ def _main(argv: list[str]) -> int:
         if args.command is None:
             parser.print_help()
             return 2
+    for (command, option), dev_module in DEV_OPTIONS.items():
+        if args.command == command and getattr(args, option, False):
+            _require_dev(f"{command} --{option.replace('_', '-')}", dev_module)
+            args._module = dev_module
     level = _log_level(args)
     _setup_logging(level)
     name = _command_name(args)
+    args.parser_tree = parser_tree  # for the documents generated from the parser
     try:
         module = _load(args._module)
         return int(module.run(args))

@@ -343,7 +343,7 @@ def test_mavproxy_sees_heartbeat_lists_and_sets_a_parameter(tmp_path: Path) -> N
     import sys
 
     from firmware_host.devtools.rover_sim import RoverScenario, write_run
-    from firmware_host.mavlink.rover import attach_rover
+    from firmware_host.rover.mavlink import attach_rover
     from firmware_host.rover.pipeline import RoverPipeline
     from firmware_host.runtime.config import RoverConfig
 

@@ -24,7 +24,7 @@ from drivers.mavlink import io as mio
 from firmware_host.commands.replay import load_input, replay_through_pty
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router
-from firmware_host.mavlink.rover import STAT_NAMES, LiveRoverIsolator, attach_rover
+from firmware_host.rover.mavlink import STAT_NAMES, LiveRoverIsolator, attach_rover
 from firmware_host.rover.outputs import gps_week_ms, unix_time
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import RoverConfig

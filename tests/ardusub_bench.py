@@ -13,7 +13,7 @@ from typing import Any
 from drivers.mavlink import io as mio
 from firmware_host.devtools.ardusub_sim import ArduSubSim
 from firmware_host.devtools.rov_sim import parse_fault
-from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, open_router
 from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.config import RovConfig
 from firmware_host.runtime.recorder import FlightRecorder
@@ -48,7 +48,8 @@ class Bench:
         self.records: list[dict[str, Any]] = []
         self.cfg = cfg
         self.vehicle = ArduSubRovVehicle(cfg, ft=ft, on_epoch=self.records.append)
-        self.runner = Runner(self.vehicle, mavlink=mav, handle_signals=False, recorder=recorder,
+        self.runner = Runner(self.vehicle, mavlink=mav, open_router=open_router,
+                             handle_signals=False, recorder=recorder,
                              out_dir=out_dir)
         self.runner.start()
         assert self.runner.router is not None

@@ -28,7 +28,7 @@ import pytest
 
 from drivers.mavlink import io as mio
 from drivers.mavlink.modes import MODES
-from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, open_router
 from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.config import load_rov_config, project_root
 from firmware_host.runtime.runner import Runner
@@ -58,7 +58,8 @@ class Peers:
                             component_id=component_id, statustext_per_s=50.0)
         self.records: list[dict[str, Any]] = []
         self.vehicle = ArduSubRovVehicle(cfg, on_epoch=self.records.append)
-        self.runner = Runner(self.vehicle, mavlink=mav, handle_signals=False)
+        self.runner = Runner(self.vehicle, mavlink=mav, open_router=open_router,
+                             handle_signals=False)
         self.runner.start()
         router = self.runner.router
         assert router is not None

@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from drivers.mavlink import io as mio
-from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, open_router
 from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.config import load_rov_config, project_root
 from firmware_host.runtime.runner import Runner
@@ -64,7 +64,7 @@ def replay_vehicle(path: Path, drift_deg: float = 0.0, drift_at_s: float | None 
     v = ArduSubRovVehicle(cfg, on_epoch=records.append)
     mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
                         gcs=(EndpointConfig("udpin:127.0.0.1:0"),))
-    runner = Runner(v, mavlink=mav, handle_signals=False)
+    runner = Runner(v, mavlink=mav, open_router=open_router, handle_signals=False)
     runner.start()
     assert runner.router is not None and v.loop is not None
     loop = v.loop

@@ -75,7 +75,7 @@ def test_every_command_has_a_section_option_and_example(tmp_path: Path) -> None:
     assert main(["man", "--out", str(page_path)]) == 0
     page = page_path.read_text(encoding="utf-8")
     assert page.startswith(".TH FDI\\-BRIDGE 1 ")
-    docs = commands()
+    docs = commands(cli.parser_tree())
     for d in docs[1:]:
         section = page.split(f".SS fdi\\-bridge {d.path.replace('-', chr(92) + '-')}\n", 1)
         assert len(section) == 2, d.path

@@ -48,6 +48,9 @@ class Writer:
     def mavlink(self) -> MavlinkSpec | None:
         return None
 
+    def outputs(self) -> tuple[str, ...]:
+        return ()
+
     def start(self, ctx: Context) -> None:
         self.ctx = ctx
 

@@ -23,8 +23,9 @@ from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.devtools.soak import SimDevice, rov_device, sim_opener
 from firmware_host.rov.config import SimConfig
+from firmware_host.rover.failsafe import RoverFailsafe
 from firmware_host.runtime.config import BridgeConfig, RoverConfig
-from firmware_host.runtime.failsafe import RoverFailsafe, SilenceWatchdog
+from firmware_host.runtime.failsafe import SilenceWatchdog
 from firmware_host.runtime.loop import FakeClock
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -183,7 +183,7 @@ def test_demo_insgnss_expected_alarms_only_at_v(root_level: int, shown: bool,
     """``demo insgnss`` injects GPS faults: its alarm, gate-health and unacknowledged-HOLD
     warnings (its GPS_INPUT goes to a UDP socket, not an autopilot) are the demo working, said
     at ``-v`` only; errors always."""
-    from firmware_host.commands.demo_insgnss import expected_quiet
+    from firmware_host.devtools.demo_insgnss import expected_quiet
 
     root = logging.getLogger()
     old = root.level

@@ -28,7 +28,7 @@ from drivers.transport import SerialSettings
 from fdi.errors import ConfigError, PortError
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.devtools.soak import SimDevice, sim_opener
-from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, open_router
 from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.config import RovConfig
 from firmware_host.rover.vehicle import RoverVehicle
@@ -60,6 +60,9 @@ class Ticker:
 
     def mavlink(self) -> MavlinkSpec | None:
         return None
+
+    def outputs(self) -> tuple[str, ...]:
+        return ()
 
     def start(self, ctx: Context) -> None:
         self.ctx = ctx
@@ -175,7 +178,8 @@ def test_rover_port_backoff_follows_reconnect_max_s_also_with_a_router() -> None
     mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
                         gcs=(EndpointConfig("udpin:127.0.0.1:0"),))
     v = RoverVehicle(_rover_cfg(reconnect_max_s=0.4))
-    runner = Runner(v, mavlink=mav, clock=clock, sleep=clock.sleep, opener=opener,
+    runner = Runner(v, mavlink=mav, open_router=open_router, clock=clock, sleep=clock.sleep,
+                    opener=opener,
                     duration_s=10.0, handle_signals=False)
     summary = runner.run()
     gaps = [round(b - a, 3) for a, b in itertools.pairwise(opens)]
@@ -278,7 +282,7 @@ def test_ardusub_rov_on_the_runner_through_a_router() -> None:
                         gcs=(EndpointConfig("udpin:127.0.0.1:0"),))
     records: list[dict[str, Any]] = []
     v = ArduSubRovVehicle(cfg, on_epoch=records.append)
-    runner = Runner(v, mavlink=mav, handle_signals=False)
+    runner = Runner(v, mavlink=mav, open_router=open_router, handle_signals=False)
     runner.start()
     assert runner.router is not None
     port = runner.router.endpoints[0].link.local_address[1]  # type: ignore[index]

@@ -34,7 +34,6 @@ from fdi.rover import RoverDetectorParams
 from firmware_host.commands.checks import input_file_arg, output_file_arg
 from firmware_host.commands.config_cmd import effective_toml
 from firmware_host.commands.replay import load_input
-from firmware_host.devtools.eval import run_ours
 from firmware_host.rover.calibration import (
     START_FACTOR,
     calibrate_records,
@@ -42,6 +41,7 @@ from firmware_host.rover.calibration import (
     doppler_free,
 )
 from firmware_host.rover.drift_bound import bullet_bounds
+from firmware_host.rover.pipeline import run_on_bytes
 from firmware_host.runtime.config import bridge_config, load_bridge_file
 
 
@@ -89,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.config}: the drift test does not run in this configuration "
                          f"(drift_test = {str(d.drift_test).lower()}, predictor = "
                          f"{d.predictor!r}, strategy = {d.strategy!r}): nothing to calibrate")
-    runs = [run_ours(cfg, b"".join(c for _, c in load_input(p).chunks))[0] for p in args.logs]
+    runs = [run_on_bytes(cfg.rover, b"".join(c for _, c in load_input(p).chunks))[0]
+            for p in args.logs]
     for p, records in zip(args.logs, runs, strict=True):
         if not any(r.get("e") is not None for r in records):
             raise FdiBridgeError(f"{p}: no position fixes in it (a capture or NMEA log of the "

@@ -7,13 +7,14 @@ same checks as ``argparse`` ``type=`` functions, so a bad value is refused while
 is parsed (``fdi-bridge replay: error: argument --out: ...``, exit 2) and a 30-second job never
 starts with an output it cannot write.
 
-Ports are checked in two steps: the spelling here (:func:`check_mavlink_url`,
-:func:`check_serial_url`), and whether a port opens (:func:`check_port_opens`) where a command
+Ports are checked in two steps: the spelling (:func:`~drivers.urls.check_mavlink_url`,
+:func:`~drivers.urls.check_serial_url`, in the drivers' layer because the configuration loader
+checks the same URLs), and whether a port opens (:func:`check_port_opens`) where a command
 must not start without it (``record`` without ``--wait``, ``replay --nmea-out``): that is a
 runtime failure (:class:`~fdi.errors.PortError`, exit 1).
 
-This module imports only the standard library and :mod:`fdi.errors` (the argument modules that
-use it must stay light for ``--help``).
+This module imports only the standard library, :mod:`drivers.urls` and :mod:`fdi.errors` (the
+argument modules that use it must stay light for ``--help``).
 """
 
 from __future__ import annotations
@@ -21,23 +22,17 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TypeVar
 
+from drivers.urls import MAVLINK_SCHEMES as MAVLINK_SCHEMES
+from drivers.urls import SERIAL_SCHEMES as SERIAL_SCHEMES
+from drivers.urls import check_mavlink_url as check_mavlink_url
+from drivers.urls import check_serial_url as check_serial_url
 from fdi.errors import UsageError
 
 T = TypeVar("T")
-
-# The mavutil / MAVProxy network spellings (drivers.mavlink.links.NETWORK_SCHEMES; repeated here
-# so that this module stays free of the drivers for a light --help).
-MAVLINK_SCHEMES = ("udpin", "udpout", "udp", "udpbcast", "tcp", "tcpin")
-_LISTENING = ("udpin", "udp", "tcpin")
-# pyserial's URL handlers (serial.urlhandler.protocol_*).
-SERIAL_SCHEMES = ("loop", "socket", "rfc2217", "spy", "alt", "hwgrep", "cp2110")
-_URL_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*)://(.*)$")
-
 
 # --------------------------------------------------------------------------- paths
 
@@ -107,77 +102,6 @@ def check_output_file(path: str | Path, option: str = "--out") -> Path:
 
 
 # --------------------------------------------------------------------------- URLs
-
-
-def _port_number(text: str, url: str, option: str, *, allow_zero: bool) -> int:
-    try:
-        port = int(text)
-    except ValueError:
-        raise UsageError(f"{option} {url}: port {text!r} is not a number") from None
-    low = 0 if allow_zero else 1
-    if not low <= port <= 65535:
-        raise UsageError(f"{option} {url}: port {port} out of range {low}-65535")
-    return port
-
-
-def check_mavlink_url(url: str, option: str = "--mavlink") -> str:
-    """A MAVLink URL as mavutil and MAVProxy spell it: ``udpout:HOST:PORT``, ``udpin:[HOST:]PORT``,
-    ``tcp:HOST:PORT``, ``tcpin:[HOST:]PORT`` (port 1-65535; 0 = any free port for a server), or
-    a serial device / pyserial URL (:func:`check_serial_url`) for an autopilot on a wire."""
-    scheme, sep, rest = url.partition(":")
-    if sep and scheme in MAVLINK_SCHEMES and not rest.startswith("//"):
-        host, hsep, port_text = rest.rpartition(":")
-        listening = scheme in _LISTENING
-        if not hsep:
-            host, port_text = "", rest
-        if not host and not listening:
-            raise UsageError(f"{option} {url}: expected {scheme}:HOST:PORT")
-        _port_number(port_text, url, option, allow_zero=listening)
-        return url
-    if sep and scheme in MAVLINK_SCHEMES:
-        raise UsageError(f"{option} {url}: expected {scheme}:HOST:PORT (no //)")
-    try:
-        return check_serial_url(url, option, pty=False)
-    except UsageError as err:
-        known = ", ".join(f"{s}:" for s in MAVLINK_SCHEMES)
-        raise UsageError(f"{err} (a MAVLink URL is one of {known} HOST:PORT, or a serial "
-                         "device)") from None
-
-
-def check_serial_url(url: str, option: str = "port", *, pty: bool = True) -> str:
-    """A pyserial URL (``socket://HOST:PORT``, ``loop://``, ``rfc2217://`` ...), a device path,
-    or (``pty=True``, outputs) ``pty:PATH`` whose directory exists and is writable."""
-    if not url:
-        raise UsageError(f"{option}: empty URL")
-    if url.startswith("pty:"):
-        if not pty:
-            raise UsageError(f"{option} {url}: pty: is for NMEA outputs only")
-        link = url[4:]
-        if link:
-            parent = Path(link).absolute().parent
-            if not parent.is_dir():
-                raise UsageError(f"{option} {url}: directory {parent} does not exist")
-            if not os.access(parent, os.W_OK | os.X_OK):
-                raise UsageError(f"{option} {url}: directory {parent} not writable")
-            if Path(link).is_dir():
-                raise UsageError(f"{option} {url}: {link} is a directory")
-        return url
-    m = _URL_SCHEME.match(url)
-    if m:
-        scheme, rest = m.group(1).lower(), m.group(2)
-        if scheme not in SERIAL_SCHEMES:
-            known = ", ".join(f"{s}://" for s in SERIAL_SCHEMES)
-            raise UsageError(f"{option} {url}: unknown URL scheme {scheme!r} (known: {known}, "
-                             "a device path" + (", pty:PATH" if pty else "") + ")")
-        if scheme in ("socket", "rfc2217"):
-            hostport = rest.split("?", 1)[0].rstrip("/")
-            host, hsep, port_text = hostport.rpartition(":")
-            if not hsep or not host:
-                raise UsageError(f"{option} {url}: expected {scheme}://HOST:PORT")
-            _port_number(port_text, url, option, allow_zero=False)
-        return url
-    # A device path (/dev/ttyUSB0, /dev/serial/by-path/...:1.0-port0, COM3): not opened here.
-    return url
 
 
 # --------------------------------------------------------------------------- numbers

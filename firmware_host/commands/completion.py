@@ -18,7 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    script = bash_completion()
+    script = bash_completion(args.parser_tree())
     if args.out is not None:
         args.out.write_text(script, encoding="utf-8")
         print(f"wrote {args.out} (load it with: source {args.out})")

@@ -1,9 +1,11 @@
 """Documents generated from the command line's own parser: a bash completion script and a man
 page (``fdi-bridge completion bash``, ``fdi-bridge man``).
 
-Both walk the whole parser (:func:`firmware_host.cli.build_parser` with no command line, which
-imports every command; only these two commands do), so a new command or option is completed
-and documented without anyone editing a list.
+Both walk the whole parser, handed in by the command line as a :class:`ParserTree`
+(:func:`firmware_host.cli.parser_tree`: ``build_parser`` with no command line, which imports
+every command; only these two commands ask for it), so a new command or option is completed
+and documented without anyone editing a list. The tree comes from the CLI, a layer above:
+this module never imports it.
 """
 
 from __future__ import annotations
@@ -14,7 +16,16 @@ import datetime as dt
 import re
 from dataclasses import dataclass, field
 
-from firmware_host import cli
+
+@dataclass(frozen=True)
+class ParserTree:
+    """The whole command line as the CLI builds it: the top parser (every command and ``sim``
+    kind), each ``demo`` kind's own parser, the formatter of ``--help`` and the version."""
+
+    top: argparse.ArgumentParser
+    demos: dict[str, argparse.ArgumentParser]
+    formatter: type[argparse.HelpFormatter]
+    version: str
 
 
 @dataclass
@@ -47,17 +58,19 @@ def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentP
     return {}
 
 
-def _help(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
+def _help(parser: argparse.ArgumentParser, action: argparse.Action,
+          formatter_class: type[argparse.HelpFormatter]) -> str:
     """The help text as ``--help`` shows it (defaults expanded), on one line."""
     if not action.help or action.help is argparse.SUPPRESS:
         return ""
-    formatter = cli._HelpFormatter(parser.prog)
+    formatter = formatter_class(parser.prog)
     shown = copy.copy(action)  # the parser's own action stays as it is
     shown.help = formatter._get_help_string(action)
     return " ".join(formatter._expand_help(shown).split())
 
 
-def _doc(path: str, parser: argparse.ArgumentParser) -> CommandDoc:
+def _doc(path: str, parser: argparse.ArgumentParser,
+         formatter_class: type[argparse.HelpFormatter]) -> CommandDoc:
     doc = CommandDoc(path, parser.description or "", " ".join(parser.format_usage().split()),
                      epilog=parser.epilog or "")
     subs = _subparsers(parser)
@@ -71,7 +84,8 @@ def _doc(path: str, parser: argparse.ArgumentParser) -> CommandDoc:
         if takes_value:
             metavar = action.metavar if isinstance(action.metavar, str) else (
                 action.dest.upper() if action.option_strings else action.dest)
-        opt = Option(list(action.option_strings), metavar, choices, _help(parser, action))
+        opt = Option(list(action.option_strings), metavar, choices,
+                     _help(parser, action, formatter_class))
         if action.option_strings:
             doc.options.append(opt)
         elif action.dest != "demo_args":
@@ -79,19 +93,19 @@ def _doc(path: str, parser: argparse.ArgumentParser) -> CommandDoc:
     return doc
 
 
-def commands() -> list[CommandDoc]:
+def commands(tree: ParserTree) -> list[CommandDoc]:
     """The top level, every command, every ``sim`` and ``demo`` kind, in ``--help`` order."""
-    top = cli.build_parser(None)
-    out = [_doc("", top)]
-    for name, parser in _subparsers(top).items():
+    fmt = tree.formatter
+    out = [_doc("", tree.top, fmt)]
+    for name, parser in _subparsers(tree.top).items():
         if name == "demo":
-            demo = _doc("demo", parser)
-            demo.subcommands = list(cli.DEMO_COMMANDS)
+            demo = _doc("demo", parser, fmt)
+            demo.subcommands = list(tree.demos)
             out.append(demo)
-            out += [_doc(f"demo {k}", cli.demo_parser(k)) for k in cli.DEMO_COMMANDS]
+            out += [_doc(f"demo {k}", p, fmt) for k, p in tree.demos.items()]
             continue
-        out.append(_doc(name, parser))
-        out += [_doc(f"{name} {k}", p) for k, p in _subparsers(parser).items()]
+        out.append(_doc(name, parser, fmt))
+        out += [_doc(f"{name} {k}", p, fmt) for k, p in _subparsers(parser).items()]
     return out
 
 
@@ -102,12 +116,12 @@ def _words(items: list[str]) -> str:
     return " ".join(items).replace('"', "")
 
 
-def bash_completion() -> str:
+def bash_completion(tree: ParserTree) -> str:
     """A bash completion script: ``source <(fdi-bridge completion bash)``, or save it as
     ``/etc/bash_completion.d/fdi-bridge``. It completes commands, ``sim``/``demo`` kinds,
     each command's options and the values of options with choices; other values and the
     positional arguments complete as file names."""
-    docs = commands()
+    docs = commands(tree)
     paths = [d.path for d in docs if d.path]
     lines = [
         "# bash completion for fdi-bridge, generated from its parser by",
@@ -189,14 +203,14 @@ EXIT_STATUS = (
 )
 
 
-def man_page(date: dt.date | None = None) -> str:
+def man_page(tree: ParserTree, date: dt.date | None = None) -> str:
     """``fdi-bridge(1)`` in roff (``man -l fdi-bridge.1``): synopsis, every command with its
     options (defaults as ``--help`` shows them) and example, the exit status."""
-    docs = commands()
+    docs = commands(tree)
     top, rest = docs[0], docs[1:]
     day = (date or dt.date.today()).isoformat()
     out = [
-        f'.TH FDI\\-BRIDGE 1 "{day}" "fdi-bridge {_roff(cli.version())}" "User Commands"',
+        f'.TH FDI\\-BRIDGE 1 "{day}" "fdi-bridge {_roff(tree.version)}" "User Commands"',
         ".SH NAME",
         "fdi\\-bridge \\- " + _roff(top.description.rstrip(".")),
         ".SH SYNOPSIS",

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from firmware_host.insgnss.vehicle import InsGnssVehicle
+from firmware_host.mavlink.router import open_router
 from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.vehicle import OutlandRovVehicle
 from firmware_host.rover.vehicle import RoverVehicle
@@ -62,7 +63,7 @@ def run_file(
         log.warning("--mavlink %s ignored: the [mavlink] router is the MAVLink output",
                     mavlink_url)
     runner = Runner(vehicle, out_dir=out, recorder=recorder, mavlink=mavlink,
-                    duration_s=duration_s, status=status)
+                    open_router=open_router, duration_s=duration_s, status=status)
     summary = runner.run()
     log.info("summary %s", json.dumps(_brief(summary), separators=(",", ":")))
     return summary

@@ -17,7 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    page = man_page()
+    page = man_page(args.parser_tree())
     if args.out is not None:
         args.out.write_text(page, encoding="utf-8")
         print(f"wrote {args.out} (read it with: man -l {args.out})")

@@ -1,5 +1,6 @@
 """``fdi-bridge mavlink``: the MAVLink router as a command, with the file's vehicle if it has one,
-and ``--bench`` (:mod:`firmware_host.devtools.router_bench`).
+and ``--bench``, a developer tool (:mod:`firmware_host.devtools.router_bench`, where the command
+line sends it when the dev extra is installed: :data:`firmware_host.cli.DEV_OPTIONS`).
 
 A file with only ``[mavlink]`` (or no file) runs the router alone. A file that also has a
 vehicle (``[rover]``, ``[rov]``) runs that vehicle on the one runtime with the router attached,
@@ -33,9 +34,7 @@ from firmware_host.commands.checks import (
 from firmware_host.commands.launch import run_file
 from firmware_host.commands.live import console_status, router_table, run_summary_text
 from firmware_host.commands.tables import fields
-from firmware_host.devtools.router_bench import bench_forwarding
-from firmware_host.mavlink.params import ParamStore
-from firmware_host.mavlink.router import Router
+from firmware_host.mavlink.router import open_router
 from firmware_host.runtime.config import BridgeFile, load_bridge_file, mavlink_config
 from firmware_host.runtime.config_mavlink import EndpointConfig, MavlinkConfig
 
@@ -53,8 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seconds", type=non_negative_float, default=0.0,
                         help="stop after this long, s (0: until ^C)")
     parser.add_argument(
-        "--bench", action="store_true", help="measure forwarding latency at 1 000 and 10 000 pkt/s"
-    )
+        "--bench", action="store_true",
+        help="measure forwarding latency at 1 000 and 10 000 pkt/s (a developer tool: the dev "
+             "extra)")
     parser.add_argument("--bench-rate", type=positive_int, action="append",
                         help="packets/s (repeatable)")
     parser.add_argument("--bench-seconds", type=positive_float, default=5.0,
@@ -82,11 +82,9 @@ def config_from_args(args: argparse.Namespace, bf: BridgeFile) -> MavlinkConfig:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.bench:
-        for rate in args.bench_rate or (1000, 10000):
-            for _ in range(max(1, args.bench_runs)):
-                print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
-        return 0
+    if getattr(args, "bench", False):  # the CLI sends --bench to the developer tool
+        raise UsageError("--bench is a developer tool: run it as fdi-bridge mavlink --bench "
+                         "(pip install 'fdi-bridge[dev]')")
     bf: BridgeFile | None = getattr(args, "bridge_file", None)  # already read by `run`
     if bf is None and not (args.config or args.autopilot or args.gcs):
         raise UsageError("give --config FILE, or --autopilot URL and --gcs URL (the defaults "
@@ -108,8 +106,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             print(run_summary_text(summary), flush=True)
         return 0
-    params = ParamStore(cfg.param_file or None)
-    router = Router(cfg, params=params)
+    router = open_router(cfg)
     log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
     quiet = logging.getLogger().getEffectiveLevel() > logging.WARNING
     if not quiet:

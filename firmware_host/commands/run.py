@@ -53,6 +53,7 @@ from firmware_host.commands.checks import (
 from firmware_host.commands.launch import run_file
 from firmware_host.commands.live import console_status, run_summary_text
 from firmware_host.rov.vehicle import OutlandRovVehicle
+from firmware_host.rover.failsafe import RoverFailsafe
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.rover.vehicle import RoverVehicle
 from firmware_host.runtime.config import (
@@ -64,7 +65,6 @@ from firmware_host.runtime.config import (
 from firmware_host.runtime.config import Vehicle as Vehicle
 from firmware_host.runtime.config import resolve_config_path as resolve_config_path
 from firmware_host.runtime.config import vehicle_of as vehicle_of
-from firmware_host.runtime.failsafe import RoverFailsafe
 from firmware_host.runtime.mavout import EncoderOutput, MavlinkOutput
 from firmware_host.runtime.recorder import FlightRecorder
 from firmware_host.runtime.runner import Runner

@@ -73,7 +73,6 @@ from firmware_host.commands.checks import (
     positive_float,
     positive_int,
 )
-from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import (
     ReplayInput,
     load_input,
@@ -81,9 +80,10 @@ from firmware_host.commands.replay import (
     replay_through_pty,
 )
 from firmware_host.devtools.insgnss_sim import bench_insgnss_step
+from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.router_bench import FLOOD_GOAL_P99_MS
 from firmware_host.devtools.rover_sim import RoverScenario, generate, write_run
-from firmware_host.rov.app import bench_rov_step
+from firmware_host.devtools.sim_rov import bench_rov_step
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, gps_week_ms, unix_time
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig

@@ -25,7 +25,6 @@ output (RMS and maximum over clean, faulty and all epochs) beside the raw input'
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import logging
 import math
@@ -48,16 +47,16 @@ from firmware_host.commands.checks import (
     output_dir_arg,
     positive_float,
 )
-from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import load_input
 from firmware_host.commands.tables import Block, Table, report_console, report_markdown
 from firmware_host.devtools.insgnss_sim import fault_spans, load_setup, run_scenario
+from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.rov_experiment import run_experiment, summarize
 from firmware_host.devtools.rov_sim import parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.devtools.score import RoverScore, read_jsonl, score_rover
 from firmware_host.rov.config import RovConfig
-from firmware_host.rover.pipeline import RoverPipeline
+from firmware_host.rover.pipeline import run_on_bytes
 from firmware_host.runtime.config import BridgeConfig, load_config
 
 STRATEGIES: tuple[str, ...] = ("grey", "three_zone", "combined")
@@ -146,11 +145,7 @@ def run_ours(cfg: BridgeConfig, data: bytes, strategy: str | None = None
         if strategy not in STRATEGIES:
             raise ValueError(f"unknown strategy {strategy!r} (known: {', '.join(STRATEGIES)})")
         rover = replace(rover, detector=replace(rover.detector, strategy=strategy))  # type: ignore[arg-type]
-    buf = io.StringIO()
-    pipe = RoverPipeline(rover, jsonl=buf)
-    pipe.feed(data)
-    pipe.finish()
-    return [json.loads(line) for line in buf.getvalue().splitlines()], pipe.summary()
+    return run_on_bytes(rover, data)
 
 
 # --------------------------------------------------------------------------- one comparison

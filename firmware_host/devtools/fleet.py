@@ -44,10 +44,10 @@ from drivers.capture import is_capture
 from drivers.configload import read_toml
 from fdi.errors import ConfigError, FdiBridgeError
 from firmware_host.commands.checks import input_path_arg, output_dir_arg, positive_int
-from firmware_host.commands.progress import Progress as Bar
 from firmware_host.commands.replay import load_input
 from firmware_host.commands.tables import Block, Table, report_console, report_markdown
 from firmware_host.devtools.eval import run_ours
+from firmware_host.devtools.progress import Progress as Bar
 from firmware_host.devtools.score import score_rover
 from firmware_host.rov.config import RovConfig, load_rov_config
 from firmware_host.rov.tlog import load_dive, replay
@@ -341,7 +341,7 @@ def run_dask(jobs: Sequence[Job], *, workers: int | None = None, scheduler: str 
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError as err:  # the optional extra
         raise FdiBridgeError(
-            "fleet: Dask is not installed (pip install 'fdi-bridge[fleet]'); "
+            "fleet: Dask is not installed (pip install 'fdi-bridge[dev]'); "
             "--workers 1 runs without it") from err
     _quiet_logs()  # importing distributed set its own levels
     cluster = None

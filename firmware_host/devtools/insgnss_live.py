@@ -50,7 +50,7 @@ from firmware_host.devtools.insgnss_sim import (
 )
 from firmware_host.insgnss import align
 from firmware_host.insgnss.vehicle import ROUTER, InsGnssVehicle
-from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router, open_router
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
@@ -272,11 +272,11 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
         recorder = None if record_dir is None else FlightRecorder(
             record_dir, RecorderConfig(dir=str(record_dir)))
         runner = Runner(vehicle, out_dir=out_dir, recorder=recorder, mavlink=mav,
-                        handle_signals=False)
+                        open_router=open_router, handle_signals=False)
         imu_write: Writer = imu.write
         if via_router:
             runner.start()  # the router's autopilot port, before the autopilot sends
-            assert runner.router is not None
+            assert isinstance(runner.router, Router)
             addr = runner.router.endpoints[0].link.local_address
             assert addr is not None
             ap = ("127.0.0.1", int(addr[1]))

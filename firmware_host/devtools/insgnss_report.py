@@ -39,7 +39,6 @@ from firmware_host.commands.checks import (
     positive_float_list,
     seed_list,
 )
-from firmware_host.commands.progress import Progress
 from firmware_host.commands.tables import (
     Block,
     Table,
@@ -58,6 +57,7 @@ from firmware_host.devtools.insgnss_sim import (
     run_method,
     run_scenario,
 )
+from firmware_host.devtools.progress import Progress
 
 AXES = ("east", "north", "up")
 # Cai & Shao, Table 2 (20 m faults), with robust filtering: (min, max) per axis, m

@@ -48,7 +48,7 @@ from firmware_host.commands.checks import (
     positive_float_list,
     seed_list,
 )
-from firmware_host.commands.progress import Progress
+from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.rover_harness import REPORT_SEEDS, clean_drive, replay
 from firmware_host.devtools.rover_sim import RoverScenario
 from firmware_host.rover.calibration import doppler_free, estimate_lag

@@ -1,7 +1,8 @@
 """How much latency the MAVLink router adds per forwarded packet, over loopback UDP.
 
 ``fdi-bridge mavlink --bench [--bench-rate PPS ...] [--bench-seconds S] [--bench-runs N]``
-prints one JSON line per run and rate.
+prints one JSON line per run and rate (:func:`run`: the command line's door to developer tools,
+:mod:`firmware_host.cli`, sends ``mavlink --bench`` here; the options are ``mavlink``'s).
 
 Three processes, so that no measuring thread competes with the router for the GIL and nothing
 spins on a core (the machine may have two):
@@ -24,6 +25,8 @@ process's CPU time over the run (the router thread is the only busy one).
 
 from __future__ import annotations
 
+import argparse
+import json
 import multiprocessing as mp
 import resource
 import socket
@@ -349,3 +352,11 @@ def bench_gps_input_under_flood(rate_pps: int = 20000, seconds: float = 20.0,
 
 _DROP_KEYS = ("rx_packets", "tx_packets", "dropped_queue_full", "dropped_own", "send_dropped",
               "rx_kernel_drops", "no_peer")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``fdi-bridge mavlink --bench``: one JSON line per run and rate."""
+    for rate in args.bench_rate or (1000, 10000):
+        for _ in range(max(1, args.bench_runs)):
+            print(json.dumps(bench_forwarding(rate, args.bench_seconds)), flush=True)
+    return 0

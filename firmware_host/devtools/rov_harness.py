@@ -41,7 +41,7 @@ from typing import Any
 
 from firmware_host.commands import tables
 from firmware_host.commands.checks import choice_list, output_file_arg, positive_float, seed_list
-from firmware_host.commands.progress import Progress
+from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.rov_experiment import run_experiment
 from firmware_host.devtools.rov_sim import FaultSpec, parse_fault
 from firmware_host.rov.config import Plant, RovConfig, load_rov_config

@@ -47,7 +47,7 @@ from firmware_host.commands.checks import (
     positive_float_list,
     seed_list,
 )
-from firmware_host.commands.progress import Progress
+from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.rover_sim import ERROR_MODELS, RoverScenario, generate
 from firmware_host.rover.calibration import calibrate_records, calibrated_detector
 from firmware_host.rover.pipeline import RoverPipeline

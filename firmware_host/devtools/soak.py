@@ -51,8 +51,8 @@ from drivers.outland.framecodec import load_protocol
 from drivers.transport import SerialSettings
 from fdi.errors import PortError
 from firmware_host.commands.checks import output_dir_arg, output_file_arg, positive_float
-from firmware_host.commands.progress import Progress
 from firmware_host.commands.tables import fields, fmt, table
+from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.rov_sim import RovPlant, RovSimServer, parse_fault
 from firmware_host.devtools.rover_sim import RoverScenario, generate
 from firmware_host.rov.config import load_rov_config, protocol_path

@@ -85,12 +85,12 @@ from fdi.insgnss import (
 from fdi.three_zone import Action
 from firmware_host.insgnss import align
 from firmware_host.insgnss.align import zaru_sigma
+from firmware_host.rover.failsafe import RoverFailsafe
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
 from firmware_host.rover.vehicle import rover_mavlink_spec
 from firmware_host.runtime.config import BridgeConfig
 from firmware_host.runtime.config_insgnss import InsGnssSetup
-from firmware_host.runtime.failsafe import RoverFailsafe
 from firmware_host.runtime.mavout import SEVERITY_WARNING
 from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
@@ -237,6 +237,10 @@ class InsGnssVehicle:
 
     def mavlink(self) -> MavlinkSpec | None:
         return rover_mavlink_spec(self.cfg, self.mavlink_url)
+
+    def outputs(self) -> tuple[str, ...]:
+        """The corrected NMEA output, when there is one (the start banner)."""
+        return (f"NMEA {self.nmea_url}",) if self.nmea_url else ()
 
     def start(self, ctx: Context) -> None:
         rc = self.cfg.rover

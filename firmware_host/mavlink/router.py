@@ -1239,3 +1239,9 @@ def _param_name(raw: Any) -> str:
     if isinstance(raw, bytes | bytearray):
         raw = raw.split(b"\0", 1)[0].decode("ascii", errors="replace")
     return str(raw).split("\0", 1)[0]
+
+
+def open_router(cfg: MavlinkConfig) -> Router:
+    """The router of a ``[mavlink]`` table with its parameter store (``param_file``): what a
+    command hands the :class:`~firmware_host.runtime.runner.Runner` as ``open_router``."""
+    return Router(cfg, params=ParamStore(cfg.param_file or None))

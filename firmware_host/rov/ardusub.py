@@ -88,12 +88,11 @@ from drivers.ratelog import RateLimitedLog
 from fdi.errors import ConfigError, DecodeError
 from fdi.heading_ft import HeadingDecision
 from fdi.lms_fir import wrap180
-from firmware_host.mavlink.router import Router
 from firmware_host.rov.config import RovConfig
 from firmware_host.rov.control import RovController, epoch_record
+from firmware_host.rov.failsafe import RovFailsafeMonitor
 from firmware_host.runtime.config_rov import ArduSubConfig
-from firmware_host.runtime.failsafe import RovFailsafeMonitor
-from firmware_host.runtime.mavout import MavlinkOutput, RouterOutput
+from firmware_host.runtime.mavout import MavlinkOutput, RouterOutput, RouterPort
 from firmware_host.runtime.records import EpochLog
 from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec, Tap
 
@@ -220,7 +219,7 @@ class AutopilotListener:
     """One message of the autopilot (``(system, component)`` = ``autopilot``) into the inbox,
     counted in ``received``."""
 
-    def __init__(self, router: Router, message: str, inbox: Inbox,
+    def __init__(self, router: RouterPort, message: str, inbox: Inbox,
                  autopilot: tuple[int, int] = (1, 1)) -> None:
         self.autopilot = autopilot
         self.inbox = inbox
@@ -268,7 +267,7 @@ class PilotInput:
     station (system ``gcs_system_id``: the pilot's presence), go to the inbox.
     """
 
-    def __init__(self, router: Router, vehicle: int, dead_band: int, inbox: Inbox,
+    def __init__(self, router: RouterPort, vehicle: int, dead_band: int, inbox: Inbox,
                  output: MavlinkOutput, gcs_system_id: int) -> None:
         self.vehicle = vehicle
         self.dead_band = dead_band
@@ -370,7 +369,7 @@ class RovAutopilotLoop:
     def __init__(
         self,
         cfg: RovConfig,
-        router: Router | None,
+        router: RouterPort | None,
         *,
         ft: bool = True,
         vehicle_system_id: int = 1,
@@ -862,6 +861,10 @@ class ArduSubRovVehicle:
 
     def mavlink(self) -> MavlinkSpec | None:
         return None
+
+    def outputs(self) -> tuple[str, ...]:
+        """No output besides MAVLink (the start banner)."""
+        return ()
 
     def start(self, ctx: Context) -> None:
         if ctx.router is None:

@@ -31,7 +31,7 @@ from drivers.transport import SerialSettings
 from firmware_host.rov.ardusub import RovOperatorSink
 from firmware_host.rov.config import RovConfig, protocol_path
 from firmware_host.rov.control import RovController, epoch_record
-from firmware_host.runtime.failsafe import RovFailsafeMonitor
+from firmware_host.rov.failsafe import RovFailsafeMonitor
 from firmware_host.runtime.records import EpochLog
 from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec, Tap
 
@@ -97,6 +97,10 @@ class OutlandRovVehicle:
 
     def mavlink(self) -> MavlinkSpec | None:
         return None  # the ROV speaks MAVLink only through a [mavlink] router
+
+    def outputs(self) -> tuple[str, ...]:
+        """No output besides MAVLink (the start banner)."""
+        return ()
 
     def start(self, ctx: Context) -> None:
         c = self.cfg.link

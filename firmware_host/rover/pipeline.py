@@ -16,6 +16,8 @@ the same ``epochs.jsonl``.
 
 from __future__ import annotations
 
+import io
+import json
 import logging
 import math
 import time
@@ -393,6 +395,17 @@ class RoverPipeline:
             "gate_health": self.gate_health.report().as_dict(),
             "link": None if self.link.result is None else self.link.result.as_dict(),
         }
+
+
+def run_on_bytes(rover: RoverConfig, data: bytes) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The pipeline on ``data`` (NMEA bytes), in-process (no pty, no output): its records as
+    ``epochs.jsonl`` has them, and its summary. ``calibrate`` and the evaluation read drives
+    with it."""
+    buf = io.StringIO()
+    pipe = RoverPipeline(rover, jsonl=buf)
+    pipe.feed(data)
+    pipe.finish()
+    return [json.loads(line) for line in buf.getvalue().splitlines()], pipe.summary()
 
 
 def _sink_stats(sink: EpochSink) -> dict[str, Any]:

@@ -4,9 +4,9 @@ Paced by its receiver's epochs (``"data"``): each step reads what the GPS port h
 at most the port's timeout) and processes the epochs it completes
 (:class:`~firmware_host.rover.pipeline.RoverPipeline`: ``epochs.jsonl``, corrected NMEA,
 GPS_INPUT). Outputs: corrected NMEA (``nmea_url``), and MAVLink either through the router
-(a ``[mavlink]`` table: :func:`~firmware_host.mavlink.rover.attach_rover`, live detector
+(a ``[mavlink]`` table: :func:`~firmware_host.rover.mavlink.attach_rover`, live detector
 parameters, NAMED_VALUE_FLOAT statistics) or to ``mavlink_url``. Failsafe
-(:class:`~firmware_host.runtime.failsafe.RoverFailsafe`): a no-fix GPS_INPUT and a STATUSTEXT
+(:class:`~firmware_host.rover.failsafe.RoverFailsafe`): a no-fix GPS_INPUT and a STATUSTEXT
 after ``silence_s`` without a valid fix, "data back" when a valid fix really comes back.
 
 Shutdown (:meth:`RoverVehicle.finish`): the epoch still pending in the driver (its end not
@@ -25,11 +25,11 @@ from typing import Any, Literal
 
 from drivers.resilient import ResilientPort
 from drivers.transport import open_port_nonblocking
-from firmware_host.mavlink.rover import attach_rover
+from firmware_host.rover.failsafe import RoverFailsafe
+from firmware_host.rover.mavlink import attach_rover
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig
-from firmware_host.runtime.failsafe import RoverFailsafe
 from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
 log = logging.getLogger("fdi_bridge.rover")
@@ -92,6 +92,10 @@ class RoverVehicle:
 
     def mavlink(self) -> MavlinkSpec | None:
         return rover_mavlink_spec(self.cfg, self.mavlink_url)
+
+    def outputs(self) -> tuple[str, ...]:
+        """The corrected NMEA output, when there is one (the start banner)."""
+        return (f"NMEA {self.nmea_url}",) if self.nmea_url else ()
 
     def start(self, ctx: Context) -> None:
         rc = self.cfg.rover

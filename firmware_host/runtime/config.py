@@ -47,16 +47,11 @@ from drivers.configload import load_dataclass, raise_all, read_toml, toml_fields
 from drivers.mavlink.modes import alarm_mode
 from drivers.outland.framecodec import load_protocol
 from drivers.transport import SerialSettings
+from drivers.urls import MAVLINK_SCHEMES, SERIAL_SCHEMES, check_mavlink_url, check_serial_url
 from fdi.chi2 import threshold
 from fdi.errors import ConfigError, UsageError
 from fdi.rover import RoverDetectorParams
 from fdi.three_zone import ThreeZoneParams
-from firmware_host.commands.checks import (
-    MAVLINK_SCHEMES,
-    SERIAL_SCHEMES,
-    check_mavlink_url,
-    check_serial_url,
-)
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.config_mavlink import MavlinkConfig
 from firmware_host.runtime.config_rov import RovConfig, heading_source_errors
@@ -270,7 +265,7 @@ URL_KINDS: dict[str, str] = {
     "mavlink_out": '"" (none) or ' + _MAVLINK,
 }
 """What a URL field (``metadata={"url": kind}``) accepts; checked at load with the command
-line's own checks (:mod:`firmware_host.commands.checks`), the spelling only (a port is opened
+line's own checks (:mod:`drivers.urls`), the spelling only (a port is opened
 when the bridge runs, a pty's directory is checked by the command that makes it)."""
 
 # SerialSettings (drivers/transport.py) is the drivers' own; its url is a port to read.

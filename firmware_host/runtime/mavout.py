@@ -10,9 +10,14 @@ pilot's extension fields: :class:`~drivers.mavlink.io.ManualControlExt`) -- goes
   autopilot port is reported once and reopened with backoff; what is sent meanwhile is dropped
   and counted). ``run``, ``replay`` and the soak use it; ``tap`` sees every packet sent (the
   flight recorder's ``mavlink tx`` channel).
-* :func:`router_output` (a :class:`~firmware_host.mavlink.router.Router`): the packets go
-  through the router's thread-safe, non-blocking API; the router's own component sends the
-  heartbeat and paces STATUSTEXT and NAMED_VALUE_FLOAT.
+* :func:`router_output` (a :class:`RouterPort`, the runtime's view of
+  :class:`firmware_host.mavlink.router.Router`): the packets go through the router's
+  thread-safe, non-blocking API; the router's own component sends the heartbeat and paces
+  STATUSTEXT and NAMED_VALUE_FLOAT.
+
+The runtime knows the router only as :class:`RouterPort`: the router (a layer above) is built
+by whoever starts a run (``open_router`` handed to the
+:class:`~firmware_host.runtime.runner.Runner`), so a replay never imports it.
 
 An output never raises on a send: a transport error is counted (``send_errors``) and logged
 rate-limited, so an unplugged autopilot never stops the detectors or the failsafes.
@@ -23,18 +28,17 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Protocol
+from typing import Any, Protocol
 
 from drivers.mavlink import io as mio
+from drivers.mavlink.framer import MavFrame
 from drivers.mavlink.io import GpsInputFix, ManualControlExt, MavEndpoint, MavPacker, PortEndpoint
 from drivers.mavlink.links import is_network_url
 from drivers.ratelog import RateLimitedLog
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
 from fdi.errors import FdiBridgeError
-
-if TYPE_CHECKING:  # the router is only handed in: a replay never imports it
-    from firmware_host.mavlink.router import Router
+from firmware_host.runtime.config_mavlink import MavlinkConfig
 
 log = logging.getLogger("fdi_bridge.mavout")
 
@@ -152,10 +156,48 @@ class EncoderOutput:
             self.encoder.close()
 
 
-class RouterOutput:
-    """A :class:`MavlinkOutput` through a :class:`Router` (its owner closes the router)."""
+class RouterPort(Protocol):
+    """What the runtime and the vehicles use of the MAVLink router
+    (:class:`firmware_host.mavlink.router.Router` implements it): its life (``start``,
+    ``close``, ``summary``), the bridge's own messages through its non-blocking API, and the
+    autopilot's and ground stations' frames (``listen``, ``intercept``)."""
 
-    def __init__(self, router: Router) -> None:
+    @property
+    def cfg(self) -> MavlinkConfig: ...
+
+    def start(self) -> object: ...
+
+    def close(self) -> None: ...
+
+    def summary(self) -> dict[str, Any]: ...
+
+    def send_gps_input(self, fix: GpsInputFix) -> bytes: ...
+
+    def send_manual_control(
+        self, x: int, y: int, z: int, r: int, buttons: int = 0, target_system: int | None = None,
+        ext: ManualControlExt | None = None,
+    ) -> bytes: ...
+
+    def send_rc_channels_override(self, channels: tuple[int, ...],
+                                  target_system: int | None = None) -> bytes: ...
+
+    def request_mode(
+        self, mode: str, vehicle: str = "rover", target_system: int | None = None
+    ) -> bytes: ...
+
+    def post_statustext(self, severity: int, text: str) -> None: ...
+
+    def set_named_value(self, name: str, value: float) -> None: ...
+
+    def listen(self, message: str, callback: Callable[[MavFrame], None]) -> None: ...
+
+    def intercept(self, message: str, callback: Callable[[MavFrame], bool]) -> None: ...
+
+
+class RouterOutput:
+    """A :class:`MavlinkOutput` through a :class:`RouterPort` (its owner closes the router)."""
+
+    def __init__(self, router: RouterPort) -> None:
         self.router = router
         self.packets = 0
 
@@ -223,5 +265,5 @@ def packer_output(source_system: int = 1, source_component: int = 191, *,
                          clock=clock)
 
 
-def router_output(router: Router) -> RouterOutput:
+def router_output(router: RouterPort) -> RouterOutput:
     return RouterOutput(router)

@@ -46,11 +46,14 @@ from typing import Any, Literal, TextIO
 from drivers.capture import Channel
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings
-from firmware_host.mavlink.params import ParamStore
-from firmware_host.mavlink.router import Router
 from firmware_host.runtime.config_mavlink import MavlinkConfig
 from firmware_host.runtime.loop import FixedRateLoop
-from firmware_host.runtime.mavout import MavlinkOutput, open_mavlink_output, router_output
+from firmware_host.runtime.mavout import (
+    MavlinkOutput,
+    RouterPort,
+    open_mavlink_output,
+    router_output,
+)
 from firmware_host.runtime.recorder import FlightRecorder, RecorderConfig
 from firmware_host.runtime.records import EpochLog
 from firmware_host.runtime.status import Banner, PortInfo, PortStatus, Snapshot, StatusSink
@@ -82,8 +85,10 @@ def _channel(name: str, url: str, baud: int, direction: Literal["rx", "tx"],
 class Runner:
     """Runs one vehicle (see the module docstring).
 
-    ``mavlink`` (the ``[mavlink]`` table) makes the runner start a router and hand the vehicle
-    its output; ``router`` hands it an existing one instead (the runner does not close it).
+    ``mavlink`` (the ``[mavlink]`` table) makes the runner open a router with ``open_router``
+    (:func:`firmware_host.mavlink.router.open_router`: the runtime knows the router only as a
+    :class:`~firmware_host.runtime.mavout.RouterPort`), start it and hand the vehicle its
+    output; ``router`` hands it an existing one instead (the runner does not close it).
     ``mavlink_output`` replaces the vehicle's own MAVLink output (the soak's packer).
     ``opener`` replaces every port's opener (simulated devices). ``jsonl`` is an open stream
     for the records instead of ``out_dir/epochs.jsonl``.
@@ -98,7 +103,8 @@ class Runner:
         recorder: FlightRecorder | None = None,
         own_recorder: bool = True,
         mavlink: MavlinkConfig | None = None,
-        router: Router | None = None,
+        open_router: Callable[[MavlinkConfig], RouterPort] | None = None,
+        router: RouterPort | None = None,
         mavlink_output: MavlinkOutput | None = None,
         duration_s: float | None = None,
         clock: Clock = time.monotonic,
@@ -113,6 +119,10 @@ class Runner:
         self.recorder = recorder
         self.own_recorder = own_recorder
         self.mavlink_cfg = mavlink
+        if mavlink is not None and router is None and open_router is None:
+            raise ValueError("a [mavlink] table needs open_router "
+                             "(firmware_host.mavlink.router.open_router) or a router")
+        self.open_router = open_router
         self.router = router
         self._own_router = False
         self.mavlink_output = mavlink_output
@@ -200,9 +210,9 @@ class Runner:
         if self.out_dir is not None:  # a full or read-only disk never stops the run
             self.epochs = EpochLog(self.out_dir, keep_going=True, clock=self.clock)
         v = self.vehicle
-        if self.router is None and self.mavlink_cfg is not None:
+        if self.router is None and self.mavlink_cfg is not None and self.open_router is not None:
             cfg = self.mavlink_cfg
-            self.router = Router(cfg, params=ParamStore(cfg.param_file or None))
+            self.router = self.open_router(cfg)
             self._own_router = True
             log.info("routing %s <-> %s", cfg.autopilot.url, ", ".join(g.url for g in cfg.gcs))
         for spec in v.ports():  # the ports' channels first: replay takes the first rx channel
@@ -257,10 +267,7 @@ class Runner:
         v = self.vehicle
         ports = tuple(PortInfo(name, p.settings.url, p.settings.baudrate)
                       for name, p in self.ports.items())
-        outputs: list[str] = []
-        nmea = getattr(v, "nmea_url", None)  # the rover's corrected NMEA (duck-typed)
-        if nmea:
-            outputs.append(f"NMEA {nmea}")
+        outputs: list[str] = list(v.outputs())
         router: list[str] = []
         if self.router is not None and self.mavlink_cfg is not None:
             cfg = self.mavlink_cfg

@@ -27,8 +27,7 @@ from typing import Any, Literal, Protocol
 
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port
-from firmware_host.mavlink.router import Router
-from firmware_host.runtime.mavout import MavlinkOutput
+from firmware_host.runtime.mavout import MavlinkOutput, RouterPort
 from firmware_host.runtime.records import EpochLog
 
 Pacing = Literal["period", "data"]
@@ -68,7 +67,7 @@ class Context:
     ports: dict[str, ResilientPort]
     epochs: EpochLog
     mavlink: MavlinkOutput | None = None
-    router: Router | None = None
+    router: RouterPort | None = None
     tap: Callable[[str, str, int, Literal["rx", "tx"]], Tap | None] = (
         lambda name, url, baud, direction: None)
     """A recorder tap for an output the vehicle opens itself (``tap("nmea tx", url, baud,
@@ -94,6 +93,11 @@ class Vehicle(Protocol):
     def ports(self) -> list[PortSpec]: ...
 
     def mavlink(self) -> MavlinkSpec | None: ...
+
+    def outputs(self) -> tuple[str, ...]:
+        """The vehicle's own outputs besides MAVLink, as the start banner names them
+        (``("NMEA pty:/tmp/gps",)``); empty when it has none."""
+        ...
 
     def start(self, ctx: Context) -> None: ...
 

@@ -1,4 +1,5 @@
-"""The rover pipeline behind the MAVLink router: one process for the passthrough and the detector.
+"""The rover's MAVLink side: its pipeline behind the router, one process for the passthrough
+and the detector.
 
 On a rover with an autopilot, ``fdi-bridge run --config X`` (or ``fdi-bridge mavlink``) with
 ``[rover]`` and ``[mavlink]`` tables runs the rover on the one runtime
@@ -32,7 +33,7 @@ from firmware_host.mavlink.router import Router
 from firmware_host.rover.outputs import MavlinkGpsSink
 from firmware_host.rover.pipeline import EpochOutcome, RoverPipeline
 from firmware_host.runtime.config import RoverConfig
-from firmware_host.runtime.mavout import RouterOutput
+from firmware_host.runtime.mavout import RouterOutput, RouterPort
 
 log = logging.getLogger("fdi_bridge.mavlink_rover")
 
@@ -71,7 +72,7 @@ def decision_stats(d: Decision) -> dict[str, float]:
 class RouterRoverSink:
     """EpochSink: the rover's MAVLink output through the router (see the module docstring)."""
 
-    def __init__(self, cfg: RoverConfig, router: Router) -> None:
+    def __init__(self, cfg: RoverConfig, router: RouterPort) -> None:
         self.output = RouterOutput(router)
         self.gps = MavlinkGpsSink(cfg, endpoint=self.output)
 
@@ -112,9 +113,12 @@ class LiveRoverIsolator(RoverIsolator):
 
 
 def attach_rover(
-    pipeline: RoverPipeline, router: Router, prefix: str = PARAM_PREFIX
+    pipeline: RoverPipeline, router: RouterPort, prefix: str = PARAM_PREFIX
 ) -> RouterRoverSink:
-    """Make ``pipeline`` (before its first epoch) use ``router``: live parameters, outputs."""
+    """Make ``pipeline`` (before its first epoch) use ``router``: live parameters (the
+    :class:`~firmware_host.mavlink.router.Router`'s parameter store), outputs."""
+    if not isinstance(router, Router):
+        raise TypeError(f"live parameters need the MAVLink router, not {type(router).__name__}")
     if pipeline.epochs:
         raise ValueError("attach_rover needs a pipeline that has not processed an epoch yet")
     pipeline.isolator = LiveRoverIsolator(pipeline.cfg.detector, router.params, prefix)

@@ -19,9 +19,9 @@ from typing import Any, TextIO
 from fdi.errors import UsageError
 from firmware_host.commands import tables
 from firmware_host.commands.checks import output_dir_arg, positive_float
-from firmware_host.commands.progress import Progress
 from firmware_host.commands.replay import run_replay
 from firmware_host.devtools.plots import HAVE_MATPLOTLIB, plot_rover
+from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 from firmware_host.devtools.score import read_jsonl, score_rover
 from firmware_host.runtime.config import load_config
@@ -89,7 +89,7 @@ def _plots(rows: list[tuple[str, Any, dict[str, Any]]], out: Path, truth: list[d
            say: TextIO) -> int:
     """One PNG per preset (with the plot extra), each named on ``say``."""
     if not HAVE_MATPLOTLIB:
-        print("\n(install the plot extra, pip install -e '.[plot]', for a PNG)", file=say)
+        print("\n(install the dev extra, pip install -e '.[dev]', for a PNG)", file=say)
         return 0
     for preset, _, _ in rows:
         png = plot_rover(read_jsonl(out / preset / "epochs.jsonl"), truth,

@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        print("matplotlib not installed: no figures (pip install 'fdi-bridge[plot]')",
+        print("matplotlib not installed: no figures (pip install 'fdi-bridge[dev]')",
               file=sys.stderr if args.json else sys.stdout)
         return 0
     out = Path(args.out)
