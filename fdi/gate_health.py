@@ -41,16 +41,20 @@ class DecisionLike(Protocol):
     """The fields of :class:`fdi.rover.Decision` the monitor reads."""
 
     @property
-    def chi2(self) -> float | None: ...
+    def chi2(self) -> float | None:
+        """The epoch's χ² statistic F(k); None when the epoch was not tested."""
 
     @property
-    def chi2_threshold(self) -> float: ...
+    def chi2_threshold(self) -> float:
+        """The χ² gate T_d the statistic is compared with."""
 
     @property
-    def grey_gate_h(self) -> float: ...
+    def grey_gate_h(self) -> float:
+        """The grey model's horizontal gate at this epoch, m."""
 
     @property
-    def fault(self) -> bool: ...
+    def fault(self) -> bool:
+        """Whether the epoch's fix was judged faulty."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,7 @@ class GateHealthReport:
     messages: tuple[str, ...] = field(default=())
 
     def as_dict(self) -> dict[str, object]:
+        """The report as a JSON-ready dict (floats rounded to 4 decimals)."""
         def r(x: float | None) -> float | None:
             return None if x is None else round(x, 4)
 
@@ -154,6 +159,7 @@ class GateHealth:
         self._win_sum += F
 
     def report(self) -> GateHealthReport:
+        """The verdict on the epochs seen so far (:class:`GateHealthReport`)."""
         n = self._n
         mean = self._sum / n if n else None
         wmean = self._win_sum / len(self._win) if self._win else None

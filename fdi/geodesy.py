@@ -15,6 +15,7 @@ WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 
 
 def lla_to_ecef(lat_deg: float, lon_deg: float, h_m: float) -> tuple[float, float, float]:
+    """WGS-84 latitude and longitude (deg) and ellipsoidal height (m) to ECEF x, y, z (m)."""
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
     s, c = math.sin(lat), math.cos(lat)
     n = WGS84_A / math.sqrt(1.0 - WGS84_E2 * s * s)
@@ -26,6 +27,8 @@ def lla_to_ecef(lat_deg: float, lon_deg: float, h_m: float) -> tuple[float, floa
 
 
 def ecef_to_lla(x: float, y: float, z: float) -> tuple[float, float, float]:
+    """ECEF x, y, z (m) to WGS-84 latitude, longitude (deg) and ellipsoidal height (m),
+    by a fixed 8 iterations on the latitude."""
     lon = math.atan2(y, x)
     p = math.hypot(x, y)
     lat = math.atan2(z, p * (1.0 - WGS84_E2))
@@ -64,6 +67,7 @@ class LocalFrame:
 
     def to_enu(self, lat_deg: float, lon_deg: float, h_m: float) -> tuple[float, float, float]:
         # lla_to_ecef, written out (once an epoch): the same operations
+        """Latitude, longitude (deg) and height (m) to east, north, up (m) from the origin."""
         lat, lon = math.radians(lat_deg), math.radians(lon_deg)
         s, c = math.sin(lat), math.cos(lat)
         nh = WGS84_A / math.sqrt(1.0 - WGS84_E2 * s * s)
@@ -79,6 +83,7 @@ class LocalFrame:
         return e, n, u
 
     def to_lla(self, e: float, n: float, u: float) -> tuple[float, float, float]:
+        """East, north, up (m) from the origin to latitude, longitude (deg) and height (m)."""
         sl, cl, so, co = self._sl, self._cl, self._so, self._co  # type: ignore[attr-defined]
         x0, y0, z0 = self._ecef0  # type: ignore[attr-defined]
         dx = -so * e - sl * co * n + cl * co * u

@@ -143,6 +143,10 @@ class FtConfig:
 
 @dataclass(frozen=True)
 class HeadingDecision:
+    """One period's heading decision: the heading to use (the compass's or the
+    substitute's), its source, the detector's state and statistics (the FIR's predicted increment
+    ``d_deg``, its error ``e2`` in deg², the weight-drift SNR ``R(k)`` and ``V``), and the event of
+    this period."""
     heading_used: float | None  # deg in [0, 360), None: no heading this period
     source: Source
     state: State

@@ -130,6 +130,7 @@ _RATE_WINDOW = 10  # IMU samples whose median interval decides the rate check
 
 
 def quat_mul(a: Quat, b: Quat) -> Quat:
+    """The Hamilton product ``a ⊗ b`` of quaternions ``(w, x, y, z)``."""
     aw, ax, ay, az = a
     bw, bx, by, bz = b
     return (
@@ -141,6 +142,7 @@ def quat_mul(a: Quat, b: Quat) -> Quat:
 
 
 def quat_conj(q: Quat) -> Quat:
+    """The conjugate of ``q`` (its inverse for a unit quaternion)."""
     return (q[0], -q[1], -q[2], -q[3])
 
 
@@ -180,6 +182,7 @@ def quat_log(q: Quat) -> Vec3:
 
 
 def quat_normalize(q: Quat) -> Quat:
+    """``q`` scaled to unit norm."""
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
@@ -211,6 +214,8 @@ def quat_to_euler(q: Quat) -> Vec3:
 
 
 def quat_to_dcm(q: Quat) -> FloatArray:
+    """The rotation matrix C(q) (3x3) of a unit quaternion: ``C(q) @ v`` is
+    :func:`quat_rotate` ``(q, v)``."""
     w, x, y, z = q
     return np.array(
         [
@@ -336,6 +341,7 @@ class EpochReport:
 
     @property
     def rejected(self) -> int:
+        """How many of the epoch's measurements the three-zone gate rejected."""
         return sum(d.action is Action.REJECT for d in self.decisions)
 
 
@@ -430,22 +436,27 @@ class InsGnssFilter:
 
     @property
     def position(self) -> FloatArray:
+        """The position estimate (3,), m, in the navigation frame (a copy)."""
         return np.array(self.nav.p)
 
     @property
     def velocity(self) -> FloatArray:
+        """The velocity estimate (3,), m/s, in the navigation frame (a copy)."""
         return np.array(self.nav.v)
 
     @property
     def attitude_rpy(self) -> FloatArray:
+        """Roll, pitch, yaw (3,), rad."""
         return np.array(quat_to_euler(self.nav.q))
 
     @property
     def accel_bias(self) -> FloatArray:
+        """The accelerometer bias estimate (3,), m/s² (a copy)."""
         return np.array(self.b_a)
 
     @property
     def gyro_bias(self) -> FloatArray:
+        """The gyro bias estimate (3,), rad/s (a copy)."""
         return np.array(self.b_g)
 
     # ------------------------------------------------------------ time update

@@ -40,6 +40,7 @@ class EarthModel:
 
     @cached_property
     def g0(self) -> float:
+        """Normal gravity at ``latitude_deg`` on the ellipsoid, m/s²."""
         return normal_gravity(self.latitude_deg)
 
     @cached_property
@@ -111,6 +112,7 @@ class ImuErrorModel:
 
     @property
     def gyro_bias_rad_s(self) -> float:
+        """The gyro bias 1σ in rad/s (configured in deg/h)."""
         return self.gyro_bias_deg_h * DEG / 3600.0
 
     @property
@@ -122,14 +124,17 @@ class ImuErrorModel:
 
     @property
     def gyro_arw_rad_sqrt_s(self) -> float:
+        """The gyro angle random walk in rad/√s (configured in deg/√h)."""
         return self.gyro_arw_deg_sqrt_h * DEG / 60.0
 
     @property
     def accel_bias_m_s2(self) -> float:
+        """The accelerometer bias 1σ in m/s² (configured in µg)."""
         return self.accel_bias_ug * 1e-6 * STANDARD_G
 
     @property
     def accel_vrw_m_s_sqrt_s(self) -> float:
+        """The accelerometer velocity random walk in m/s/√s (configured in µg/√Hz)."""
         return self.accel_vrw_ug_sqrt_hz * 1e-6 * STANDARD_G
 
 
@@ -158,4 +163,5 @@ class InsGnssParams:
 
     @property
     def earth(self) -> EarthModel:
+        """The Earth model at the configured latitude, with or without its rotation."""
         return EarthModel(self.latitude_deg, self.earth_rotation)

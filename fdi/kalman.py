@@ -53,6 +53,8 @@ class GpsKalman:
         self.initialised = True
 
     def predict(self, dt: float) -> None:
+        """Time update over ``dt`` seconds, per axis: x = F x, P = F P Fᵀ + Q (white-noise
+        acceleration of spectral density ``q``)."""
         q = self.q
         # Q = q [[dt³/3, dt²/2], [dt²/2, dt]], the same for every axis
         q00, q01, q11 = q * dt**3 / 3.0, q * dt * dt / 2.0, q * dt
@@ -100,4 +102,5 @@ class GpsKalman:
 
     @property
     def position(self) -> tuple[float, float, float]:
+        """The position estimate per axis (east, north, up), m."""
         return (self.axes[0].p, self.axes[1].p, self.axes[2].p)

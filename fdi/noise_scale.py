@@ -36,9 +36,12 @@ class RobustVariance:
 
     @property
     def sigma(self) -> float:
+        """The current scale estimate (the square root of the variance)."""
         return math.sqrt(self.var)
 
     def update(self, x: float, alpha: float | None = None) -> None:
+        """Take one residual ``x`` (clipped at ``clip_sigmas``, ignored beyond
+        ``reject_sigmas``) with weight ``alpha`` (default 1/``samples``); nothing while frozen."""
         if self.frozen:
             return
         a = self.alpha if alpha is None else alpha
@@ -90,6 +93,7 @@ class TrimmedScale:
 
     @property
     def full(self) -> bool:
+        """Whether the window holds ``window`` differences."""
         return len(self._d) == self.window
 
     @property

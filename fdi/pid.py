@@ -67,12 +67,16 @@ class HeadingPid:
         self.output = 0.0
 
     def reset(self) -> None:
+        """Clear the integral, the derivative filter and the output."""
         self.integral = 0.0
         self._prev_heading = None
         self._d_filt = 0.0
         self.output = 0.0
 
     def update(self, setpoint_deg: float, heading_deg: float, dt: float) -> float:
+        """One control step: the output (yaw command) for ``setpoint_deg`` and the measured
+        ``heading_deg`` after ``dt`` seconds; the previous output when ``dt`` or the heading
+        is not usable."""
         if not (dt > 0.0) or not math.isfinite(heading_deg):
             return self.output
         c = self.cfg

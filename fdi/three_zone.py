@@ -435,6 +435,7 @@ class ThreeZoneGate:
 
     @property
     def window_full(self) -> bool:
+        """Whether the history holds ``window`` accepted values (the fit is possible)."""
         return len(self._hist) == self.params.window
 
     def fit(self) -> tuple[float, float] | None:

@@ -31,6 +31,7 @@ FDI_ALLOWED = frozenset({
     "dataclasses", "enum", "fractions", "functools", "heapq", "itertools", "math", "numbers",
     "operator", "statistics", "typing", "numpy", "numpy.typing",
     "array",  # typed flat buffers (fdi/drift.py); its tofile/fromfile are refused below
+    "importlib",  # fdi/__init__.py's public names, imported on first use: fdi's own modules
 })
 IO_BUILTINS = frozenset({"open", "print", "input", "breakpoint", "exec", "eval", "__import__"})
 NUMPY_IO = frozenset({"load", "save", "savez", "savez_compressed", "loadtxt", "savetxt",
