@@ -4,19 +4,21 @@ A vehicle (the rover, the ROV on the Outland link, the ROV through an ArduSub au
 INS/GNSS) says
 
 * which ports it needs (:class:`PortSpec`: URL and line settings, the reopen backoff cap, which
-  directions the flight recorder keeps) and, without a router, where its own MAVLink output
-  goes (:class:`MavlinkSpec`);
+  directions the flight recorder keeps), without a router where its own MAVLink output goes
+  (:class:`MavlinkSpec`), and its other outputs as the start banner names them (``outputs``);
 * how it is paced: ``"period"`` (a fixed-rate step every ``period_s`` on absolute deadlines,
   the ROV at 5 Hz) or ``"data"`` (a step whenever input arrives, the rover by its receiver's
   epochs; ``step`` blocks at most the port's timeout);
 * how its inputs become typed records and outputs (``step``), what it does when its input
-  goes silent (``check``, run every iteration: the silence watchdogs and failsafes of
-  :mod:`firmware_host.runtime.failsafe`), what it does at shutdown (``finish``: records
-  completed, nothing stale sent) and its summary.
+  goes silent (``check``, run every iteration: its own failsafe, on the
+  :class:`~firmware_host.runtime.failsafe.SilenceWatchdog`), what it does at shutdown
+  (``finish``: records completed, nothing stale sent) and its summary.
 
 Everything else -- signals, ``--duration``, the clock, opening and reopening the ports, the
 recorder's taps, ``epochs.jsonl`` and ``summary.json``, the MAVLink router -- is the
-:class:`~firmware_host.runtime.runner.Runner`'s, once, for every vehicle.
+:class:`~firmware_host.runtime.runner.Runner`'s, once, for every vehicle. The runtime knows the
+vehicles only by this protocol and the router only as
+:class:`~firmware_host.runtime.mavout.RouterPort` (``Context.router``).
 """
 
 from __future__ import annotations
