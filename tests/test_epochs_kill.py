@@ -51,6 +51,12 @@ class Writer:
     def outputs(self) -> tuple[str, ...]:
         return ()
 
+    def status_fields(self) -> dict[str, Any]:
+        return {}
+
+    def status_detail(self) -> tuple[str, ...]:
+        return ()
+
     def start(self, ctx: Context) -> None:
         self.ctx = ctx
 

@@ -242,6 +242,14 @@ class InsGnssVehicle:
         """The corrected NMEA output, when there is one (the start banner)."""
         return (f"NMEA {self.nmea_url}",) if self.nmea_url else ()
 
+    def status_fields(self) -> dict[str, Any]:
+        """Nothing beyond the runner's own status line fields."""
+        return {}
+
+    def status_detail(self) -> tuple[str, ...]:
+        """Nothing after the ports on the status line."""
+        return ()
+
     def start(self, ctx: Context) -> None:
         rc = self.cfg.rover
         out = rc.output

@@ -866,6 +866,14 @@ class ArduSubRovVehicle:
         """No output besides MAVLink (the start banner)."""
         return ()
 
+    def status_fields(self) -> dict[str, Any]:
+        """Nothing beyond the runner's own status line fields."""
+        return {}
+
+    def status_detail(self) -> tuple[str, ...]:
+        """Nothing after the ports on the status line."""
+        return ()
+
     def start(self, ctx: Context) -> None:
         if ctx.router is None:
             raise ConfigError("(config)", "mavlink", "a [mavlink] table: the ArduSub ROV's "

@@ -102,6 +102,14 @@ class OutlandRovVehicle:
         """No output besides MAVLink (the start banner)."""
         return ()
 
+    def status_fields(self) -> dict[str, Any]:
+        """Nothing beyond the runner's own status line fields."""
+        return {}
+
+    def status_detail(self) -> tuple[str, ...]:
+        """Nothing after the ports on the status line."""
+        return ()
+
     def start(self, ctx: Context) -> None:
         c = self.cfg.link
         self.link = OutlandLink(ctx.ports[LINK], self.proto, c.wiring, c.address,

@@ -313,10 +313,7 @@ class Runner:
         actions = vs.get("actions")
         if faults is None and isinstance(actions, dict):  # the ROV: its control actions
             extra = {k: actions[k] for k in sorted(actions) if actions[k]}
-        more = getattr(self.vehicle, "status_fields", None)  # the vehicle's own fields
-        if callable(more):
-            extra.update(more())
-        detail = getattr(self.vehicle, "status_detail", None)
+        extra.update(self.vehicle.status_fields())  # the vehicle's own fields
         return Snapshot(
             elapsed_s=now - self.t0,
             epochs=int(epochs) if isinstance(epochs, int) else self.records,
@@ -325,7 +322,7 @@ class Runner:
             ports=tuple(ports),
             last_record_age_s=None if self._last_record_t is None
             else now - self._last_record_t,
-            extra=extra, detail=tuple(detail()) if callable(detail) else ())
+            extra=extra, detail=tuple(self.vehicle.status_detail()))
 
     def close(self) -> dict[str, Any]:
         """Finish the vehicle, close everything, write ``summary.json``; returns the summary."""

@@ -101,6 +101,16 @@ class Vehicle(Protocol):
         (``("NMEA pty:/tmp/gps",)``); empty when it has none."""
         ...
 
+    def status_fields(self) -> dict[str, Any]:
+        """Counters the status line adds after the epochs, faults and alarms (the
+        :class:`~firmware_host.runtime.status.Snapshot`'s ``extra``); empty for none."""
+        ...
+
+    def status_detail(self) -> tuple[str, ...]:
+        """Compact items the status line shows after the ports (the Snapshot's ``detail``,
+        the rover's last fix and what was sent); empty for none."""
+        ...
+
     def start(self, ctx: Context) -> None: ...
 
     def step(self, t: float) -> int:
