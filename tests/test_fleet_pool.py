@@ -5,15 +5,19 @@ The Dask executors are compared with these in hil_tests/test_fleet.py (the ``fle
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
 import pytest
 
+from firmware_host.commands.replay import load_input
+from firmware_host.devtools.eval import run_ours
 from firmware_host.devtools.fleet import (
     discover,
     parse_sweeps,
     point_configs,
+    replay_rover,
     run_fleet,
 )
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
@@ -24,8 +28,8 @@ from tests.processes import descendants, leftovers
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("fleet-pool")
-    for seed in range(1, 7):  # 6 generated runs, 30 s each, 1/5/10 Hz
-        write_run(RoverScenario(rate_hz=(1.0, 5.0, 10.0)[seed % 3], duration_s=30.0,
+    for seed in range(1, 7):  # 6 generated runs, 2 min each, 1/5/10 Hz
+        write_run(RoverScenario(rate_hz=(1.0, 5.0, 10.0)[seed % 3], duration_s=120.0,
                                 seed=200 + seed), root / f"run{seed}")
     (root / "damaged.cap").write_bytes(b"\x00\x01not a capture\xff" * 40)
     return root
@@ -77,3 +81,17 @@ def test_the_fleet_command_leaves_no_process_running_after_it_exits(runs: Path) 
                           "--workers", "2", "--json"], root)
     assert rc == 0
     assert left == []
+
+
+def test_a_job_keeps_the_records_eval_reads_back_from_epochs_jsonl(runs: Path) -> None:
+    cfg = point_configs("rover", parse_sweeps([]))["config"]
+    for run in ("run1", "run3"):  # 5 Hz and 1 Hz; faults and replacements in both
+        data = b"".join(c for _, c in load_input(runs / run / "rover.cap").chunks)
+        ours, summary = run_ours(cfg, data)
+        kept, counted = replay_rover(cfg, data, records=True)
+        assert len(kept) == summary["epochs"] >= 120
+        assert json.dumps(kept) == json.dumps(ours)  # the same values (NaN included)
+        assert sum(r["action"] == "replace" for r in kept) > 0
+        _, bare = replay_rover(cfg, data, records=False)
+        for key in ("epochs", "faults", "alarms", "actions", "reasons", "input", "gate_health"):
+            assert bare[key] == counted[key] == summary[key], key

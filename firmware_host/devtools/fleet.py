@@ -43,7 +43,7 @@ import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TextIO, cast
 
 from drivers.capture import is_capture
 from drivers.configload import read_toml
@@ -52,10 +52,10 @@ from firmware_host.commands.checks import input_path_arg, output_dir_arg, positi
 from firmware_host.commands.progress import Progress as Bar
 from firmware_host.commands.replay import load_input
 from firmware_host.commands.tables import Block, Table, report_console, report_markdown
-from firmware_host.devtools.eval import run_ours
 from firmware_host.devtools.score import score_rover
 from firmware_host.rov.config import RovConfig, load_rov_config
 from firmware_host.rov.tlog import load_dive, replay
+from firmware_host.rover.pipeline import EpochOutcome, RoverPipeline
 from firmware_host.runtime.config import (
     BridgeConfig,
     bridge_config,
@@ -259,10 +259,44 @@ def _round(x: Any) -> Any:
     return x
 
 
+class _KeptRecords:
+    """An output that keeps each epoch's record, the dict the pipeline builds for
+    ``epochs.jsonl`` (what ``json.loads`` of its line gives back, without the round trip)."""
+
+    def __init__(self) -> None:
+        self.records: list[dict[str, Any]] = []
+
+    def emit(self, out: EpochOutcome) -> None:
+        self.records.append(out.record)
+
+    def close(self) -> None:
+        pass
+
+
+class _NoFile:
+    """A ``jsonl`` that writes nothing: the pipeline builds the records, the job keeps them."""
+
+    def write(self, text: str) -> int:
+        return len(text)
+
+
+def replay_rover(cfg: BridgeConfig, data: bytes, records: bool
+                 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The rover pipeline (no pty) on ``data``: its records (only when ``records``: scoring
+    needs them, counting does not) and its summary. The records are those of
+    :func:`~firmware_host.devtools.eval.run_ours` (tests/test_fleet_pool.py compares them)."""
+    kept = _KeptRecords()
+    pipe = RoverPipeline(cfg.rover, jsonl=cast("TextIO", _NoFile()) if records else None,
+                         sinks=[kept] if records else None)
+    pipe.feed(data)
+    pipe.finish()
+    return kept.records, pipe.summary()
+
+
 def _rover_row(job: Job) -> dict[str, Any]:
     inp = load_input(job.log.path)
     data = b"".join(c for _, c in inp.chunks)
-    records, summary = run_ours(job.rover, data)
+    records, summary = replay_rover(job.rover, data, records=job.log.truth is not None)
     counters = summary["input"]
     if counters["sentences"] == 0 and not counters["ignored"]:
         raise FdiBridgeError(
