@@ -56,7 +56,8 @@ def test_gpsdecode_rows_judge_the_ratios() -> None:
                                    "no_pty": [1.2, 1.2, 1.3], "no_records": [1.0, 1.0, 0.9]},
                          "peak_rss_mib": {"gpsdecode": 6.6, "records": 26.1, "no_pty": 25.0,
                                           "no_records": 24.0},
-                         "ratio": {"records": 5.0, "no_pty": 4.1, "no_records": 3.3}}}
+                         "ratio": {"records": 5.0, "no_pty": 4.1, "no_records": 3.3},
+                         "floor_rss_mib": 5.1}}
     rows = bench.gpsdecode_rows(res)
     by = {r["figure"].split(":")[0]: r for r in rows}
     recs = next(r for n, r in by.items() if "through a pty" in n)
@@ -64,7 +65,7 @@ def test_gpsdecode_rows_judge_the_ratios() -> None:
     nore = next(r for n, r in by.items() if "--no-records" in n)
     assert nore["ok"] is False and nore["goal"] == "<= 3"
     assert "1.50 CPU-s against gpsdecode's 0.300" in recs["figure"]
-    assert rows[-1]["value"] == round(26.1 / 6.6, 2)
+    assert rows[-1]["value"] == round(26.1 / 6.6, 2) and "`true`: 5.1 MiB" in rows[-1]["figure"]
     assert bench.gpsdecode_rows({"gpsdecode": {"error": "not installed"}}) == []
 
 
@@ -76,3 +77,4 @@ def test_the_replay_against_gpsdecode_on_a_short_log() -> None:
     assert all(r > 0 for r in g["ratio"].values())
     # The replay's own memory: a Python process with its imports, far below the bench's.
     assert 10.0 < g["peak_rss_mib"]["records"] < 60.0
+    assert g["floor_rss_mib"] < g["peak_rss_mib"]["records"]
