@@ -31,6 +31,7 @@ from firmware_host.devtools.fleet import (
 )
 from firmware_host.devtools.rover_sim import RoverScenario, write_run
 from firmware_host.rov.config import RovConfig
+from tests.processes import cmdline, descendants, leftovers
 
 pytest.importorskip("distributed", reason="the fleet extra (Dask) is not installed")
 
@@ -126,18 +127,26 @@ def scheduler() -> Iterator[str]:
                 p.kill()
 
 
-def test_serial_localcluster_and_scheduler_give_the_same_rows(
+def test_serial_pool_localcluster_and_scheduler_give_the_same_rows(
         fleet_dir: Path, scheduler: str) -> None:
     logs = _logs(fleet_dir)
     configs = point_configs("rover", parse_sweeps(SWEEP))
     rov = RovConfig()
+    before = descendants()  # the scheduler and its worker are there already
     serial = run_fleet(logs, configs, rov, workers=1)
-    local = run_fleet(logs, configs, rov, workers=2)
+    pool = run_fleet(logs, configs, rov, workers=2)
+    local = run_fleet(logs, configs, rov, workers=2, dask=True)
     remote = run_fleet(logs, configs, rov, scheduler=scheduler)
-    assert serial.executor == "serial" and "LocalCluster" in local.executor
+    assert serial.executor == "serial" and pool.executor == "process pool x2"
+    assert "LocalCluster" in local.executor and scheduler in remote.executor
     assert len(serial.rows) == 3 * len(logs)
+    assert pool.rows == serial.rows
     assert local.rows == serial.rows
     assert remote.rows == serial.rows
+    # No pool or LocalCluster worker left behind; multiprocessing's resource tracker (started
+    # by Dask) serves this process until it exits: the command's test below sees it go.
+    left = [cmdline(p) for p in descendants() - before]
+    assert [c for c in left if "resource_tracker" not in c] == []
     # The damaged and the empty file are rows with their error; nothing else failed.
     errors = {Path(r["log"]).name: r["error"] for r in serial.rows if r["error"]}
     assert set(errors) == {"damaged.cap", "empty.log"}, errors
@@ -151,6 +160,16 @@ def test_serial_localcluster_and_scheduler_give_the_same_rows(
     assert tight["scored_logs"] == loose["scored_logs"] == 20
     assert tight["epochs"] == loose["epochs"]
     assert tight["replaced"] != loose["replaced"]
+
+
+def test_the_fleet_command_on_dask_leaves_no_process_running_after_it_exits(
+        fleet_dir: Path) -> None:
+    root = str(Path(__file__).resolve().parents[1])
+    rc, left = leftovers([sys.executable, "-m", "firmware_host.cli", "fleet",
+                          str(fleet_dir / "runs" / "run01"), str(fleet_dir / "runs" / "run02"),
+                          "--dask", "--workers", "2", "--json"], root)
+    assert rc == 0
+    assert left == []
 
 
 def test_fleet_command_writes_tables_json_and_reports_bad_input(

@@ -477,7 +477,7 @@ def test_bench_replay_memory_prints_an_aligned_table() -> None:
     assert "|" not in text
     lines = text.splitlines()
     assert lines[0].startswith("replay peak RSS, 1 Hz") and "24 h log (MiB)" in lines[0]
-    assert lines[1].split() == ["nmea", "56.6", "56.7", "1.002", "<=", "1.10"]
+    assert lines[1].split() == ["nmea", "56.6", "56.7", "1.002", "<=", "1.5"]
 
 
 def test_a_wide_table_wraps_to_the_width_repeating_its_key_columns() -> None:

@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--corpus", type=Path, default=ROOT.parent / "shared" / "corpus")
     ap.add_argument("--keep", type=Path, default=None, help="keep the outputs here")
     ap.add_argument("--tree", type=Path, default=ROOT,
-                    help="the tree to check (default: this one; e.g. a copy built with mypyc)")
+                    help="the tree to check (default: this one)")
     args = ap.parse_args(argv)
     work = args.keep or Path(tempfile.mkdtemp(prefix="replay-identity-"))
     ref = work / "ref-tree"

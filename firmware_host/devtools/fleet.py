@@ -13,11 +13,14 @@ trade-off (detection against false alarms) when truth files are there.
   sweep applies to the rover configuration, so a dive's row is the same at every point.
 * **Deterministic.** A replay depends only on its input bytes, so the rows are the same whichever
   executor ran them (wall-clock figures such as processing times are left out of the rows).
-* **Parallel by default, distributed when asked** (the ``fleet`` extra: Dask): ``--workers N``
-  runs an embedded Dask ``LocalCluster`` of N single-threaded worker processes (default: the
-  cores), ``--scheduler tcp://HOST:8786`` uses an existing cluster, ``--workers 1`` runs in this
-  process with no Dask at all. A log that cannot be read is a row with its error; it never stops
-  the others.
+* **Parallel by default, distributed when asked**: by default a local process pool
+  (:class:`concurrent.futures.ProcessPoolExecutor`, workers forked from this process, no
+  scheduler) of ``--workers N`` processes (default: the cores) runs the jobs; ``--workers 1``
+  runs them in this process. Dask (the ``fleet`` extra) only when asked: ``--dask`` runs an
+  embedded ``LocalCluster`` of N single-threaded worker processes, ``--scheduler
+  tcp://HOST:8786`` uses an existing cluster. Every executor gives the same rows, and none
+  leaves a worker process behind when the command ends (^C included). A log that cannot be
+  read is a row with its error; it never stops the others.
 * **Sweeps.** ``--sweep rover.detector.gate_sigmas=4,6,8`` (repeatable: the cartesian product of
   all sweeps) changes one key of the ``--config`` file per point; every point is validated by the
   one config loader before any work starts, so a bad key or value fails at once (exit 2).
@@ -26,11 +29,13 @@ trade-off (detection against false alarms) when truth files are there.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import contextlib
 import itertools
 import json
 import logging
 import math
+import multiprocessing
 import os
 import sys
 import time
@@ -38,7 +43,7 @@ import tomllib
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TextIO, cast
 
 from drivers.capture import is_capture
 from drivers.configload import read_toml
@@ -46,11 +51,11 @@ from fdi.errors import ConfigError, FdiBridgeError
 from firmware_host.commands.checks import input_path_arg, output_dir_arg, positive_int
 from firmware_host.commands.replay import load_input
 from firmware_host.commands.tables import Block, Table, report_console, report_markdown
-from firmware_host.devtools.eval import run_ours
 from firmware_host.devtools.progress import Progress as Bar
 from firmware_host.devtools.score import score_rover
 from firmware_host.rov.config import RovConfig, load_rov_config
 from firmware_host.rov.tlog import load_dive, replay
+from firmware_host.rover.pipeline import EpochOutcome, RoverPipeline
 from firmware_host.runtime.config import (
     BridgeConfig,
     bridge_config,
@@ -254,10 +259,44 @@ def _round(x: Any) -> Any:
     return x
 
 
+class _KeptRecords:
+    """An output that keeps each epoch's record, the dict the pipeline builds for
+    ``epochs.jsonl`` (what ``json.loads`` of its line gives back, without the round trip)."""
+
+    def __init__(self) -> None:
+        self.records: list[dict[str, Any]] = []
+
+    def emit(self, out: EpochOutcome) -> None:
+        self.records.append(out.record)
+
+    def close(self) -> None:
+        pass
+
+
+class _NoFile:
+    """A ``jsonl`` that writes nothing: the pipeline builds the records, the job keeps them."""
+
+    def write(self, text: str) -> int:
+        return len(text)
+
+
+def replay_rover(cfg: BridgeConfig, data: bytes, records: bool
+                 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The rover pipeline (no pty) on ``data``: its records (only when ``records``: scoring
+    needs them, counting does not) and its summary. The records are those of
+    :func:`~firmware_host.devtools.eval.run_ours` (tests/test_fleet_pool.py compares them)."""
+    kept = _KeptRecords()
+    pipe = RoverPipeline(cfg.rover, jsonl=cast("TextIO", _NoFile()) if records else None,
+                         sinks=[kept] if records else None)
+    pipe.feed(data)
+    pipe.finish()
+    return kept.records, pipe.summary()
+
+
 def _rover_row(job: Job) -> dict[str, Any]:
     inp = load_input(job.log.path)
     data = b"".join(c for _, c in inp.chunks)
-    records, summary = run_ours(job.rover, data)
+    records, summary = replay_rover(job.rover, data, records=job.log.truth is not None)
     counters = summary["input"]
     if counters["sentences"] == 0 and not counters["ignored"]:
         raise FdiBridgeError(
@@ -332,6 +371,29 @@ def run_serial(jobs: Sequence[Job], progress: Progress | None = None,
     return rows
 
 
+def run_pool(jobs: Sequence[Job], workers: int, progress: Progress | None = None,
+             into: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
+    """The jobs on a local pool of ``workers`` processes (forked where the system can: a worker
+    starts with this process's modules already imported), one job per task; the rows in job
+    order, appended to ``into`` when all are done or at ^C (the rows done by then). The pool is
+    shut down before this returns, its queued jobs cancelled: no worker outlives the call."""
+    methods = multiprocessing.get_all_start_methods()
+    ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
+    rows: list[dict[str, Any] | None] = [None] * len(jobs)
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    try:
+        index = {pool.submit(evaluate_log, job): i for i, job in enumerate(jobs)}
+        for done, fut in enumerate(concurrent.futures.as_completed(index), 1):
+            rows[index[fut]] = fut.result()
+            if progress is not None:
+                progress(done, len(jobs))
+    finally:  # ^C too: the rows done, in job order, and the workers joined
+        pool.shutdown(wait=True, cancel_futures=True)
+        out = into if into is not None else []
+        out.extend(r for r in rows if r is not None)
+    return out
+
+
 def run_dask(jobs: Sequence[Job], *, workers: int | None = None, scheduler: str | None = None,
              progress: Progress | None = None,
              into: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
@@ -342,7 +404,7 @@ def run_dask(jobs: Sequence[Job], *, workers: int | None = None, scheduler: str 
     except ImportError as err:  # the optional extra
         raise FdiBridgeError(
             "fleet: Dask is not installed (pip install 'fdi-bridge[dev]'); "
-            "--workers 1 runs without it") from err
+            "without --dask and --scheduler the fleet runs without it") from err
     _quiet_logs()  # importing distributed set its own levels
     cluster = None
     if scheduler is None:
@@ -375,23 +437,32 @@ def run_dask(jobs: Sequence[Job], *, workers: int | None = None, scheduler: str 
 
 
 def run_fleet(logs: Sequence[LogEntry], configs: dict[str, BridgeConfig], rov: RovConfig, *,
-              workers: int | None = None, scheduler: str | None = None,
+              workers: int | None = None, scheduler: str | None = None, dask: bool = False,
               progress: Progress | None = None) -> FleetResult:
-    """Every log at every point; ``workers == 1`` and no scheduler: in this process."""
+    """Every log at every point: on the Dask scheduler at ``scheduler``, else on a Dask
+    ``LocalCluster`` of ``workers`` processes when ``dask``, else on a local process pool of
+    ``workers`` (default: the cores), or in this process when that is 1 (or there is one
+    job)."""
     jobs = [Job(log, label, cfg, rov) for label, cfg in configs.items() for log in logs]
+    n = workers if workers is not None else (os.cpu_count() or 1)
     t0 = time.perf_counter()
     rows: list[dict[str, Any]] = []
     partial = False
-    serial = scheduler is None and workers == 1
-    executor = "serial" if serial else (
-        f"dask {scheduler}" if scheduler else f"dask LocalCluster x{workers}")
+    if scheduler is not None:
+        executor = f"dask {scheduler}"
+    elif dask:
+        executor = f"dask LocalCluster x{n}"
+    else:
+        n = min(n, len(jobs))
+        executor = "serial" if n <= 1 else f"process pool x{n}"
     try:
         with _levels_kept():
-            if serial:
+            if executor.startswith("dask"):
+                run_dask(jobs, workers=n, scheduler=scheduler, progress=progress, into=rows)
+            elif executor == "serial":
                 run_serial(jobs, progress, into=rows)
             else:
-                run_dask(jobs, workers=workers, scheduler=scheduler, progress=progress,
-                         into=rows)
+                run_pool(jobs, n, progress, into=rows)
     except KeyboardInterrupt:
         partial = True
     return FleetResult(rows, list(configs), executor, time.perf_counter() - t0, len(jobs),
@@ -567,10 +638,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a config key and its values (repeatable: all combinations), "
                              "e.g. rover.detector.gate_sigmas=4,6,8")
     parser.add_argument("--workers", type=positive_int, default=None,
-                        help="Dask LocalCluster worker processes (default: the cores); "
-                             "1 = serial, in this process, no Dask")
+                        help="worker processes of the local pool (or of --dask's "
+                             "LocalCluster); default: the cores; 1 = in this process")
+    parser.add_argument("--dask", action="store_true",
+                        help="run on an embedded Dask LocalCluster instead of the local "
+                             "process pool (the fleet extra)")
     parser.add_argument("--scheduler", default=None,
-                        help="an existing Dask scheduler, e.g. tcp://127.0.0.1:8786")
+                        help="an existing Dask scheduler, e.g. tcp://127.0.0.1:8786 (the "
+                             "logs' paths must be readable by its workers)")
     parser.add_argument("--compare-serial", action="store_true",
                         help="also run serially, check the rows are identical, print the ratio")
     parser.add_argument("--out", type=output_dir_arg, default=None,
@@ -608,7 +683,7 @@ def _run(args: argparse.Namespace) -> int:
     workers = args.workers if args.workers is not None else (os.cpu_count() or 1)
     with Bar(len(logs), "fleet", unit="job") as bar:
         result = run_fleet(logs, configs, rov, workers=workers, scheduler=args.scheduler,
-                           progress=_progress(bar))
+                           dask=args.dask, progress=_progress(bar))
     doc: dict[str, Any] = {
         "executor": result.executor, "seconds": round(result.seconds, 3),
         "points": {label: pooled([r for r in result.rows if r["point"] == label])
