@@ -28,7 +28,7 @@ import math
 import os
 import struct
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final, NamedTuple
@@ -678,30 +678,53 @@ class MavEndpoint(_Encoders):
         self._pending_what = f"mode {mode}"
         return raw
 
+    on_message: Callable[[Any], None] | None = None  # every message read (the status's echo)
+
+    def drain(self, limit: int = 1024) -> int:
+        """Read what has arrived, without blocking (at most ``limit`` messages): each goes to
+        :attr:`on_message`, and a pending command's COMMAND_ACK settles it as at a send."""
+        n = 0
+        while n < limit and (msg := self._recv_nowait()) is not None:
+            n += 1
+            self._settles(msg)
+        return n
+
+    def _recv_nowait(self) -> Any | None:
+        try:
+            msg = self._conn.recv_msg()
+        except OSError:
+            return None
+        if msg is not None and self.on_message is not None:
+            self.on_message(msg)
+        return msg
+
+    def _settles(self, msg: Any) -> bool:
+        """True when ``msg`` is the pending command's final COMMAND_ACK (counted, logged)."""
+        pending = self._pending
+        if pending is None or msg.get_type() != "COMMAND_ACK" or int(msg.command) != pending[0]:
+            return False
+        result = int(msg.result)
+        if result == MAV_RESULT_IN_PROGRESS:
+            self._pending_due = time.monotonic() + self.command_retry_s
+            return False
+        self._pending = None
+        key = "command_accepted" if result == MAV_RESULT_ACCEPTED else "command_refused"
+        self.command_stats[key] += 1
+        if result != MAV_RESULT_ACCEPTED:
+            _log.warning("autopilot refused %s (MAV_RESULT %d)", self._pending_what, result)
+        return True
+
     def _service_command(self) -> None:
         pending = self._pending
         if pending is None:
             return
         command, attempts, again = pending
         for _ in range(64):  # what arrived since the last send (non-blocking)
-            try:
-                msg = self._conn.recv_msg()
-            except OSError:
-                break
+            msg = self._recv_nowait()
             if msg is None:
                 break
-            if msg.get_type() != "COMMAND_ACK" or int(msg.command) != command:
-                continue
-            result = int(msg.result)
-            if result == MAV_RESULT_IN_PROGRESS:
-                self._pending_due = time.monotonic() + self.command_retry_s
-                continue
-            self._pending = None
-            key = "command_accepted" if result == MAV_RESULT_ACCEPTED else "command_refused"
-            self.command_stats[key] += 1
-            if result != MAV_RESULT_ACCEPTED:
-                _log.warning("autopilot refused %s (MAV_RESULT %d)", self._pending_what, result)
-            return
+            if self._settles(msg):
+                return
         if time.monotonic() < self._pending_due:
             return
         if attempts >= self.command_retries:

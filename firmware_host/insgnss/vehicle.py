@@ -54,6 +54,13 @@ fault is believed); an epoch whose fix was not used as is (replaced, down-weight
 or a fault believed) is raised to the innovation's scale ``sqrt(P⁻_ii + R_ii)``: the output is
 then mostly the INS prediction and the receiver disagreed with it. One record per epoch in
 ``epochs.jsonl``.
+
+While coasting (a no-fix epoch) the horizontal accuracy sent is
+``sqrt(max(P_h(fix), σ_rx²) + P_h(now) − P_h(fix))``: what the covariance grew since the last
+fix used, on top of that fix's claim, and that claim at least the receiver's own accuracy of
+the fix (``σ_rx``, as the rover sends it: GST, else σ √2 HDOP). A receiver's error is
+correlated in time, so the filter's average of its fixes at rest (``P_h`` far below the
+receiver's σ) is no better than the receiver there; the coast starts from it.
 """
 
 from __future__ import annotations
@@ -85,7 +92,7 @@ from fdi.insgnss import (
 from fdi.three_zone import Action
 from firmware_host.insgnss import align
 from firmware_host.insgnss.align import zaru_sigma
-from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
+from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, receiver_accuracy, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
 from firmware_host.rover.vehicle import rover_mavlink_spec
 from firmware_host.runtime.config import BridgeConfig
@@ -221,6 +228,8 @@ class InsGnssVehicle:
         self.coast_checks = 0  # coasts ended by a fix: their claim checked against it
         self.coast_failed = 0  # ... of which the fix was beyond the claim (NEES > χ²₂(0.99))
         self.coast_inflation = 1.0  # factor on the coast's accuracy from the failed checks
+        self._fix_acc_h = 0.0  # the receiver's own horizontal accuracy of the last fix used
+        self._var_h_fix = 0.0  # the filter's horizontal variance just after that fix
         self._router_q: deque[bytes] = deque()  # appended by the router's thread
         self._imu_tap: Callable[[bytes], None] | None = None
 
@@ -481,6 +490,8 @@ class InsGnssVehicle:
                 self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
                 rep = kf.update(t_g, enu)
                 self._last_fix_t = t_g
+                self._fix_acc_h = receiver_accuracy(out.epoch, self.cfg.rover.detector)[0]
+                self._var_h_fix = self._var_h(kf)
             self._coasting = rep is None
             if still and not kf.bias_active:
                 kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
@@ -745,8 +756,10 @@ class InsGnssVehicle:
             var = np.maximum(var, self._prior_var + r)
         acc_h = math.sqrt(max(float(var[0]), float(var[1])))
         acc_v = math.sqrt(float(var[2]))
-        if rep is None:  # coasting: scaled by the coast checks that failed
-            acc_h *= self.coast_inflation
+        if rep is None:  # coasting (module docstring): from the receiver's accuracy at least
+            grown = max(0.0, self._var_h(kf) - self._var_h_fix)
+            acc_h = math.sqrt(max(self._var_h_fix, self._fix_acc_h**2) + grown)
+            acc_h *= self.coast_inflation  # and scaled by the coast checks that failed
             acc_v *= self.coast_inflation
         ins: dict[str, Any] = {
             "pos": [_r(x, 3) for x in p], "vel": [_r(x, 3) for x in kf.velocity],
@@ -793,14 +806,22 @@ class InsGnssVehicle:
                                 {**(out.record or {}), "ins": ins},
                                 heading_deg=out.heading_deg))
 
+    @staticmethod
+    def _var_h(kf: InsGnssFilter) -> float:
+        """The larger horizontal variance of the position (the fault bias's added while a
+        fault is believed), m²."""
+        var = np.diag(kf.P)[:2] + (np.diag(kf._Pbb)[:2] if kf.bias_active else 0.0)
+        return float(max(var[0], var[1]))
+
     def _check_coast(self, enu: tuple[float, float, float]) -> None:
         """The first fix after a coast checks the coast's claim: the horizontal NEES
         ``νᵀ (P + R)⁻¹ ν`` of the fix against the coasted position, before the update. Beyond
-        χ²₂(0.99) = 9.21 the claim failed: the coast's accuracy (GPS_INPUT, the records) is
-        scaled from now on by ``√k``, ``k`` the factor on ``P`` that would have made this
-        return typical (``νᵀ (k P + R)⁻¹ ν = 2``, its mean); the largest so far is kept. (The
-        filter's own ``P`` is not changed: the gate's readmission already pulls a drifted
-        state back.)"""
+        χ²₂(0.99) = 9.21 the claim failed: the filter's ``P`` is widened by ``k`` before the
+        fix is taken (:meth:`~fdi.insgnss.InsGnssFilter.inflate`), ``k`` the factor on ``P``
+        that would have made this return typical (``νᵀ (k P + R)⁻¹ ν = 2``, its mean), so the
+        fix pulls the drifted state back and corrects what drifted; and the coast's accuracy
+        (GPS_INPUT, the records) is scaled from now on by ``√k``, the largest so far, because
+        the filter's model drifted faster than it claimed."""
         kf = self.kf
         assert kf is not None
         nu = np.array(enu[:2]) - kf.position[:2]
@@ -819,6 +840,7 @@ class InsGnssVehicle:
             else:
                 hi = k
         self.coast_inflation = max(self.coast_inflation, math.sqrt(hi))
+        kf.inflate(hi)  # the filter's own claim widened before the fix is taken
         claim = math.sqrt(max(float(P[0, 0]), float(P[1, 1])))
         self.ratelog.warning(
             "coast check", f"INS coast claimed {claim:.2f} m (1σ), the fix returned "

@@ -48,6 +48,7 @@ from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings
 from firmware_host.mavlink.params import ParamStore
 from firmware_host.mavlink.router import Router
+from firmware_host.runtime import autopilot_echo
 from firmware_host.runtime.config_mavlink import MavlinkConfig
 from firmware_host.runtime.loop import FixedRateLoop
 from firmware_host.runtime.mavout import MavlinkOutput, open_mavlink_output, router_output
@@ -139,6 +140,7 @@ class Runner:
         self._last_record_t: float | None = None
         self._next_status = 0.0
         self._status_prev: tuple[float, dict[str, tuple[int, int]]] | None = None
+        self._echo: autopilot_echo.AutopilotEcho | None = None
 
     # ------------------------------------------------------------------ control
 
@@ -221,6 +223,8 @@ class Runner:
                     **({"opener": self.opener} if self.opener is not None else {}))
                 self._own_output = True
         self.mavlink_output = output
+        if output is not None and self.status is not None:  # the status line's autopilot
+            self._echo = autopilot_echo.attach(output, self.router, self.clock)
         ctx = Context(clock=self.clock, ports=self.ports, epochs=self.epochs, mavlink=output,
                       router=self.router,
                       tap=lambda name, url, baud, direction: self._tap(name, url, baud,
@@ -318,7 +322,8 @@ class Runner:
             ports=tuple(ports),
             last_record_age_s=None if self._last_record_t is None
             else now - self._last_record_t,
-            extra=extra, detail=tuple(detail()) if callable(detail) else ())
+            extra=extra, detail=tuple(detail()) if callable(detail) else (),
+            autopilot=None if self._echo is None else self._echo.view(now))
 
     def close(self) -> dict[str, Any]:
         """Finish the vehicle, close everything, write ``summary.json``; returns the summary."""
