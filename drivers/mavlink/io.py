@@ -459,6 +459,15 @@ class _Encoders:
         msg = self._mav.ahrs2_encode(roll_rad, pitch_rad, yaw_rad, 0.0, 0, 0)
         return self._emit(msg)
 
+    def send_gps_raw_int(self, time_usec: int, fix_type: int, lat_deg: float, lon_deg: float,
+                         alt_m: float, satellites: int) -> bytes:
+        """GPS_RAW_INT (an autopilot's report of its GPS: what it made of a GPS_INPUT; a
+        simulated autopilot's echo); accuracies and velocity unknown (UINT16_MAX)."""
+        msg = self._mav.gps_raw_int_encode(
+            time_usec, fix_type, round(lat_deg * 1e7), round(lon_deg * 1e7), round(alt_m * 1e3),
+            65535, 65535, 65535, 65535, satellites)
+        return self._emit(msg)
+
     def send_param_set(
         self, target_system: int, target_component: int, name: str, value: float
     ) -> bytes:
@@ -646,6 +655,8 @@ class MavEndpoint(_Encoders):
             raise PortError(f"could not write to {self.url!r}: {err}") from err
         if self._pending is not None:
             self._service_command()
+        elif self.on_message is not None:  # someone watches what comes back: read it now
+            self.drain(64)
         return bytes(msg.get_msgbuf())
 
     _pending: tuple[int, int, Any] | None = None  # (command, attempts, re-encode)

@@ -223,7 +223,7 @@ class Runner:
                     **({"opener": self.opener} if self.opener is not None else {}))
                 self._own_output = True
         self.mavlink_output = output
-        if output is not None and self.status is not None:  # the status line's autopilot
+        if output is not None:  # the status line's autopilot (read at each snapshot)
             self._echo = autopilot_echo.attach(output, self.router, self.clock)
         ctx = Context(clock=self.clock, ports=self.ports, epochs=self.epochs, mavlink=output,
                       router=self.router,
