@@ -62,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
         bar.step("generated")
         for preset, cfg in zip(names, configs, strict=True):
             summary = run_replay(cfg, out / "run" / "rover.nmea", out / preset)
+            if summary.get("partial"):  # ^C in a replay: no comparison of part of the run
+                print(f"fdi-bridge demo: interrupted during the {preset} replay; no "
+                      f"comparison (the partial files are in {out})", file=sys.stderr)
+                return 130
             score = score_rover(read_jsonl(out / preset / "epochs.jsonl"), truth)
             rows.append((preset, score, summary))
             bar.step(f"replayed {preset}")
