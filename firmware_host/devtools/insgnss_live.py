@@ -235,6 +235,7 @@ class LiveRun:
     epochs: npt.NDArray[np.int_]
     pos_err: npt.NDArray[np.float64]
     wall_s: float
+    coast: CoastReport | None = None  # with an outage (:func:`compare`)
 
 
 def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
@@ -368,6 +369,43 @@ def offline_aligned(data: NavData, params: InsGnssParams, j0: int,
     return np.array(out)
 
 
+@dataclass(frozen=True)
+class CoastReport:
+    """A GNSS outage through the live vehicle: epochs the INS's coast went out as a 3D fix,
+    epochs sent as no-fix past the coast limit, and the largest true horizontal error over
+    the horizontal accuracy sent (issue G: at most 2)."""
+
+    sent: int
+    no_fix: int
+    worst_ratio: float
+    worst_err_m: float
+
+
+def coast_report(records: list[dict[str, Any]], data: NavData, latitude_deg: float,
+                 rate_hz: int) -> CoastReport:
+    """The coast epochs of ``records`` (``ins.coast_s``) against the truth (the trajectory at
+    the record's time)."""
+    frame = frame_of(latitude_deg)
+    day0 = UTC0 % 86400.0
+    sent = no_fix = 0
+    worst_ratio = worst_err = 0.0
+    for r in records:
+        ins = r.get("ins")
+        if r.get("mode") != "ins" or not isinstance(ins, dict) or "coast_s" not in ins:
+            continue
+        if ins.get("output") == "no fix":
+            no_fix += 1
+            continue
+        t = (float(r["t"]) - day0 + 43200.0) % 86400.0 - 43200.0
+        p = data.traj.p[round((t - float(data.traj.t[0])) * rate_hz)]
+        e, n, _ = frame.to_enu(*ins["lla"])
+        err = float(np.hypot(e - p[0], n - p[1]))
+        sent += 1
+        worst_err = max(worst_err, err)
+        worst_ratio = max(worst_ratio, err / max(float(ins["acc_h_m"]), 1e-9))
+    return CoastReport(sent, no_fix, worst_ratio, worst_err)
+
+
 def rms(err: npt.NDArray[np.float64]) -> float:
     """The 3D position RMS (m)."""
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
@@ -414,16 +452,24 @@ COMPARISON_HEADER = ["scenario", "seed", "live epochs", "live RMS m", "sim insgn
 
 def compare(setup: InsGnssSetup, scenario: Scenario, seed: int, out_dir: Path, *,
             speed: float = 50.0, imu_message: str = "HIGHRES_IMU",
-            impair: LinkImpairment | None = None, mavlink_url: str = "") -> Comparison:
+            impair: LinkImpairment | None = None, mavlink_url: str = "",
+            outage: tuple[float, float] | None = None,
+            attitude_error_deg: float | None = None) -> Comparison:
     """Generate the scenario, run ``sim insgnss``'s filter (the preset's strategy) and "none"
-    offline, play the same data to the live vehicle over ptys; see :class:`Comparison`."""
+    offline, play the same data to the live vehicle over ptys; see :class:`Comparison`.
+    ``outage``: a GNSS outage of the live run only (:func:`build_events`; see
+    :func:`coast_report`); ``attitude_error_deg``: the autopilot also sends ATTITUDE."""
     data = generate(setup, scenario, seed)
     strategy = setup.filter.strategy
     runs: dict[str, MethodRun] = {s: run_method(data, setup.filter, s)
                                   for s in (strategy, "none")}
     summary = summarize(data, runs, scenario, seed, setup)
     lr = run_live(setup, data, out_dir, imu_message=imu_message, impair=impair, seed=seed,
-                  speed=speed, mavlink_url=mavlink_url)
+                  speed=speed, mavlink_url=mavlink_url, outage=outage,
+                  attitude_error_deg=attitude_error_deg)
+    if outage is not None:
+        lr.coast = coast_report(lr.records, data, setup.filter.latitude_deg,
+                                setup.sim.imu_rate_hz)
     return Comparison(scenario, seed, rms(lr.pos_err),
                       summary["methods"][strategy]["position_rms_3d_m"],
                       summary["methods"]["none"]["position_rms_3d_m"], len(lr.pos_err),
