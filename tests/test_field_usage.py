@@ -4,6 +4,8 @@ such, an unknown preset gets the nearest name, ``doctor`` lists the ports withou
 from __future__ import annotations
 
 import json
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -55,3 +57,16 @@ def test_doctor_lists_the_ports_without_a_config(capsys: pytest.CaptureFixture[s
     rep = json.loads(capsys.readouterr().out)
     assert isinstance(rep["ports"], list) and rep["problems"] == []
 
+
+
+def test_the_demo_s_plot_hint_suits_a_wheel_user(monkeypatch: pytest.MonkeyPatch,
+                                                 tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """Without matplotlib the demo says how to get a PNG: the package's extra, which works for
+    a wheel (``pip install -e .`` needs a checkout)."""
+    from firmware_host.commands import demo_rover
+
+    monkeypatch.setattr(demo_rover, "HAVE_MATPLOTLIB", False)
+    assert demo_rover._plots([], tmp_path, [], sys.stdout) == 0
+    out = capsys.readouterr().out
+    assert "pip install 'fdi-bridge[plot]'" in out and "-e" not in out

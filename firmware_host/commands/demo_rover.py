@@ -93,7 +93,8 @@ def _plots(rows: list[tuple[str, Any, dict[str, Any]]], out: Path, truth: list[d
            say: TextIO) -> int:
     """One PNG per preset (with the plot extra), each named on ``say``."""
     if not HAVE_MATPLOTLIB:
-        print("\n(install the plot extra, pip install -e '.[plot]', for a PNG)", file=say)
+        print("\n(for a PNG, install the plot extra: pip install 'fdi-bridge[plot]')",
+              file=say)
         return 0
     for preset, _, _ in rows:
         png = plot_rover(read_jsonl(out / preset / "epochs.jsonl"), truth,

@@ -150,3 +150,35 @@ def compare_field(setup: InsGnssSetup, seed: int, out_dir: Path, *,
             ins_err = rover_err  # before the alignment the rover's output is the vehicle's
         out.append(FieldEpoch(t, ins_err, rover_err, coast, acc))
     return FieldRun(out, lr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m firmware_host.devtools.insgnss_field [--sigma R] [--seeds 1-8]``: one line a
+    seed (the table of docs/insgnss-live.md)."""
+    import argparse
+    import tempfile
+
+    parser = argparse.ArgumentParser(prog="insgnss_field", description=__doc__.split("\n")[0])
+    parser.add_argument("--sigma", type=float, default=None,
+                        help="the filter's gnss_sigma_h_m (default: the live example's)")
+    parser.add_argument("--seeds", default="1-8", help="first-last")
+    args = parser.parse_args(argv)
+    first, _, last = args.seeds.partition("-")
+    for seed in range(int(first), int(last or first) + 1):
+        with tempfile.TemporaryDirectory() as d:
+            fr = compare_field(field_setup(args.sigma), seed, Path(d))
+        t, worst = max(fr.excess(), key=lambda x: x[1])
+        coast = [e for e in fr.epochs if e.coast_s is not None and e.ins_err_m is not None
+                 and e.acc_h_m]
+        ratio = max((e.ins_err_m or 0.0) / (e.acc_h_m or 1.0) for e in coast) if coast else 0.0
+        ins_max = max(e.ins_err_m for e in fr.epochs if e.ins_err_m is not None)
+        rover_max = max(e.rover_err_m for e in fr.epochs if e.rover_err_m is not None)
+        print(f"sigma {args.sigma or 'example'} seed {seed}: worst excess over the rover "
+              f"{worst:.2f} m at t = {t:.0f} s; INS max {ins_max:.2f} m, rover max "
+              f"{rover_max:.2f} m; coast error / accuracy at most {ratio:.2f} "
+              f"({len(coast)} coast epochs sent)", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

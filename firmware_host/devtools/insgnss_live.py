@@ -72,6 +72,8 @@ class LinkImpairment:
     burst_every_s: float = 0.0  # 0: no bursts
     burst_s: float = 0.2
     shuffle_bursts: bool = False  # a held burst goes out in random order (a UDP link)
+    thin_from_s: float | None = None  # from this trajectory time on, only every
+    thin_keep: int = 1  # ``thin_keep``-th IMU packet goes out (a link that slows down)
 
 
 def frame_of(latitude_deg: float) -> LocalFrame:
@@ -155,6 +157,8 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
             raw = packer.send_highres_imu(usec, (float(a[0]), float(a[1]), float(a[2])),
                                           (float(g[0]), float(g[1]), float(g[2])))
         if imp.drop and rng.random() < imp.drop:
+            continue
+        if imp.thin_from_s is not None and tk >= imp.thin_from_s and k % imp.thin_keep:
             continue
         when = tk
         if imp.burst_every_s > 0:
@@ -245,7 +249,7 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              record_dir: Path | None = None, via_router: bool = False,
              attitude_error_deg: float | None = None,
              outage: tuple[float, float] | Sequence[tuple[float, float]] | None = None,
-             ) -> LiveRun:
+             imu_socket: bool = False) -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
     ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
@@ -253,7 +257,9 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
     (both inputs, for ``fdi-bridge replay``); ``via_router``: the IMU over UDP on 127.0.0.1 to
     the autopilot link of a ``[mavlink]`` router, ``imu_url = "router"``, one datagram a
     packet (GPS_INPUT then goes out through the router too); ``outage``: a GNSS outage
-    (:func:`build_events`)."""
+    (:func:`build_events`); ``imu_socket``: the IMU link is a TCP connection on 127.0.0.1
+    (``imu_url = "socket://127.0.0.1:PORT"``, the autopilot's side listening as SITL's TCP
+    ports do) instead of a pty."""
     lat = setup.filter.latitude_deg
     events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
                           impair=impair, seed=seed, attitude_error_deg=attitude_error_deg,
@@ -265,9 +271,15 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
     mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
                         gcs=(EndpointConfig("udpin:127.0.0.1:0"),)) if via_router else None
     with PtyPair() as gps, PtyPair() as imu, socket.socket(socket.AF_INET,
-                                                           socket.SOCK_DGRAM) as udp:
+                                                           socket.SOCK_DGRAM) as udp, \
+            socket.create_server(("127.0.0.1", 0)) as server:
         cfg = replace(base, rover=replace(rover, port=replace(rover.port, url=gps.url)))
-        live = replace(setup, live=replace(setup.live, imu_url=ROUTER if via_router else imu.url,
+        imu_url = imu.url
+        if via_router:
+            imu_url = ROUTER
+        elif imu_socket:
+            imu_url = f"socket://127.0.0.1:{server.getsockname()[1]}"
+        live = replace(setup, live=replace(setup.live, imu_url=imu_url,
                                            imu_message=imu_message))  # type: ignore[arg-type]
         vehicle = InsGnssVehicle(cfg, live)
         recorder = None if record_dir is None else FlightRecorder(
@@ -287,11 +299,18 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
                     udp.sendto(frame.raw, ap)
         done = threading.Event()
         stop = threading.Event()
+        conns: list[socket.socket] = []
 
         def feed() -> None:
             time.sleep(0.2)  # the runner opens the ports first
+            writer = imu_write
             try:
-                play(events, (imu_write, gps.write), speed=speed, stop=stop)
+                if imu_socket:  # the vehicle's port connects to the autopilot's listener
+                    server.settimeout(10.0)
+                    conn, _ = server.accept()
+                    conns.append(conn)  # closed once the runner has stopped
+                    writer = conn.sendall
+                play(events, (writer, gps.write), speed=speed, stop=stop)
             finally:
                 done.set()
 
@@ -312,6 +331,8 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
         finally:
             stop.set()
             thread.join(5.0)
+            for conn in conns:
+                conn.close()
         wall = time.monotonic() - t0
     records = [json.loads(line) for line in
                (out_dir / "epochs.jsonl").read_text(encoding="utf-8").splitlines()]

@@ -230,6 +230,8 @@ class InsGnssVehicle:
         self.coast_inflation = 1.0  # factor on the coast's accuracy from the failed checks
         self._fix_acc_h = 0.0  # the receiver's own horizontal accuracy of the last fix used
         self._var_h_fix = 0.0  # the filter's horizontal variance just after that fix
+        self._rate_win: deque[tuple[float, int]] = deque()  # (GNSS time, integrated so far)
+        self.rate_drops = 0  # the integrated rate fell below min_imu_rate_hz (a reset each)
         self._router_q: deque[bytes] = deque()  # appended by the router's thread
         self._imu_tap: Callable[[bytes], None] | None = None
 
@@ -479,6 +481,7 @@ class InsGnssVehicle:
                     continue
                 kf.propagate(t, s.gyro_rad_s, s.accel_m_s2)
                 self.stats.integrated += 1
+            self._watch_rate(t_g)
             still = self._stationary(out, [s for _, s in samples])
             enu = self._fix_enu(out)
             if enu is None:
@@ -508,12 +511,33 @@ class InsGnssVehicle:
             self.ratelog.warning("ins reset", f"{err}; realigning, rover detector meanwhile")
             self.kf = None
             self.aligned_at = None
+            self._rate_win.clear()
             self._rest_reset()
             self._emit_rover(out, t_g, "reset")
             return
         finally:
             self._prev_t = t_g
         self._emit_ins(out, t_g, rep, zupt)
+
+    def _watch_rate(self, t_g: float) -> None:
+        """The IMU rate on the samples actually integrated, over the last
+        ``rate_samples / min_imu_rate_hz`` seconds (2.5 s by default): below
+        ``min_imu_rate_hz`` at any time the filter is stopped (an EstimatorError: the rover
+        detector meanwhile, realigned when the stream is back), said once per drop."""
+        win = self._rate_win
+        win.append((t_g, self.stats.integrated))
+        span_s = self.live.rate_samples / self.params.min_imu_rate_hz
+        while len(win) > 2 and t_g - win[1][0] >= span_s:
+            win.popleft()
+        dt = t_g - win[0][0]
+        if dt < span_s:
+            return
+        rate = (self.stats.integrated - win[0][1]) / dt
+        if rate < self.params.min_imu_rate_hz:
+            self.rate_drops += 1
+            raise EstimatorError(
+                f"imu_rate {rate:.3g} Hz integrated over the last {dt:.1f} s, below "
+                f"min_imu_rate_hz {self.params.min_imu_rate_hz:g}")
 
     # ------------------------------------------------------------------ alignment
 
@@ -911,6 +935,7 @@ class InsGnssVehicle:
             "coast_no_fix": self.coast_no_fix, "coast_checks": self.coast_checks,
             "coast_failed": self.coast_failed,
             "coast_inflation": round(self.coast_inflation, 3),
+            "rate_drops": self.rate_drops,
             "align_wait": dict(self.align_wait), "resets": dict(self.resets),
             "gate_actions": dict(self.gate_actions),
             "imu": {"received": st.received, "integrated": st.integrated,
