@@ -14,6 +14,7 @@ import pytest
 
 from firmware_host.devtools import insgnss_sim as sim
 from firmware_host.devtools.insgnss_live import UTC0, LinkImpairment, run_live
+from firmware_host.runtime.config import CONFIG_DIR, insgnss_setup, load_bridge_file
 
 DAY0 = float(UTC0 % 86400.0)  # the records' t: seconds of the day
 
@@ -24,16 +25,23 @@ def _setup(rest_s: int) -> sim.InsGnssSetup:
 
 
 def test_an_ins_fed_by_socket_at_50_hz_integrates_every_sample(tmp_path: Path) -> None:
-    setup = _setup(60)
+    """The live example's filter and live settings (config/insgnss-live-example.toml, whose
+    IMU is ``socket://127.0.0.1:5762``: here the port of the test's listener), RAW_IMU at
+    50 Hz with ATTITUDE for the heading at rest, as SITL's TCP port sends them."""
+    ex = insgnss_setup(load_bridge_file(CONFIG_DIR / "insgnss-live-example.toml"))
+    assert ex.live.imu_url.startswith("socket://127.0.0.1:")
+    base = _setup(60)
+    setup = replace(base, filter=ex.filter, live=ex.live,
+                    sim=replace(base.sim, imu=ex.sim.imu))
     data = sim.generate(setup, "clean", 1)
     lr = run_live(setup, data, tmp_path, seed=1, imu_message="RAW_IMU", decimate=2,
-                  imu_socket=True, speed=10.0)
+                  imu_socket=True, speed=10.0, attitude_error_deg=1.0)
     ins = lr.summary["ins"]
     imu = ins["imu"]
     assert not ins["refused"] and ins["imu_rate_hz"] == pytest.approx(50.0, rel=0.01)
     sent = (len(data.traj.t) - 1) // 2 + 1  # every other 100 Hz sample from k = 1
     assert imu["received"] >= 0.99 * sent, (imu, sent)
-    assert ins["aligned_at"] is not None
+    assert ins["aligned_at"] is not None and ins["alignment"]["method"] == "attitude"
     # every sample after the alignment is integrated (the last epochs' samples too)
     after = 50.0 * (float(data.gnss_t[-1]) - (ins["aligned_at"] - DAY0))
     assert imu["integrated"] >= 0.99 * after, (imu, after)
