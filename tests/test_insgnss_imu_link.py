@@ -7,6 +7,7 @@ of the same recording decides the same."""
 from __future__ import annotations
 
 import logging
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -64,3 +65,15 @@ def test_a_stream_that_slows_below_the_minimum_stops_the_ins(
     assert said and "below min_imu_rate_hz 20" in said[0], said
     late = [r for r in lr.records if float(r["t"]) - DAY0 > -5.0]
     assert late and all(r["mode"] == "rover" for r in late)  # the rover detector meanwhile
+
+
+def test_the_status_line_says_the_ins_is_coasting(tmp_path: Path) -> None:
+    """The operator sees the coast (issue G): a GNSS outage over the last epochs, the vehicle's
+    status line section then is "INS coasting, N s, accuracy X m" or, past the limit,
+    "INS coast limit, N s: no fix", beside the IMU's rate."""
+    setup = _setup(60)
+    data = sim.generate(setup, "clean", 1)
+    lr = run_live(setup, data, tmp_path, seed=1, outage=(float(data.gnss_t[-1]) - 4.5, 1e9))
+    assert len(lr.status) == 2 and lr.status[1] == "imu 100 Hz", lr.status
+    assert re.fullmatch(r"INS coast(ing, [45] s, accuracy [\d.]+ m| limit, [45] s: no fix)",
+                        lr.status[0]), lr.status

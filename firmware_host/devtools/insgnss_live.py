@@ -240,6 +240,7 @@ class LiveRun:
     pos_err: npt.NDArray[np.float64]
     wall_s: float
     coast: CoastReport | None = None  # with an outage (:func:`compare`)
+    status: tuple[str, ...] = ()  # the vehicle's status line section at the end
 
 
 def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
@@ -337,7 +338,7 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
     records = [json.loads(line) for line in
                (out_dir / "epochs.jsonl").read_text(encoding="utf-8").splitlines()]
     epochs, errs = live_errors(records, data, lat, setup.sim.imu_rate_hz)
-    return LiveRun(summary, records, epochs, errs, wall)
+    return LiveRun(summary, records, epochs, errs, wall, status=vehicle.status_detail())
 
 
 def live_errors(records: list[dict[str, Any]], data: NavData, latitude_deg: float,

@@ -231,6 +231,7 @@ class InsGnssVehicle:
         self._fix_acc_h = 0.0  # the receiver's own horizontal accuracy of the last fix used
         self._var_h_fix = 0.0  # the filter's horizontal variance just after that fix
         self._rate_win: deque[tuple[float, int]] = deque()  # (GNSS time, integrated so far)
+        self._status = "waiting for the first epoch"  # the status line's section
         self.rate_drops = 0  # the integrated rate fell below min_imu_rate_hz (a reset each)
         self._router_q: deque[bytes] = deque()  # appended by the router's thread
         self._imu_tap: Callable[[bytes], None] | None = None
@@ -311,6 +312,16 @@ class InsGnssVehicle:
             wait = max(self.cfg.rover.port.timeout_s, 0.01)
             self._idle_s = max(0.0, wait - (self.clock() - t0))
         return n
+
+    def status_detail(self) -> tuple[str, ...]:
+        """The status line's section (Snapshot ``detail``): what drives the output now, as
+        the operator needs it: ``INS 0.37 m`` (the accuracy sent), ``INS coasting, 6 s,
+        accuracy 0.5 m``, ``INS coast limit, 11 s: no fix``, ``rover detector (aligning: at
+        rest: levelling (heading from ATTITUDE))``, or the refusal; with the IMU's rate."""
+        rate = () if self.rate_hz is None else (f"imu {self.rate_hz:.0f} Hz",)
+        if self.refused:
+            return ("INS refused: rover detector", *rate)
+        return (self._status, *rate)
 
     def check(self, now: float) -> None:
         if self.failsafe is not None:
@@ -756,6 +767,7 @@ class InsGnssVehicle:
         self._prev_fix = None if enu is None else (out.t_s or 0.0, enu, self._vel_en(out))
         record = self._base_record(out, t_g, "rover")
         record["why"] = why
+        self._status = f"rover detector ({why})"
         self.write_record(record)
         self._send(out)
 
@@ -809,9 +821,13 @@ class InsGnssVehicle:
             alt = h - (out.epoch.geoid_sep_m or 0.0)
             ins["lla"] = [round(lat, 9), round(lon, 9), round(h, 3)]
         coast_s = t_g - (self._last_fix_t if self._last_fix_t is not None else t_g)
+        self._status = f"INS {acc_h:.2f} m" + (" (fix not used as is)" if rep is not None
+                                                and not used else "")
         if rep is None:
             ins["coast_s"] = round(coast_s, 3)
+            self._status = f"INS coasting, {coast_s:.0f} s, accuracy {acc_h:.1f} m"
             if not self._coast(coast_s, acc_h):
+                self._status = f"INS coast limit, {coast_s:.0f} s: no fix"
                 ins["output"] = "no fix"
                 record = self._base_record(out, t_g, "ins")
                 record["ins"] = ins
