@@ -23,6 +23,7 @@ from firmware_host.runtime.config import BridgeConfig, RoverConfig
 from firmware_host.runtime.status import AutopilotView
 
 MAV_TYPE_GROUND_ROVER = 10
+ROOT = Path(__file__).resolve().parents[1]
 
 
 class Autopilot:
@@ -159,3 +160,46 @@ def test_through_the_router_the_autopilot_link_is_watched() -> None:
             router.close()
     assert view.heartbeat_age_s is not None and view.heartbeat_age_s < 1.0
     assert (view.gps_fix_type, view.gps_sats) == (3, 11)
+
+
+def test_fdi_bridge_run_on_a_terminal_shows_the_autopilot(tmp_path: Path) -> None:
+    """``fdi-bridge run`` as a subprocess, its stderr on a real terminal (a pty), the receiver
+    on another pty at 10 Hz, GPS_INPUT to the simulated autopilot: the refreshing status line
+    ends with the autopilot's heartbeat age and its echo of our fix."""
+    import re
+    import threading
+
+    from tests.ptyrun import cli_under_pty
+
+    sc = RoverScenario(rate_hz=10.0, duration_s=30.0, seed=2, kinds=())
+    epochs = [data for _t, data, _truth in generate(sc)]
+    ap = Autopilot()
+    halt = threading.Event()
+    with PtyPair(link=tmp_path / "gps", baudrate=38400) as gps:
+        cfg = tmp_path / "bridge.toml"
+        cfg.write_text(f'[rover.port]\nurl = "{gps.url}"\nbaudrate = 38400\n'
+                       f'[rover.output]\nmavlink_url = "udpout:127.0.0.1:{ap.port}"\n')
+
+        def feed() -> None:
+            for chunk in epochs:
+                if halt.is_set():
+                    return
+                gps.write(chunk)
+                gps.read(0.0)
+                ap.serve()
+                halt.wait(0.1)
+
+        thread = threading.Thread(target=feed, daemon=True)
+        thread.start()
+        try:
+            rc, text = cli_under_pty(["run", "--config", str(cfg), "--duration", "4"],
+                                     tmp_path, timeout=30.0,
+                                     env=dict(os.environ, PYTHONPATH=str(ROOT), COLUMNS="250"))
+        finally:
+            halt.set()
+            thread.join(5.0)
+            ap.close()
+    assert rc == 0, text
+    lines = [x.removesuffix("\x1b[K") for x in text.split("\r") if "| gps up" in x]
+    assert len(lines) >= 3, text
+    assert re.search(r"\| autopilot hb \d+\.\d s echo DGPS 9sv$", lines[-1]), lines[-1]
