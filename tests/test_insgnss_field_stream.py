@@ -1,9 +1,15 @@
 """Issue G's whole fault stream through the live INS/GNSS vehicle, at rest (jumps, bursts,
 walks at zero speed, a 20 s outage; ArduPilot's gyro drift; a DGPS receiver's error), beside
 the plain rover detector on the same epochs (firmware_host/devtools/insgnss_field.py, real
-ptys): the INS's output is never further from the truth than
-the rover's by more than 0.5 m; while it coasts its error is at most twice the accuracy it
-sends; past the coast limit it sends no-fix."""
+ptys), seed 1 with the filter's R of the receiver's class (0.5 m): the INS's output is never
+further from the truth than the rover's by more than 0.5 m (0.22 m); while it coasts its error
+is at most twice the accuracy it sends; past the coast limit it sends no-fix.
+
+Not every seed meets the 0.5 m: over seeds 1-8 the worst excess is 0.22-0.67 m (seeds 4, 7
+and 8 above 0.5; the example's R of 3 m: 0.34-0.74 m), the INS lagging the receiver's slowly
+wandering error at rest (docs/insgnss-live.md, "The field's fault stream at rest";
+``python -m firmware_host.devtools.insgnss_field --sigma 0.5 --seeds 1-8``). The coast's
+check holds on all eight (error / accuracy at most 1.81)."""
 
 from __future__ import annotations
 
