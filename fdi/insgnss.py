@@ -525,6 +525,18 @@ class InsGnssFilter:
         self._acc_dt = 0.0
         self._acc_fn = [0.0, 0.0, 0.0]
 
+    def inflate(self, k: float) -> None:
+        """Widen the covariance by ``k >= 1`` (``P ← k P``; the bias block and its cross terms
+        too): a consistency check found the claims too small for the error (ArduPilot EKF3's
+        "inflate the variance" outcome of its GPS position check). The correlations are kept,
+        so the next update corrects the attitude and biases that caused the error."""
+        if not k > 1.0 or not math.isfinite(k):
+            return
+        self.P = self.P * k
+        if self.bias_active:
+            self._Pxb = self._Pxb * k
+            self._Pbb = self._Pbb * k
+
     # ------------------------------------------------------------ measurement update
 
     def update(

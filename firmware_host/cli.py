@@ -279,7 +279,17 @@ def _command_of(argv: Sequence[str]) -> tuple[str | None, str | None]:
 class _Parser(argparse.ArgumentParser):
     """A usage error is one line (what was wrong, and where the help is), exit 2."""
 
+    _args: Sequence[str] | None = None
+
+    def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                         namespace: argparse.Namespace | None = None,
+                         ) -> tuple[argparse.Namespace, list[str]]:
+        self._args = None if args is None else list(args)  # for error(): the words it saw
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str) -> NoReturn:
+        from firmware_host.commands.arg_errors import unknown_option_error
+        message = unknown_option_error(self, self._args, message)
         self.exit(2, f"{self.prog}: error: {message} (see: {self.prog} --help)\n")
 
 

@@ -11,11 +11,14 @@ detector then sees as faults. gpsd's and ArduPilot's NMEA drivers count on the s
 :func:`max_rate_hz` and :func:`smallest_baud` are the arithmetic; :class:`LinkCheck` watches a
 running stream (bytes and the receiver's own fix times, so a pty that carries more than its
 nominal baud, or a replay at any speed, measures the same) and decides once whether it fits.
+:class:`WirePacer` retimes a recording as its line could have delivered it (``replay --speed
+1`` onto a pty: a pty carries any rate, a real wire does not).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 STANDARD_BAUDS: tuple[int, ...] = (4800, 9600, 19200, 38400, 57600, 115200)
@@ -125,3 +128,34 @@ class LinkCheck:
         self.result = LinkFit(self.baudrate, bytes_in / epochs, 1.0 / period_s, kinds,
                               self.bits)
         return self.result
+
+
+class WirePacer:
+    """A recording's chunks ``(t, bytes)`` at the times the line could have delivered them.
+
+    A chunk is complete when its last byte has arrived, and the line carries one byte every
+    ``bits / baudrate`` seconds, one chunk after the other:
+    ``t'_k = max(t_k, t'_{k-1} + n_k · bits / baudrate)``. A recording made on a real wire is
+    unchanged (its times already respect the line); one whose receiver sent more than the
+    baud rate carries (a capture written through a pty, ``sim rover`` at 10 Hz with a 9600
+    baud header) falls behind as it would on the wire: the backlog grows by the excess, a
+    late epoch after another. ``lag_s`` is the largest delay so far (``t'_k - t_k``).
+
+    The times stay on the recording's axis: ``replay --speed S`` divides them by ``S`` as it
+    does every recording's, so at ``S > 1`` the line is taken to be ``S`` times faster too
+    (the same epochs late by the same share of their period); at ``--speed 0`` nothing is
+    paced and this is not used.
+    """
+
+    def __init__(self, chunks: Iterable[tuple[float, bytes]], baudrate: int,
+                 bits: float = 10.0) -> None:
+        self.chunks = chunks
+        self.byte_s = bits / baudrate if baudrate > 0 else 0.0
+        self.lag_s = 0.0
+
+    def __iter__(self) -> Iterator[tuple[float, bytes]]:
+        free = -math.inf  # when the line has sent everything before
+        for t, data in self.chunks:
+            free = max(t, free + len(data) * self.byte_s)
+            self.lag_s = max(self.lag_s, free - t)
+            yield free, data

@@ -28,7 +28,7 @@ import math
 import os
 import struct
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final, NamedTuple
@@ -459,6 +459,15 @@ class _Encoders:
         msg = self._mav.ahrs2_encode(roll_rad, pitch_rad, yaw_rad, 0.0, 0, 0)
         return self._emit(msg)
 
+    def send_gps_raw_int(self, time_usec: int, fix_type: int, lat_deg: float, lon_deg: float,
+                         alt_m: float, satellites: int) -> bytes:
+        """GPS_RAW_INT (an autopilot's report of its GPS: what it made of a GPS_INPUT; a
+        simulated autopilot's echo); accuracies and velocity unknown (UINT16_MAX)."""
+        msg = self._mav.gps_raw_int_encode(
+            time_usec, fix_type, round(lat_deg * 1e7), round(lon_deg * 1e7), round(alt_m * 1e3),
+            65535, 65535, 65535, 65535, satellites)
+        return self._emit(msg)
+
     def send_param_set(
         self, target_system: int, target_component: int, name: str, value: float
     ) -> bytes:
@@ -646,6 +655,8 @@ class MavEndpoint(_Encoders):
             raise PortError(f"could not write to {self.url!r}: {err}") from err
         if self._pending is not None:
             self._service_command()
+        elif self.on_message is not None:  # someone watches what comes back: read it now
+            self.drain(64)
         return bytes(msg.get_msgbuf())
 
     _pending: tuple[int, int, Any] | None = None  # (command, attempts, re-encode)
@@ -678,30 +689,53 @@ class MavEndpoint(_Encoders):
         self._pending_what = f"mode {mode}"
         return raw
 
+    on_message: Callable[[Any], None] | None = None  # every message read (the status's echo)
+
+    def drain(self, limit: int = 1024) -> int:
+        """Read what has arrived, without blocking (at most ``limit`` messages): each goes to
+        :attr:`on_message`, and a pending command's COMMAND_ACK settles it as at a send."""
+        n = 0
+        while n < limit and (msg := self._recv_nowait()) is not None:
+            n += 1
+            self._settles(msg)
+        return n
+
+    def _recv_nowait(self) -> Any | None:
+        try:
+            msg = self._conn.recv_msg()
+        except OSError:
+            return None
+        if msg is not None and self.on_message is not None:
+            self.on_message(msg)
+        return msg
+
+    def _settles(self, msg: Any) -> bool:
+        """True when ``msg`` is the pending command's final COMMAND_ACK (counted, logged)."""
+        pending = self._pending
+        if pending is None or msg.get_type() != "COMMAND_ACK" or int(msg.command) != pending[0]:
+            return False
+        result = int(msg.result)
+        if result == MAV_RESULT_IN_PROGRESS:
+            self._pending_due = time.monotonic() + self.command_retry_s
+            return False
+        self._pending = None
+        key = "command_accepted" if result == MAV_RESULT_ACCEPTED else "command_refused"
+        self.command_stats[key] += 1
+        if result != MAV_RESULT_ACCEPTED:
+            _log.warning("autopilot refused %s (MAV_RESULT %d)", self._pending_what, result)
+        return True
+
     def _service_command(self) -> None:
         pending = self._pending
         if pending is None:
             return
         command, attempts, again = pending
         for _ in range(64):  # what arrived since the last send (non-blocking)
-            try:
-                msg = self._conn.recv_msg()
-            except OSError:
-                break
+            msg = self._recv_nowait()
             if msg is None:
                 break
-            if msg.get_type() != "COMMAND_ACK" or int(msg.command) != command:
-                continue
-            result = int(msg.result)
-            if result == MAV_RESULT_IN_PROGRESS:
-                self._pending_due = time.monotonic() + self.command_retry_s
-                continue
-            self._pending = None
-            key = "command_accepted" if result == MAV_RESULT_ACCEPTED else "command_refused"
-            self.command_stats[key] += 1
-            if result != MAV_RESULT_ACCEPTED:
-                _log.warning("autopilot refused %s (MAV_RESULT %d)", self._pending_what, result)
-            return
+            if self._settles(msg):
+                return
         if time.monotonic() < self._pending_due:
             return
         if attempts >= self.command_retries:

@@ -1,4 +1,7 @@
-"""``fdi-bridge doctor --config FILE``: start-up checks, a clear list of what is wrong.
+"""``fdi-bridge doctor [--config FILE]``: start-up checks, a clear list of what is wrong.
+
+Without ``--config`` it lists the system's serial ports (check 2) and stops there: what a field
+engineer wants first, before any file names the receiver's port.
 
 Checks, in order:
 
@@ -89,6 +92,9 @@ class Report:
         else:
             out.append("  (none found)")
         out.append("")
+        if not (self.ok or self.warnings or self.problems):
+            out.append("no configuration checked (--config FILE checks one)")
+            return out
         out += [f"ok       {m}" for m in self.ok]
         out += [f"warning  {m}" for m in self.warnings]
         out += [f"PROBLEM  {m}" for m in self.problems]
@@ -316,7 +322,7 @@ def check_rov_gyro(rep: Report, rov: RovConfig) -> None:
 
 
 def diagnose(
-    config: str | Path,
+    config: str | Path | None,
     *,
     mavlink_url: str | None = None,
     record_dir: str | None = None,
@@ -329,6 +335,8 @@ def diagnose(
         rep.ports = list(list_ports())
     except Exception as err:  # a broken sysfs must not hide the other checks
         rep.warnings.append(f"could not list serial ports: {err}")
+    if config is None:  # the ports only
+        return rep
     try:
         bf = load_bridge_file(config)  # what `run --config` reads, with the same checks
         mode = run_mode(bf)
@@ -374,7 +382,8 @@ def diagnose(
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", required=True, help="config file or preset name")
+    parser.add_argument("--config", default=None,
+                        help="config file or preset name (without: list the serial ports only)")
     parser.add_argument("--gps-probe-s", type=float, default=3.0,
                         help="read the GPS this long to check that its rate fits the baud rate "
                              "(and, with a MAVLink output, ArduPilot's health check) "

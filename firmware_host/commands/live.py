@@ -23,11 +23,15 @@ import firmware_host
 from firmware_host.commands.tables import fields, fmt, table
 from firmware_host.runtime.config import BridgeFile, presets_dir
 from firmware_host.runtime.config_rov import COMPASS_ONLY, rov_gyro
-from firmware_host.runtime.status import Banner, Snapshot
+from firmware_host.runtime.status import AutopilotView, Banner, Snapshot
 
 log = logging.getLogger("fdi_bridge.status")
 
 LOG_EVERY_S = 60.0
+HEARTBEAT_LOST_S = 3.0  # three 1 Hz heartbeats missed: the autopilot is not there
+# GPS_RAW_INT's fix_type (MAVLink GPS_FIX_TYPE), as short as cgps shows it
+GPS_FIX_NAMES = {0: "no GPS", 1: "no fix", 2: "2D", 3: "3D", 4: "DGPS", 5: "RTK float",
+                 6: "RTK fixed", 7: "static", 8: "PPP"}
 
 def _rate(bps: float) -> str:
     """Fixed decimals, so that the refreshing line does not jitter."""
@@ -68,7 +72,30 @@ def status_line(s: Snapshot) -> str:
             parts.append(f"{p.name} WAITING{since}")
     parts.append(f"last epoch {_age(s.last_record_age_s)}")
     parts += s.detail
+    if s.autopilot is not None:
+        parts.append(autopilot_text(s.autopilot))
     return " | ".join(parts)
+
+
+def autopilot_text(a: AutopilotView) -> str:
+    """``autopilot hb 0.4 s echo 3D 10sv``: the autopilot's last heartbeat and its GPS_RAW_INT
+    (its own view of the fix we sent), ``autopilot SILENT 12 s`` past :data:`HEARTBEAT_LOST_S`,
+    ``autopilot no heartbeat`` before the first; the echo's age when it is older than that."""
+    age = a.heartbeat_age_s
+    if age is None:
+        text = "autopilot no heartbeat"
+    elif age > HEARTBEAT_LOST_S:
+        text = f"autopilot SILENT {age:.0f} s"
+    else:
+        text = f"autopilot hb {age:.1f} s"
+    if a.gps_fix_type is not None:
+        kind = GPS_FIX_NAMES.get(a.gps_fix_type, str(a.gps_fix_type))
+        text += f" echo {kind} {a.gps_sats}sv"
+        if a.gps_age_s is not None and a.gps_age_s > HEARTBEAT_LOST_S:
+            text += f" {a.gps_age_s:.0f} s ago"
+    elif age is not None:
+        text += " no GPS_RAW_INT"
+    return text
 
 
 def banner_lines(b: Banner) -> list[tuple[str, str]]:

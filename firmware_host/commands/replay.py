@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from drivers.capture import CaptureReader, is_capture
-from drivers.gps.link import LinkFit
+from drivers.gps.link import LinkFit, WirePacer
 from drivers.ptypair import PtyPair
 from drivers.transport import SerialSettings, open_port, read_some
 from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
@@ -214,7 +214,8 @@ def replay_through_pty(
     """Run ``pipeline`` on ``inp`` through a real pty; return transport facts for the summary."""
     with PtyPair(baudrate=inp.baudrate) as pty:
         port = open_port(SerialSettings(url=pty.url, baudrate=inp.baudrate, timeout_s=0.05))
-        feeder = PtyFeeder(pty, inp.chunks, speed)
+        feeder = PtyFeeder(pty, WirePacer(inp.chunks, inp.baudrate) if speed > 0
+                           and inp.kind == "capture" else inp.chunks, speed)  # the line's pace
         started = clock()
         feeder.start()
         try:

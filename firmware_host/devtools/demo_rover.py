@@ -62,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
         bar.step("generated")
         for preset, cfg in zip(names, configs, strict=True):
             summary = run_replay(cfg, out / "run" / "rover.nmea", out / preset)
+            if summary.get("partial"):  # ^C in a replay: no comparison of part of the run
+                print(f"fdi-bridge demo: interrupted during the {preset} replay; no "
+                      f"comparison (the partial files are in {out})", file=sys.stderr)
+                return 130
             score = score_rover(read_jsonl(out / preset / "epochs.jsonl"), truth)
             rows.append((preset, score, summary))
             bar.step(f"replayed {preset}")
@@ -89,7 +93,8 @@ def _plots(rows: list[tuple[str, Any, dict[str, Any]]], out: Path, truth: list[d
            say: TextIO) -> int:
     """One PNG per preset (with the plot extra), each named on ``say``."""
     if not HAVE_MATPLOTLIB:
-        print("\n(install the dev extra, pip install -e '.[dev]', for a PNG)", file=say)
+        print("\n(for a PNG, install the dev extra: pip install 'fdi-bridge[dev]')",
+              file=say)
         return 0
     for preset, _, _ in rows:
         png = plot_rover(read_jsonl(out / preset / "epochs.jsonl"), truth,

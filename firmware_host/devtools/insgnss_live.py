@@ -72,6 +72,8 @@ class LinkImpairment:
     burst_every_s: float = 0.0  # 0: no bursts
     burst_s: float = 0.2
     shuffle_bursts: bool = False  # a held burst goes out in random order (a UDP link)
+    thin_from_s: float | None = None  # from this trajectory time on, only every
+    thin_keep: int = 1  # ``thin_keep``-th IMU packet goes out (a link that slows down)
 
 
 def frame_of(latitude_deg: float) -> LocalFrame:
@@ -156,6 +158,8 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
                                           (float(g[0]), float(g[1]), float(g[2])))
         if imp.drop and rng.random() < imp.drop:
             continue
+        if imp.thin_from_s is not None and tk >= imp.thin_from_s and k % imp.thin_keep:
+            continue
         when = tk
         if imp.burst_every_s > 0:
             phase = (tk + data.lead) % imp.burst_every_s
@@ -235,6 +239,8 @@ class LiveRun:
     epochs: npt.NDArray[np.int_]
     pos_err: npt.NDArray[np.float64]
     wall_s: float
+    coast: CoastReport | None = None  # with an outage (:func:`compare`)
+    status: tuple[str, ...] = ()  # the vehicle's status line section at the end
 
 
 def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
@@ -244,7 +250,7 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
              record_dir: Path | None = None, via_router: bool = False,
              attitude_error_deg: float | None = None,
              outage: tuple[float, float] | Sequence[tuple[float, float]] | None = None,
-             ) -> LiveRun:
+             imu_socket: bool = False) -> LiveRun:
     """Play ``data`` to an :class:`~firmware_host.insgnss.vehicle.InsGnssVehicle` on a
     :class:`~firmware_host.runtime.runner.Runner` over two real ptys (GNSS NMEA, MAVLink IMU);
     ``out_dir`` gets its ``epochs.jsonl`` and ``summary.json``; ``mavlink_url`` / ``nmea_url``:
@@ -252,7 +258,9 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
     (both inputs, for ``fdi-bridge replay``); ``via_router``: the IMU over UDP on 127.0.0.1 to
     the autopilot link of a ``[mavlink]`` router, ``imu_url = "router"``, one datagram a
     packet (GPS_INPUT then goes out through the router too); ``outage``: a GNSS outage
-    (:func:`build_events`)."""
+    (:func:`build_events`); ``imu_socket``: the IMU link is a TCP connection on 127.0.0.1
+    (``imu_url = "socket://127.0.0.1:PORT"``, the autopilot's side listening as SITL's TCP
+    ports do) instead of a pty."""
     lat = setup.filter.latitude_deg
     events = build_events(data, lat, imu_message=imu_message, decimate=decimate,
                           impair=impair, seed=seed, attitude_error_deg=attitude_error_deg,
@@ -264,9 +272,15 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
     mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
                         gcs=(EndpointConfig("udpin:127.0.0.1:0"),)) if via_router else None
     with PtyPair() as gps, PtyPair() as imu, socket.socket(socket.AF_INET,
-                                                           socket.SOCK_DGRAM) as udp:
+                                                           socket.SOCK_DGRAM) as udp, \
+            socket.create_server(("127.0.0.1", 0)) as server:
         cfg = replace(base, rover=replace(rover, port=replace(rover.port, url=gps.url)))
-        live = replace(setup, live=replace(setup.live, imu_url=ROUTER if via_router else imu.url,
+        imu_url = imu.url
+        if via_router:
+            imu_url = ROUTER
+        elif imu_socket:
+            imu_url = f"socket://127.0.0.1:{server.getsockname()[1]}"
+        live = replace(setup, live=replace(setup.live, imu_url=imu_url,
                                            imu_message=imu_message))  # type: ignore[arg-type]
         vehicle = InsGnssVehicle(cfg, live)
         recorder = None if record_dir is None else FlightRecorder(
@@ -286,11 +300,18 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
                     udp.sendto(frame.raw, ap)
         done = threading.Event()
         stop = threading.Event()
+        conns: list[socket.socket] = []
 
         def feed() -> None:
             time.sleep(0.2)  # the runner opens the ports first
+            writer = imu_write
             try:
-                play(events, (imu_write, gps.write), speed=speed, stop=stop)
+                if imu_socket:  # the vehicle's port connects to the autopilot's listener
+                    server.settimeout(10.0)
+                    conn, _ = server.accept()
+                    conns.append(conn)  # closed once the runner has stopped
+                    writer = conn.sendall
+                play(events, (writer, gps.write), speed=speed, stop=stop)
             finally:
                 done.set()
 
@@ -311,11 +332,13 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
         finally:
             stop.set()
             thread.join(5.0)
+            for conn in conns:
+                conn.close()
         wall = time.monotonic() - t0
     records = [json.loads(line) for line in
                (out_dir / "epochs.jsonl").read_text(encoding="utf-8").splitlines()]
     epochs, errs = live_errors(records, data, lat, setup.sim.imu_rate_hz)
-    return LiveRun(summary, records, epochs, errs, wall)
+    return LiveRun(summary, records, epochs, errs, wall, status=vehicle.status_detail())
 
 
 def live_errors(records: list[dict[str, Any]], data: NavData, latitude_deg: float,
@@ -368,6 +391,43 @@ def offline_aligned(data: NavData, params: InsGnssParams, j0: int,
     return np.array(out)
 
 
+@dataclass(frozen=True)
+class CoastReport:
+    """A GNSS outage through the live vehicle: epochs the INS's coast went out as a 3D fix,
+    epochs sent as no-fix past the coast limit, and the largest true horizontal error over
+    the horizontal accuracy sent (issue G: at most 2)."""
+
+    sent: int
+    no_fix: int
+    worst_ratio: float
+    worst_err_m: float
+
+
+def coast_report(records: list[dict[str, Any]], data: NavData, latitude_deg: float,
+                 rate_hz: int) -> CoastReport:
+    """The coast epochs of ``records`` (``ins.coast_s``) against the truth (the trajectory at
+    the record's time)."""
+    frame = frame_of(latitude_deg)
+    day0 = UTC0 % 86400.0
+    sent = no_fix = 0
+    worst_ratio = worst_err = 0.0
+    for r in records:
+        ins = r.get("ins")
+        if r.get("mode") != "ins" or not isinstance(ins, dict) or "coast_s" not in ins:
+            continue
+        if ins.get("output") == "no fix":
+            no_fix += 1
+            continue
+        t = (float(r["t"]) - day0 + 43200.0) % 86400.0 - 43200.0
+        p = data.traj.p[round((t - float(data.traj.t[0])) * rate_hz)]
+        e, n, _ = frame.to_enu(*ins["lla"])
+        err = float(np.hypot(e - p[0], n - p[1]))
+        sent += 1
+        worst_err = max(worst_err, err)
+        worst_ratio = max(worst_ratio, err / max(float(ins["acc_h_m"]), 1e-9))
+    return CoastReport(sent, no_fix, worst_ratio, worst_err)
+
+
 def rms(err: npt.NDArray[np.float64]) -> float:
     """The 3D position RMS (m)."""
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
@@ -414,16 +474,24 @@ COMPARISON_HEADER = ["scenario", "seed", "live epochs", "live RMS m", "sim insgn
 
 def compare(setup: InsGnssSetup, scenario: Scenario, seed: int, out_dir: Path, *,
             speed: float = 50.0, imu_message: str = "HIGHRES_IMU",
-            impair: LinkImpairment | None = None, mavlink_url: str = "") -> Comparison:
+            impair: LinkImpairment | None = None, mavlink_url: str = "",
+            outage: tuple[float, float] | None = None,
+            attitude_error_deg: float | None = None) -> Comparison:
     """Generate the scenario, run ``sim insgnss``'s filter (the preset's strategy) and "none"
-    offline, play the same data to the live vehicle over ptys; see :class:`Comparison`."""
+    offline, play the same data to the live vehicle over ptys; see :class:`Comparison`.
+    ``outage``: a GNSS outage of the live run only (:func:`build_events`; see
+    :func:`coast_report`); ``attitude_error_deg``: the autopilot also sends ATTITUDE."""
     data = generate(setup, scenario, seed)
     strategy = setup.filter.strategy
     runs: dict[str, MethodRun] = {s: run_method(data, setup.filter, s)
                                   for s in (strategy, "none")}
     summary = summarize(data, runs, scenario, seed, setup)
     lr = run_live(setup, data, out_dir, imu_message=imu_message, impair=impair, seed=seed,
-                  speed=speed, mavlink_url=mavlink_url)
+                  speed=speed, mavlink_url=mavlink_url, outage=outage,
+                  attitude_error_deg=attitude_error_deg)
+    if outage is not None:
+        lr.coast = coast_report(lr.records, data, setup.filter.latitude_deg,
+                                setup.sim.imu_rate_hz)
     return Comparison(scenario, seed, rms(lr.pos_err),
                       summary["methods"][strategy]["position_rms_3d_m"],
                       summary["methods"]["none"]["position_rms_3d_m"], len(lr.pos_err),

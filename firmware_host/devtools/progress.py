@@ -1,5 +1,6 @@
 """Progress bars for jobs longer than a few seconds (``bench``, ``eval --suite``,
-``sim insgnss-report``, ``fleet``), drawn by tqdm on standard error.
+``sim insgnss-report``, ``fleet``; ``record``'s byte count and rate, with no total), drawn by
+tqdm on standard error.
 
 A bar is shown only when standard error is a terminal (tqdm's ``disable=None``), so a job under
 systemd, in a pipe or in a test prints nothing extra; ``-q`` (log level error or above) turns
@@ -24,12 +25,13 @@ def quiet() -> bool:
 class Progress:
     """A bar of ``total`` steps named ``desc``; a context manager that closes the bar."""
 
-    def __init__(self, total: int | None, desc: str, unit: str = "step") -> None:
+    def __init__(self, total: int | None, desc: str, unit: str = "step", *,
+                 unit_scale: bool = False) -> None:
         # The width from the terminal, else $COLUMNS, else 80 (a pty of size 0x0 would make
         # tqdm draw nothing).
         width = shutil.get_terminal_size((80, 24)).columns
         self.bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, leave=False,
-                        disable=True if quiet() else None, ncols=width)
+                        disable=True if quiet() else None, ncols=width, unit_scale=unit_scale)
 
     @property
     def shown(self) -> bool:

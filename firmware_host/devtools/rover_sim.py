@@ -51,6 +51,7 @@ import argparse
 import calendar
 import json
 import math
+import sys
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -671,7 +672,12 @@ def run(args: argparse.Namespace) -> int:
                          f"{args.rate:g} Hz")
     sc = RoverScenario(rate_hz=args.rate, duration_s=args.duration, seed=args.seed,
                        gst=args.gst, zda=args.zda, kinds=kinds, error_model=args.error_model)
-    summary = write_run(sc, args.out)
+    try:
+        summary = write_run(sc, args.out)
+    except KeyboardInterrupt:  # the files are cut where ^C came: say so, not a plain stop
+        print(f"fdi-bridge sim rover: interrupted; the files in {args.out} are partial "
+              f"(cut before {args.duration:g} s)", file=sys.stderr)
+        return 130
     if args.json:
         print(json.dumps(summary))
     else:

@@ -54,6 +54,13 @@ fault is believed); an epoch whose fix was not used as is (replaced, down-weight
 or a fault believed) is raised to the innovation's scale ``sqrt(P⁻_ii + R_ii)``: the output is
 then mostly the INS prediction and the receiver disagreed with it. One record per epoch in
 ``epochs.jsonl``.
+
+While coasting (a no-fix epoch) the horizontal accuracy sent is
+``sqrt(max(P_h(fix), σ_rx²) + P_h(now) − P_h(fix))``: what the covariance grew since the last
+fix used, on top of that fix's claim, and that claim at least the receiver's own accuracy of
+the fix (``σ_rx``, as the rover sends it: GST, else σ √2 HDOP). A receiver's error is
+correlated in time, so the filter's average of its fixes at rest (``P_h`` far below the
+receiver's σ) is no better than the receiver there; the coast starts from it.
 """
 
 from __future__ import annotations
@@ -86,7 +93,7 @@ from fdi.three_zone import Action
 from firmware_host.insgnss import align
 from firmware_host.insgnss.align import zaru_sigma
 from firmware_host.rover.failsafe import RoverFailsafe
-from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, unix_time
+from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink, receiver_accuracy, unix_time
 from firmware_host.rover.pipeline import EpochOutcome, EpochSink, RoverPipeline
 from firmware_host.rover.vehicle import rover_mavlink_spec
 from firmware_host.runtime.config import BridgeConfig
@@ -221,6 +228,11 @@ class InsGnssVehicle:
         self.coast_checks = 0  # coasts ended by a fix: their claim checked against it
         self.coast_failed = 0  # ... of which the fix was beyond the claim (NEES > χ²₂(0.99))
         self.coast_inflation = 1.0  # factor on the coast's accuracy from the failed checks
+        self._fix_acc_h = 0.0  # the receiver's own horizontal accuracy of the last fix used
+        self._var_h_fix = 0.0  # the filter's horizontal variance just after that fix
+        self._rate_win: deque[tuple[float, int]] = deque()  # (GNSS time, integrated so far)
+        self._status = "waiting for the first epoch"  # the status line's section
+        self.rate_drops = 0  # the integrated rate fell below min_imu_rate_hz (a reset each)
         self._router_q: deque[bytes] = deque()  # appended by the router's thread
         self._imu_tap: Callable[[bytes], None] | None = None
 
@@ -245,10 +257,6 @@ class InsGnssVehicle:
     def status_fields(self) -> dict[str, Any]:
         """Nothing beyond the runner's own status line fields."""
         return {}
-
-    def status_detail(self) -> tuple[str, ...]:
-        """Nothing after the ports on the status line."""
-        return ()
 
     def start(self, ctx: Context) -> None:
         rc = self.cfg.rover
@@ -312,6 +320,16 @@ class InsGnssVehicle:
             wait = max(self.cfg.rover.port.timeout_s, 0.01)
             self._idle_s = max(0.0, wait - (self.clock() - t0))
         return n
+
+    def status_detail(self) -> tuple[str, ...]:
+        """The status line's section (Snapshot ``detail``): what drives the output now, as
+        the operator needs it: ``INS 0.37 m`` (the accuracy sent), ``INS coasting, 6 s,
+        accuracy 0.5 m``, ``INS coast limit, 11 s: no fix``, ``rover detector (aligning: at
+        rest: levelling (heading from ATTITUDE))``, or the refusal; with the IMU's rate."""
+        rate = () if self.rate_hz is None else (f"imu {self.rate_hz:.0f} Hz",)
+        if self.refused:
+            return ("INS refused: rover detector", *rate)
+        return (self._status, *rate)
 
     def check(self, now: float) -> None:
         if self.failsafe is not None:
@@ -482,6 +500,7 @@ class InsGnssVehicle:
                     continue
                 kf.propagate(t, s.gyro_rad_s, s.accel_m_s2)
                 self.stats.integrated += 1
+            self._watch_rate(t_g)
             still = self._stationary(out, [s for _, s in samples])
             enu = self._fix_enu(out)
             if enu is None:
@@ -493,6 +512,8 @@ class InsGnssVehicle:
                 self._prior_var = np.diag(kf.P)[:3].copy()  # P⁻ (at the last covariance step)
                 rep = kf.update(t_g, enu)
                 self._last_fix_t = t_g
+                self._fix_acc_h = receiver_accuracy(out.epoch, self.cfg.rover.detector)[0]
+                self._var_h_fix = self._var_h(kf)
             self._coasting = rep is None
             if still and not kf.bias_active:
                 kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
@@ -509,12 +530,33 @@ class InsGnssVehicle:
             self.ratelog.warning("ins reset", f"{err}; realigning, rover detector meanwhile")
             self.kf = None
             self.aligned_at = None
+            self._rate_win.clear()
             self._rest_reset()
             self._emit_rover(out, t_g, "reset")
             return
         finally:
             self._prev_t = t_g
         self._emit_ins(out, t_g, rep, zupt)
+
+    def _watch_rate(self, t_g: float) -> None:
+        """The IMU rate on the samples actually integrated, over the last
+        ``rate_samples / min_imu_rate_hz`` seconds (2.5 s by default): below
+        ``min_imu_rate_hz`` at any time the filter is stopped (an EstimatorError: the rover
+        detector meanwhile, realigned when the stream is back), said once per drop."""
+        win = self._rate_win
+        win.append((t_g, self.stats.integrated))
+        span_s = self.live.rate_samples / self.params.min_imu_rate_hz
+        while len(win) > 2 and t_g - win[1][0] >= span_s:
+            win.popleft()
+        dt = t_g - win[0][0]
+        if dt < span_s:
+            return
+        rate = (self.stats.integrated - win[0][1]) / dt
+        if rate < self.params.min_imu_rate_hz:
+            self.rate_drops += 1
+            raise EstimatorError(
+                f"imu_rate {rate:.3g} Hz integrated over the last {dt:.1f} s, below "
+                f"min_imu_rate_hz {self.params.min_imu_rate_hz:g}")
 
     # ------------------------------------------------------------------ alignment
 
@@ -733,6 +775,7 @@ class InsGnssVehicle:
         self._prev_fix = None if enu is None else (out.t_s or 0.0, enu, self._vel_en(out))
         record = self._base_record(out, t_g, "rover")
         record["why"] = why
+        self._status = f"rover detector ({why})"
         self.write_record(record)
         self._send(out)
 
@@ -757,8 +800,10 @@ class InsGnssVehicle:
             var = np.maximum(var, self._prior_var + r)
         acc_h = math.sqrt(max(float(var[0]), float(var[1])))
         acc_v = math.sqrt(float(var[2]))
-        if rep is None:  # coasting: scaled by the coast checks that failed
-            acc_h *= self.coast_inflation
+        if rep is None:  # coasting (module docstring): from the receiver's accuracy at least
+            grown = max(0.0, self._var_h(kf) - self._var_h_fix)
+            acc_h = math.sqrt(max(self._var_h_fix, self._fix_acc_h**2) + grown)
+            acc_h *= self.coast_inflation  # and scaled by the coast checks that failed
             acc_v *= self.coast_inflation
         ins: dict[str, Any] = {
             "pos": [_r(x, 3) for x in p], "vel": [_r(x, 3) for x in kf.velocity],
@@ -784,9 +829,13 @@ class InsGnssVehicle:
             alt = h - (out.epoch.geoid_sep_m or 0.0)
             ins["lla"] = [round(lat, 9), round(lon, 9), round(h, 3)]
         coast_s = t_g - (self._last_fix_t if self._last_fix_t is not None else t_g)
+        self._status = f"INS {acc_h:.2f} m" + (" (fix not used as is)" if rep is not None
+                                                and not used else "")
         if rep is None:
             ins["coast_s"] = round(coast_s, 3)
+            self._status = f"INS coasting, {coast_s:.0f} s, accuracy {acc_h:.1f} m"
             if not self._coast(coast_s, acc_h):
+                self._status = f"INS coast limit, {coast_s:.0f} s: no fix"
                 ins["output"] = "no fix"
                 record = self._base_record(out, t_g, "ins")
                 record["ins"] = ins
@@ -805,14 +854,22 @@ class InsGnssVehicle:
                                 {**(out.record or {}), "ins": ins},
                                 heading_deg=out.heading_deg))
 
+    @staticmethod
+    def _var_h(kf: InsGnssFilter) -> float:
+        """The larger horizontal variance of the position (the fault bias's added while a
+        fault is believed), m²."""
+        var = np.diag(kf.P)[:2] + (np.diag(kf._Pbb)[:2] if kf.bias_active else 0.0)
+        return float(max(var[0], var[1]))
+
     def _check_coast(self, enu: tuple[float, float, float]) -> None:
         """The first fix after a coast checks the coast's claim: the horizontal NEES
         ``νᵀ (P + R)⁻¹ ν`` of the fix against the coasted position, before the update. Beyond
-        χ²₂(0.99) = 9.21 the claim failed: the coast's accuracy (GPS_INPUT, the records) is
-        scaled from now on by ``√k``, ``k`` the factor on ``P`` that would have made this
-        return typical (``νᵀ (k P + R)⁻¹ ν = 2``, its mean); the largest so far is kept. (The
-        filter's own ``P`` is not changed: the gate's readmission already pulls a drifted
-        state back.)"""
+        χ²₂(0.99) = 9.21 the claim failed: the filter's ``P`` is widened by ``k`` before the
+        fix is taken (:meth:`~fdi.insgnss.InsGnssFilter.inflate`), ``k`` the factor on ``P``
+        that would have made this return typical (``νᵀ (k P + R)⁻¹ ν = 2``, its mean), so the
+        fix pulls the drifted state back and corrects what drifted; and the coast's accuracy
+        (GPS_INPUT, the records) is scaled from now on by ``√k``, the largest so far, because
+        the filter's model drifted faster than it claimed."""
         kf = self.kf
         assert kf is not None
         nu = np.array(enu[:2]) - kf.position[:2]
@@ -831,6 +888,7 @@ class InsGnssVehicle:
             else:
                 hi = k
         self.coast_inflation = max(self.coast_inflation, math.sqrt(hi))
+        kf.inflate(hi)  # the filter's own claim widened before the fix is taken
         claim = math.sqrt(max(float(P[0, 0]), float(P[1, 1])))
         self.ratelog.warning(
             "coast check", f"INS coast claimed {claim:.2f} m (1σ), the fix returned "
@@ -901,6 +959,7 @@ class InsGnssVehicle:
             "coast_no_fix": self.coast_no_fix, "coast_checks": self.coast_checks,
             "coast_failed": self.coast_failed,
             "coast_inflation": round(self.coast_inflation, 3),
+            "rate_drops": self.rate_drops,
             "align_wait": dict(self.align_wait), "resets": dict(self.resets),
             "gate_actions": dict(self.gate_actions),
             "imu": {"received": st.received, "integrated": st.integrated,

@@ -22,12 +22,14 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+from drivers.gps.epochs import GpsEpoch
 from drivers.gps.nmea import format_date, format_lat, format_lon, format_time, with_checksum
 from drivers.mavlink.io import GpsInputFix
 from drivers.mavlink.modes import alarm_mode
 from drivers.ptypair import PtyPair
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings, open_port_nonblocking
+from fdi.rover import RoverDetectorParams
 from firmware_host.rover.pipeline import EpochOutcome
 from firmware_host.runtime.config import RoverConfig
 from firmware_host.runtime.mavout import MavlinkOutput, open_mavlink_output
@@ -236,6 +238,17 @@ def _date_from_clock(utc_s: float, now_unix: float) -> tuple[int, int, int] | No
     return y, m, d
 
 
+def receiver_accuracy(e: GpsEpoch, detector: RoverDetectorParams) -> tuple[float, float]:
+    """The receiver's own horizontal and vertical accuracy of epoch ``e`` (m): its GST
+    standard deviations, else the detector's σ (``sigma_m`` √2, ``sigma_up_m``) times the HDOP
+    (at least 1)."""
+    if e.sd_lat_m is not None and e.sd_lon_m is not None:
+        h_acc = math.hypot(e.sd_lat_m, e.sd_lon_m)
+        return h_acc, (e.sd_alt_m if e.sd_alt_m is not None else 2.0 * h_acc)
+    dop = max(1.0, e.hdop or 1.0)
+    return detector.sigma_m * math.sqrt(2.0) * dop, detector.sigma_up_m * dop
+
+
 class MavlinkGpsSink:
     """GPS_INPUT per epoch; STATUSTEXT and the alarm mode on alarm; heartbeat at 1 Hz of fix time.
 
@@ -324,12 +337,7 @@ class MavlinkGpsSink:
             time_usec = round(self.wall_clock() * 1e6)
         t = out.t_s if out.t_s is not None else e.utc_s
         replaced = d.action != "accept"
-        if e.sd_lat_m is not None and e.sd_lon_m is not None:
-            h_acc = math.hypot(e.sd_lat_m, e.sd_lon_m)
-            v_acc = e.sd_alt_m if e.sd_alt_m is not None else 2.0 * h_acc
-        else:
-            h_acc = self.cfg.detector.sigma_m * math.sqrt(2.0) * max(1.0, e.hdop or 1.0)
-            v_acc = self.cfg.detector.sigma_up_m * max(1.0, e.hdop or 1.0)
+        h_acc, v_acc = receiver_accuracy(e, self.cfg.detector)
         factor = self.cfg.output.replaced_accuracy_factor if replaced else 1.0
         h_acc *= factor
         v_acc *= factor

@@ -35,6 +35,7 @@ states explicitly (a test keeps the two equal).
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import importlib.util
 import logging
 import math
@@ -97,8 +98,10 @@ def resolve_config_path(name: str | Path) -> Path:
             return preset
         if not p.exists():
             names = ", ".join(preset_names()) or "(none installed)"
+            near = difflib.get_close_matches(p.stem, preset_names(), n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
             raise ConfigError(str(name), "(file)", f"a TOML file or a preset name ({names})",
-                              "no such file or preset")
+                              f"no such file or preset{hint}")
     return p
 
 

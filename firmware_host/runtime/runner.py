@@ -46,6 +46,7 @@ from typing import Any, Literal, TextIO
 from drivers.capture import Channel
 from drivers.resilient import Opener, ResilientPort
 from drivers.transport import SerialSettings
+from firmware_host.runtime import autopilot_echo
 from firmware_host.runtime.config_mavlink import MavlinkConfig
 from firmware_host.runtime.loop import FixedRateLoop
 from firmware_host.runtime.mavout import (
@@ -149,6 +150,7 @@ class Runner:
         self._last_record_t: float | None = None
         self._next_status = 0.0
         self._status_prev: tuple[float, dict[str, tuple[int, int]]] | None = None
+        self._echo: autopilot_echo.AutopilotEcho | None = None
 
     # ------------------------------------------------------------------ control
 
@@ -231,6 +233,8 @@ class Runner:
                     **({"opener": self.opener} if self.opener is not None else {}))
                 self._own_output = True
         self.mavlink_output = output
+        if output is not None:  # the status line's autopilot (read at each snapshot)
+            self._echo = autopilot_echo.attach(output, self.router, self.clock)
         ctx = Context(clock=self.clock, ports=self.ports, epochs=self.epochs, mavlink=output,
                       router=self.router,
                       tap=lambda name, url, baud, direction: self._tap(name, url, baud,
@@ -322,7 +326,8 @@ class Runner:
             ports=tuple(ports),
             last_record_age_s=None if self._last_record_t is None
             else now - self._last_record_t,
-            extra=extra, detail=tuple(self.vehicle.status_detail()))
+            extra=extra, detail=tuple(self.vehicle.status_detail()),
+            autopilot=None if self._echo is None else self._echo.view(now))
 
     def close(self) -> dict[str, Any]:
         """Finish the vehicle, close everything, write ``summary.json``; returns the summary."""

@@ -51,6 +51,19 @@ class PortStatus:
 
 
 @dataclass(frozen=True)
+class AutopilotView:
+    """The autopilot at the other end of the MAVLink output now
+    (:mod:`firmware_host.runtime.autopilot_echo`): its HEARTBEAT's age (None: none heard), its
+    last GPS_RAW_INT (its own view of the fix we sent: fix type, satellites; None: none heard)
+    and that message's age (s)."""
+
+    heartbeat_age_s: float | None
+    gps_fix_type: int | None = None
+    gps_sats: int | None = None
+    gps_age_s: float | None = None
+
+
+@dataclass(frozen=True)
 class Snapshot:
     """The live status (one line): counters since the start, port states, the last record's
     age (the last fix, for the rover)."""
@@ -65,6 +78,8 @@ class Snapshot:
     # The vehicle's state in words, after the ports (the rover: its fix, its output, its
     # receiver's sentences), one section each.
     detail: tuple[str, ...] = ()
+    # With a MAVLink output that reads: whether the autopilot is there and its echo of our fix.
+    autopilot: AutopilotView | None = None
 
 
 class StatusSink(Protocol):

@@ -1,0 +1,184 @@
+"""The field's fault stream at rest through the live INS/GNSS vehicle, beside the plain rover.
+
+Issue G's run on a real ArduRover: a stationary NMEA receiver with jumps, bursts, position
+walks at zero speed and a 20 s outage, the autopilot's IMU drifting as ArduPilot's simulated
+one. Here the same stream on the project's simulated autopilot
+(:mod:`firmware_host.devtools.insgnss_live`, real ptys):
+
+* the vehicle at rest for ``rest_s`` (the live example's filter and IMU model, ArduPilot's
+  gyro drift 0.05 deg/s per minute, RAW_IMU, ATTITUDE 1 deg off for the heading);
+* the receiver's error a DGPS receiver's, as ``sim rover``'s ``gm`` model: a first-order
+  Gauss-Markov process per axis (σ 0.35 m horizontal, 0.7 m up, τ 60 s);
+* its faults (:func:`field_faults`): single-epoch jumps of 3-6 m, bursts of 4-6 epochs of 3-6 m
+  in random directions, two walks at zero reported speed (0.2 m/s east and 0.15 m/s south,
+  25 s each, then back), and the outage (no-fix epochs, :data:`OUTAGE`).
+
+:func:`compare_field` returns, per epoch, the INS's horizontal error (its output) and the
+plain rover's (the rover detector's output on the same epoch: the vehicle runs it on every fix
+and records it, the same pipeline as ``RoverVehicle``). The rover sends nothing during the
+outage (no-fix), the INS coasts then sends no-fix past its limit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from firmware_host.devtools import insgnss_sim as sim
+from firmware_host.devtools.insgnss_live import UTC0, LiveRun, frame_of, run_live
+from firmware_host.runtime.config import CONFIG_DIR, insgnss_setup, load_bridge_file
+from firmware_host.runtime.config_insgnss import InsGnssSetup
+
+FloatArray = npt.NDArray[np.float64]
+REST_S = 300  # s at rest before the take-off roll (trajectory t = -320 .. -20)
+OUTAGE = (-70.0, -50.0)  # the 20 s GNSS outage (trajectory time)
+JUMPS_T = (-250.0, -240.0, -200.0, -120.0)
+BURSTS = ((-230.0, 4), (-150.0, 6))  # (start, epochs)
+WALKS = ((-190.0, 25.0, (0.2, 0.0)), (-110.0, 25.0, (0.0, -0.15)))  # (start, s, m/s E, N)
+GM_SIGMA_M = (0.35, 0.35, 0.7)
+GM_TAU_S = 60.0
+
+
+def field_setup(gnss_sigma_h_m: float | None = None) -> InsGnssSetup:
+    """The live example's filter and IMU at rest for :data:`REST_S` with ArduPilot's gyro
+    drift; the simulator's own GNSS noise off (:func:`field_data` adds a receiver's).
+    ``gnss_sigma_h_m``: the filter's R (E/N 1σ; up twice that), default the example's."""
+    ex = insgnss_setup(load_bridge_file(CONFIG_DIR / "insgnss-live-example.toml"))
+    base = sim.load_setup(None)
+    filt = ex.filter if gnss_sigma_h_m is None else replace(
+        ex.filter, gnss_sigma_h_m=gnss_sigma_h_m, gnss_sigma_v_m=2.0 * gnss_sigma_h_m)
+    return replace(base, filter=filt, live=ex.live,
+                   sim=replace(base.sim, epochs=20, rest_s=REST_S, random_faults=0,
+                               imu=ex.sim.imu, gyro_drift_deg_s_per_min=0.05,
+                               gnss_sigma_h_m=0.0, gnss_sigma_v_m=0.0,
+                               gnss_sigma_vel_m_s=0.03))
+
+
+def field_faults(t: FloatArray, rng: np.random.Generator) -> FloatArray:
+    """The faults (E, N, U m) at the GNSS epochs ``t``: jumps, bursts, walks (module doc)."""
+    f = np.zeros((len(t), 3))
+
+    def at(a: float, b: float) -> npt.NDArray[np.bool_]:
+        return (t >= a) & (t < b)
+
+    def kick() -> FloatArray:
+        ang, size = rng.uniform(0.0, 2.0 * math.pi), rng.uniform(3.0, 6.0)
+        return size * np.array([math.cos(ang), math.sin(ang)])
+
+    for tj in JUMPS_T:
+        f[at(tj, tj + 1.0), :2] += kick()
+    for tb, n in BURSTS:
+        for k in range(n):
+            f[at(tb + k, tb + k + 1.0), :2] += kick()
+    for tw, dur, (ve, vn) in WALKS:
+        w = at(tw, tw + dur)
+        f[w, 0] += ve * (t[w] - tw)
+        f[w, 1] += vn * (t[w] - tw)
+    return f
+
+
+def field_data(setup: InsGnssSetup, seed: int) -> sim.NavData:
+    """The simulator's clean run plus a DGPS receiver's error and :func:`field_faults`."""
+    data = sim.generate(setup, "clean", seed)
+    rng = np.random.default_rng(seed)
+    t = data.gnss_t
+    sg = np.array(GM_SIGMA_M)
+    phi = math.exp(-1.0 / GM_TAU_S)  # 1 Hz epochs
+    gm = np.zeros((len(t), 3))
+    gm[0] = rng.normal(0.0, 1.0, 3) * sg
+    for k in range(1, len(t)):  # x_k = φ x_{k-1} + sqrt(1 - φ²) σ w_k
+        gm[k] = phi * gm[k - 1] + math.sqrt(1.0 - phi * phi) * sg * rng.normal(0.0, 1.0, 3)
+    f = field_faults(np.asarray(t, dtype=np.float64), rng)
+    return replace(data, gnss_p=data.gnss_p + gm + f, fault=data.fault + f)
+
+
+@dataclass(frozen=True)
+class FieldEpoch:
+    """One epoch at rest: the INS's output error (None: no fix sent), the rover's (None: its
+    detector sent nothing), the coast's time and the accuracy sent (m)."""
+
+    t: float
+    ins_err_m: float | None
+    rover_err_m: float | None
+    coast_s: float | None
+    acc_h_m: float | None
+
+
+@dataclass
+class FieldRun:
+    epochs: list[FieldEpoch]
+    run: LiveRun
+
+    def excess(self) -> list[tuple[float, float]]:
+        """(t, INS error − rover error) on every epoch both sent a position."""
+        return [(e.t, e.ins_err_m - e.rover_err_m) for e in self.epochs
+                if e.ins_err_m is not None and e.rover_err_m is not None]
+
+
+def compare_field(setup: InsGnssSetup, seed: int, out_dir: Path, *,
+                  mavlink_url: str = "") -> FieldRun:
+    """Play :func:`field_data` to the live vehicle (RAW_IMU, ATTITUDE 1 deg off) with the
+    outage; each epoch at rest as a :class:`FieldEpoch`."""
+    data = field_data(setup, seed)
+    lr = run_live(setup, data, out_dir, seed=seed, imu_message="RAW_IMU",
+                  attitude_error_deg=1.0, outage=OUTAGE, mavlink_url=mavlink_url)
+    frame = frame_of(setup.filter.latitude_deg)
+    rate = setup.sim.imu_rate_hz
+    day0 = UTC0 % 86400.0
+    out: list[FieldEpoch] = []
+    for r in lr.records:
+        t = float(r["t"]) - day0
+        if t > -float(setup.sim.takeoff_s) - 1.0:
+            break  # the take-off roll
+        p = data.traj.p[round((t - float(data.traj.t[0])) * rate)]
+        ins = r.get("ins") if r.get("mode") == "ins" else None
+        ins_err = rover_err = coast = acc = None
+        if isinstance(ins, dict) and "lla" in ins and ins.get("output") != "no fix":
+            e, n, _ = frame.to_enu(*ins["lla"])
+            ins_err = float(np.hypot(e - p[0], n - p[1]))
+            acc = float(ins["acc_h_m"])
+        if isinstance(ins, dict) and "coast_s" in ins:
+            coast = float(ins["coast_s"])
+        if r.get("lat") is not None and r.get("action") != "alarm":
+            e, n, _ = frame.to_enu(float(r["lat"]), float(r["lon"]), 0.0)
+            rover_err = float(np.hypot(e - p[0], n - p[1]))
+        if r.get("mode") != "ins":
+            ins_err = rover_err  # before the alignment the rover's output is the vehicle's
+        out.append(FieldEpoch(t, ins_err, rover_err, coast, acc))
+    return FieldRun(out, lr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m firmware_host.devtools.insgnss_field [--sigma R] [--seeds 1-8]``: one line a
+    seed (the table of docs/insgnss-live.md)."""
+    import argparse
+    import tempfile
+
+    parser = argparse.ArgumentParser(prog="insgnss_field", description=__doc__.split("\n")[0])
+    parser.add_argument("--sigma", type=float, default=None,
+                        help="the filter's gnss_sigma_h_m (default: the live example's)")
+    parser.add_argument("--seeds", default="1-8", help="first-last")
+    args = parser.parse_args(argv)
+    first, _, last = args.seeds.partition("-")
+    for seed in range(int(first), int(last or first) + 1):
+        with tempfile.TemporaryDirectory() as d:
+            fr = compare_field(field_setup(args.sigma), seed, Path(d))
+        t, worst = max(fr.excess(), key=lambda x: x[1])
+        coast = [e for e in fr.epochs if e.coast_s is not None and e.ins_err_m is not None
+                 and e.acc_h_m]
+        ratio = max((e.ins_err_m or 0.0) / (e.acc_h_m or 1.0) for e in coast) if coast else 0.0
+        ins_max = max(e.ins_err_m for e in fr.epochs if e.ins_err_m is not None)
+        rover_max = max(e.rover_err_m for e in fr.epochs if e.rover_err_m is not None)
+        print(f"sigma {args.sigma or 'example'} seed {seed}: worst excess over the rover "
+              f"{worst:.2f} m at t = {t:.0f} s; INS max {ins_max:.2f} m, rover max "
+              f"{rover_max:.2f} m; coast error / accuracy at most {ratio:.2f} "
+              f"({len(coast)} coast epochs sent)", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
