@@ -123,11 +123,14 @@ class TxCheck:
 
 class ReplayDriver:
     """One replay into ``out_dir`` (None: no files, for a pipeline that writes to a caller's
-    stream). See the module docstring."""
+    stream). ``partial_on_signal=False``: a stop signal propagates, nothing finished (a
+    caller's loop, a benchmark). See the module docstring."""
 
-    def __init__(self, out_dir: Path | None, *, records: bool = True) -> None:
+    def __init__(self, out_dir: Path | None, *, records: bool = True,
+                 partial_on_signal: bool = True) -> None:
         self.out_dir = out_dir
         self.records = records
+        self.partial_on_signal = partial_on_signal
         self.clock = FakeClock(0.0)
         self.epochs: EpochLog = (RecordCount(out_dir) if out_dir is not None and not records
                                  else EpochLog(out_dir))
@@ -172,6 +175,8 @@ class ReplayDriver:
                     if close is not None:
                         close()
             except KeyboardInterrupt as err:  # ^C, SIGTERM, SIGHUP: keep what was read
+                if not self.partial_on_signal:
+                    raise
                 self.interrupted_by = getattr(err, "signame", "SIGINT")
             vehicle.finish()
         finally:
