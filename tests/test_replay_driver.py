@@ -44,6 +44,7 @@ class Probe:
     def start(self, ctx: Context) -> None:
         self.clock = ctx.clock
         self.epochs = ctx.epochs
+        self.log.append(("start", ctx.clock()))
 
     def step(self, t: float) -> int:
         self.log.append(("step", t))
@@ -72,7 +73,7 @@ def test_period_vehicle_steps_at_the_recorded_times(tmp_path: Path) -> None:
     read left it (the next step starts at its own deadline)."""
     v = Probe("period")
     d = ReplayDriver(tmp_path)
-    d.run(v, [0.0, 0.2, 0.4])
+    d.run(v, [0.0, 0.2, 0.4], start=lambda: v.start(d.context()))
     assert [t for k, t in v.log if k == "step"] == [0.0, 0.2, 0.4]
     assert [(r["t"], r["clock"]) for r in _lines(tmp_path / "epochs.jsonl")] == [
         (0.0, 0.0), (0.2, 0.2), (0.4, 0.4)]
@@ -84,7 +85,8 @@ def test_data_vehicle_clock_never_goes_back(tmp_path: Path) -> None:
     """Data pacing: a step runs at the clock, which a recorded time earlier than where the
     last read left it does not move back."""
     v = Probe("data")
-    ReplayDriver(tmp_path).run(v, [0.0, 0.2, 1.0])
+    d = ReplayDriver(tmp_path)
+    d.run(v, [0.0, 0.2, 1.0], start=lambda: v.start(d.context()))
     assert [t for k, t in v.log if k == "step"] == [0.0, 0.5, 1.0]
 
 
@@ -100,16 +102,17 @@ def test_a_stop_signal_finishes_and_marks_the_summary_partial(tmp_path: Path) ->
 
     v = Probe("data", stop_at=1.0)
     d = ReplayDriver(tmp_path)
-    d.run(v, steps(v))
-    assert [k for k, _ in v.log] == ["step", "check", "step", "inputs closed", "finish"]
+    d.run(v, steps(v), start=lambda: v.start(d.context()))
+    assert [k for k, _ in v.log] == ["start", "step", "check", "step", "inputs closed", "finish"]
     s = d.write_summary(d.summary(v.summary(), config="c", input={"kind": "probe"}, facts={}))
     assert s["partial"] is True and s["interrupted_by"] == "SIGINT" and s["epochs"] == 1
     assert json.loads((tmp_path / "summary.json").read_text()) == s
     # A caller's own loop (a benchmark) gets the signal instead, with nothing finished.
     v2 = Probe("data", stop_at=1.0)
+    d2 = ReplayDriver(None, partial_on_signal=False)
     with pytest.raises(KeyboardInterrupt):
-        ReplayDriver(None, partial_on_signal=False).run(v2, steps(v2))
-    assert [k for k, _ in v2.log] == ["step", "check", "step", "inputs closed"]
+        d2.run(v2, steps(v2), start=lambda: v2.start(d2.context()))
+    assert [k for k, _ in v2.log] == ["start", "step", "check", "step", "inputs closed"]
 
 
 def test_summary_order_and_tx_check(tmp_path: Path) -> None:

@@ -47,7 +47,6 @@ from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 from firmware_host.runtime.replay import ReplayDriver, ReplayPort, wrote
-from firmware_host.runtime.vehicle import Context
 
 log = logging.getLogger("fdi_bridge.replay")
 
@@ -210,7 +209,8 @@ class RoverFeed:
     """The rover's pipeline as a vehicle of the replay driver
     (:class:`~firmware_host.runtime.replay.ReplayDriver`): each step feeds it the bytes its
     port was given (a read of the pty, or a block of the file), and it finishes by completing
-    the last epoch and closing its outputs."""
+    the last epoch and closing its outputs. Nothing to start: the pipeline is built with its
+    outputs."""
 
     name = "rover"
     pacing: Literal["data"] = "data"
@@ -218,9 +218,6 @@ class RoverFeed:
     def __init__(self, pipeline: RoverPipeline, port: ReplayPort) -> None:
         self.pipeline = pipeline
         self.port = port
-
-    def start(self, ctx: Context) -> None:
-        """Nothing: the pipeline is built with its outputs."""
 
     def step(self, t: float) -> int:
         return self.pipeline.feed(self.port.read_some(len(self.port.pending)))

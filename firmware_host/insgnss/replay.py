@@ -84,7 +84,8 @@ def replay_with(cfg: BridgeConfig, setup: InsGnssSetup, reader: CaptureReader, o
             (gps if rec.channel == gps_id else imu).load(rec.data)
             yield (rec.t_us - t0) / 1e6
 
-    driver.run(vehicle, steps(), ports={"gps": gps, "imu": imu})
+    driver.run(vehicle, steps(),
+               start=lambda: vehicle.start(driver.context({"gps": gps, "imu": imu})))
     return driver.write_summary(driver.summary(
         vehicle.summary(), vehicle="insgnss", config=config_name,
         input={"kind": "insgnss capture", "notes": reader.all_notes()},

@@ -182,7 +182,7 @@ def replay_rov(cfg: RovConfig, base_dir: Path, capture: Path, out_dir: Path,
             leftover += port.leftover()
             tx.compare(st.k, bytes(port.written), bytes(st.tx))
 
-    driver.run(vehicle, steps(), ports={LINK: port})
+    driver.run(vehicle, steps(), start=lambda: vehicle.start(driver.context({LINK: port})))
     return driver.write_summary(driver.summary(
         vehicle.summary(), vehicle="rov", config=config_name,
         input={"file": str(capture), "kind": "rov capture", "notes": reader.all_notes()},
@@ -227,7 +227,7 @@ def replay_ardusub(cfg: RovConfig, capture: Path, out_dir: Path, *,
             yield st.t
             tx.compare(st.k, b"".join(loop.tx), bytes(st.tx))
 
-    driver.run(vehicle, steps(), start=lambda ctx: vehicle.start_replay(ctx.epochs))
+    driver.run(vehicle, steps(), start=lambda: vehicle.start_replay(driver.epochs))
     return driver.write_summary(driver.summary(
         vehicle.summary(), vehicle="rov-ardusub", config=config_name,
         input={"file": str(capture), "kind": "rov-ardusub capture",

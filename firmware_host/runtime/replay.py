@@ -33,24 +33,25 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, Literal, Protocol, TextIO, cast
+from typing import TYPE_CHECKING, Any, Literal, Protocol, TextIO, cast
 
-from drivers.resilient import ResilientPort
 from firmware_host.runtime.loop import FakeClock
 from firmware_host.runtime.records import EPOCHS, SUMMARY, EpochLog
-from firmware_host.runtime.vehicle import Context
+
+if TYPE_CHECKING:  # runtime.vehicle imports the MAVLink router: see ReplayDriver.context
+    from drivers.resilient import ResilientPort
+    from firmware_host.runtime.vehicle import Context
 
 Pacing = Literal["period", "data"]
 
 
 class ReplayVehicle(Protocol):
     """What the driver needs of a vehicle (a part of :class:`~firmware_host.runtime.vehicle.
-    Vehicle`: a replay opens no port, so ``ports``, ``mavlink`` and ``idle_s`` are not used)."""
+    Vehicle`: a replay opens no port, so ``ports``, ``mavlink`` and ``idle_s`` are not used;
+    the caller says how it starts, see :meth:`ReplayDriver.run`)."""
 
     @property
     def pacing(self) -> Pacing: ...
-
-    def start(self, ctx: Context) -> None: ...
 
     def step(self, t: float) -> int: ...
 
@@ -144,20 +145,28 @@ class ReplayDriver:
         pipeline); None with ``records=False`` (then it builds none)."""
         return self.epochs.stream
 
+    def context(self, ports: Mapping[str, object] | None = None) -> Context:
+        """What a vehicle's ``start`` gets in a replay: the fake clock, the records, the
+        replay's ports (no MAVLink output, no router, no recorder)."""
+        # Imported here: runtime.vehicle imports the MAVLink router (pymavlink), which the
+        # rover's replay, started without a context, never loads.
+        from firmware_host.runtime.vehicle import Context
+
+        # The vehicle uses only what the replay's ports have of a port.
+        return Context(clock=self.clock, epochs=self.epochs,
+                       ports=cast("dict[str, ResilientPort]", dict(ports or {})))
+
     def run(self, vehicle: ReplayVehicle, steps: Iterable[float], *,
-            ports: Mapping[str, object] | None = None,
-            start: Callable[[Context], None] | None = None) -> None:
-        """Start ``vehicle`` (``start`` instead of ``vehicle.start``, e.g. without a router),
-        step it at each time of ``steps``, finish it; ``epochs.jsonl`` is closed whatever
-        happens. A stop signal ends the steps (``interrupted_by``); any other error
-        propagates, with nothing finished."""
-        # The vehicle uses only what ReplayPort (or the caller's port) has of a port.
-        ctx = Context(clock=self.clock, epochs=self.epochs,
-                      ports=cast(dict[str, ResilientPort], dict(ports or {})))
+            start: Callable[[], None] | None = None) -> None:
+        """``start()`` the vehicle (e.g. ``vehicle.start(driver.context(ports))``), step it at
+        each time of ``steps``, finish it; ``epochs.jsonl`` is closed whatever happens. A stop
+        signal ends the steps (``interrupted_by``); any other error propagates, with nothing
+        finished."""
         clock = self.clock
         t0 = time.perf_counter()
         try:
-            (vehicle.start if start is None else start)(ctx)
+            if start is not None:
+                start()
             by_deadline = vehicle.pacing == "period"
             it = iter(steps)
             try:
