@@ -42,11 +42,17 @@ from drivers.transport import SerialSettings, open_port, read_some
 from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
 from firmware_host.commands.port_checks import check_port_opens, output_urls
 from firmware_host.commands.replay_args import add_arguments as add_arguments
-from firmware_host.commands.summaries import replay_problems, replay_text
+from firmware_host.commands.summaries import (
+    insgnss_replay_text,
+    replay_problems,
+    replay_text,
+    rov_replay_text,
+    wrote_text,
+)
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
-from firmware_host.runtime.replay import ReplayDriver, ReplayPort, wrote
+from firmware_host.runtime.replay import ReplayDriver, ReplayPort
 
 log = logging.getLogger("fdi_bridge.replay")
 
@@ -412,15 +418,12 @@ def print_summary(s: dict[str, Any], stream: TextIO) -> None:
 # --------------------------------------------------------------------------- CLI
 
 
-def _print_rov(args: argparse.Namespace, summary: dict[str, Any]) -> None:
+def _print(args: argparse.Namespace, summary: dict[str, Any], text: str) -> None:
     if args.json:
         print(json.dumps(summary))
-        return
-    r = summary["replay"]
-    print(f"ROV replay: {r['steps']} steps, {summary['epochs']} epochs, commands "
-          f"{'as recorded' if r['tx_match'] else 'DIFFERENT from the recording'} "
-          f"({r['tx_steps_same']} steps same, {r['tx_steps_differ']} differ)")
-    print(wrote(args.out, not args.no_records))
+    else:
+        print(text)
+        print(wrote_text(args.out, not args.no_records))
 
 
 def _interrupted(summary: dict[str, Any]) -> int:
@@ -443,13 +446,11 @@ def _run(args: argparse.Namespace) -> int:
         names = {c.name for c in CaptureReader(args.capture).channels}
         if {ROV_TICK, ROV_LINK_RX} <= names or ARDUSUB_TICK in names:
             s = importlib.import_module(ROV_REPLAY).run(args)
-            _print_rov(args, s)
+            _print(args, s, rov_replay_text(s))
             return _interrupted(s)
         if set(INS_RX) <= names:
-            ins = importlib.import_module(INS_REPLAY)
-            s = ins.run(args)
-            print(json.dumps(s) if args.json else ins.result_text(s, args.out,
-                                                                  records=not args.no_records))
+            s = importlib.import_module(INS_REPLAY).run(args)
+            _print(args, s, insgnss_replay_text(s))
             return _interrupted(s)
         if ROV_LINK_RX in names:
             raise FdiBridgeError(f"{args.capture}: an ROV recording without step ticks (made "
@@ -471,11 +472,7 @@ def _run(args: argparse.Namespace) -> int:
     warnings += link_warnings(summary)
     for w in warnings:
         print(f"fdi-bridge replay: warning: {w}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        print(replay_text(summary))
-        print(wrote(args.out, not args.no_records))
+    _print(args, summary, replay_text(summary))
     status = _interrupted(summary)
     if status:
         return status

@@ -30,7 +30,7 @@ from fdi.errors import CaptureFormatError, FdiBridgeError
 from firmware_host.insgnss.vehicle import InsGnssVehicle
 from firmware_host.runtime.config import BridgeConfig, bridge_config, load_bridge_file, vehicle_of
 from firmware_host.runtime.config_insgnss import InsGnssSetup
-from firmware_host.runtime.replay import ReplayDriver, ReplayPort, wrote
+from firmware_host.runtime.replay import ReplayDriver, ReplayPort
 
 GPS_RX, IMU_RX = "gps rx", "imu rx"
 
@@ -93,21 +93,11 @@ def replay_with(cfg: BridgeConfig, setup: InsGnssSetup, reader: CaptureReader, o
                "bytes_imu": imu.bytes_rx}))
 
 
-def result_text(summary: dict[str, Any], out_dir: Path, *, records: bool = True) -> str:
-    """The replay's result for a human (``records``: ``epochs.jsonl`` was written)."""
-    ins = summary.get("ins", {})
-    modes = ins.get("epochs", {})
-    r = summary["replay"]
-    return (f"INS/GNSS replay: {r['records']} records ({r['bytes_imu']} IMU bytes, "
-            f"{r['bytes_gps']} GNSS bytes), {summary['epochs']} epochs: "
-            f"{modes.get('ins', 0)} by the INS, {modes.get('rover', 0)} by the rover detector"
-            f"\n{wrote(out_dir, records)}")
-
-
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """``fdi-bridge replay`` of a live INS/GNSS recording (from
-    :mod:`firmware_host.commands.replay`, which prints): needs ``--config``, the file it was
-    recorded with; returns the summary."""
+    :mod:`firmware_host.commands.replay`, which prints
+    :func:`~firmware_host.commands.summaries.insgnss_replay_text`): needs ``--config``, the
+    file it was recorded with; returns the summary."""
     if args.config is None:
         raise FdiBridgeError(f"{args.capture} is a live INS/GNSS recording: give --config with "
                              "the [rover] + [insgnss] file it was recorded with")

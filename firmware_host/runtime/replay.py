@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Protocol, TextIO, cast
 
 from firmware_host.runtime.loop import FakeClock
-from firmware_host.runtime.records import EPOCHS, SUMMARY, EpochLog
+from firmware_host.runtime.records import EPOCHS, EpochLog
 
 if TYPE_CHECKING:  # runtime.vehicle imports the MAVLink router: see ReplayDriver.context
     from drivers.resilient import ResilientPort
@@ -227,9 +227,3 @@ class ReplayDriver:
         self.epochs.write_summary(summary)
         return summary
 
-
-def wrote(out_dir: Path, records: bool = True) -> str:
-    """The line a replay command ends with: the files it wrote."""
-    if not records:
-        return f"wrote {out_dir / SUMMARY} (no {EPOCHS}: --no-records)"
-    return f"wrote {out_dir / EPOCHS} and {out_dir / SUMMARY}"
