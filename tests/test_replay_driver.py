@@ -73,7 +73,7 @@ def test_period_vehicle_steps_at_the_recorded_times(tmp_path: Path) -> None:
     read left it (the next step starts at its own deadline)."""
     v = Probe("period")
     d = ReplayDriver(tmp_path)
-    d.run(v, [0.0, 0.2, 0.4], start=lambda: v.start(d.context()))
+    d.run(v, [0.0, 0.2, 0.4], start=lambda: v.start(Context(d.clock, {}, d.epochs)))
     assert [t for k, t in v.log if k == "step"] == [0.0, 0.2, 0.4]
     assert [(r["t"], r["clock"]) for r in _lines(tmp_path / "epochs.jsonl")] == [
         (0.0, 0.0), (0.2, 0.2), (0.4, 0.4)]
@@ -86,7 +86,7 @@ def test_data_vehicle_clock_never_goes_back(tmp_path: Path) -> None:
     last read left it does not move back."""
     v = Probe("data")
     d = ReplayDriver(tmp_path)
-    d.run(v, [0.0, 0.2, 1.0], start=lambda: v.start(d.context()))
+    d.run(v, [0.0, 0.2, 1.0], start=lambda: v.start(Context(d.clock, {}, d.epochs)))
     assert [t for k, t in v.log if k == "step"] == [0.0, 0.5, 1.0]
 
 
@@ -102,7 +102,7 @@ def test_a_stop_signal_finishes_and_marks_the_summary_partial(tmp_path: Path) ->
 
     v = Probe("data", stop_at=1.0)
     d = ReplayDriver(tmp_path)
-    d.run(v, steps(v), start=lambda: v.start(d.context()))
+    d.run(v, steps(v), start=lambda: v.start(Context(d.clock, {}, d.epochs)))
     assert [k for k, _ in v.log] == ["start", "step", "check", "step", "inputs closed", "finish"]
     s = d.write_summary(d.summary(v.summary(), config="c", input={"kind": "probe"}, facts={}))
     assert s["partial"] is True and s["interrupted_by"] == "SIGINT" and s["epochs"] == 1
@@ -111,7 +111,7 @@ def test_a_stop_signal_finishes_and_marks_the_summary_partial(tmp_path: Path) ->
     v2 = Probe("data", stop_at=1.0)
     d2 = ReplayDriver(None, partial_on_signal=False)
     with pytest.raises(KeyboardInterrupt):
-        d2.run(v2, steps(v2), start=lambda: v2.start(d2.context()))
+        d2.run(v2, steps(v2), start=lambda: v2.start(Context(d2.clock, {}, d2.epochs)))
     assert [k for k, _ in v2.log] == ["start", "step", "check", "step", "inputs closed"]
 
 

@@ -23,14 +23,16 @@ from __future__ import annotations
 import argparse
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from drivers.capture import CaptureReader
+from drivers.resilient import ResilientPort
 from fdi.errors import CaptureFormatError, FdiBridgeError
 from firmware_host.insgnss.vehicle import InsGnssVehicle
 from firmware_host.runtime.config import BridgeConfig, bridge_config, load_bridge_file, vehicle_of
 from firmware_host.runtime.config_insgnss import InsGnssSetup
 from firmware_host.runtime.replay import ReplayDriver, ReplayPort
+from firmware_host.runtime.vehicle import Context
 
 GPS_RX, IMU_RX = "gps rx", "imu rx"
 
@@ -84,8 +86,9 @@ def replay_with(cfg: BridgeConfig, setup: InsGnssSetup, reader: CaptureReader, o
             (gps if rec.channel == gps_id else imu).load(rec.data)
             yield (rec.t_us - t0) / 1e6
 
-    driver.run(vehicle, steps(),
-               start=lambda: vehicle.start(driver.context({"gps": gps, "imu": imu})))
+    ports = {"gps": cast(ResilientPort, gps), "imu": cast(ResilientPort, imu)}
+    ctx = Context(clock=driver.clock, ports=ports, epochs=driver.epochs)
+    driver.run(vehicle, steps(), start=lambda: vehicle.start(ctx))
     return driver.write_summary(driver.summary(
         vehicle.summary(), vehicle="insgnss", config=config_name,
         input={"kind": "insgnss capture", "notes": reader.all_notes()},

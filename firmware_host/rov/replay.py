@@ -31,9 +31,10 @@ import json
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from drivers.capture import CaptureReader
+from drivers.resilient import ResilientPort
 from fdi.errors import CaptureFormatError, FdiBridgeError
 from firmware_host.rov.ardusub import RX as ARDUSUB_RX
 from firmware_host.rov.ardusub import TICK as ARDUSUB_TICK
@@ -44,6 +45,7 @@ from firmware_host.rov.vehicle import LINK, TICK, OutlandRovVehicle, link_settin
 from firmware_host.runtime.config import load_bridge_file, rov_config, vehicle_of
 from firmware_host.runtime.loop import FakeClock
 from firmware_host.runtime.replay import ReplayDriver, TxCheck
+from firmware_host.runtime.vehicle import Context
 
 RX = f"{LINK} rx"
 TX = f"{LINK} tx"
@@ -182,7 +184,10 @@ def replay_rov(cfg: RovConfig, base_dir: Path, capture: Path, out_dir: Path,
             leftover += port.leftover()
             tx.compare(st.k, bytes(port.written), bytes(st.tx))
 
-    driver.run(vehicle, steps(), start=lambda: vehicle.start(driver.context({LINK: port})))
+    # The vehicle uses only read/write/in_waiting/reset_input_buffer of its port.
+    ctx = Context(clock=driver.clock, ports={LINK: cast(ResilientPort, port)},
+                  epochs=driver.epochs)
+    driver.run(vehicle, steps(), start=lambda: vehicle.start(ctx))
     return driver.write_summary(driver.summary(
         vehicle.summary(), vehicle="rov", config=config_name,
         input={"file": str(capture), "kind": "rov capture", "notes": reader.all_notes()},

@@ -33,14 +33,10 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, Protocol, TextIO, cast
+from typing import Any, Literal, Protocol, TextIO
 
 from firmware_host.runtime.loop import FakeClock
 from firmware_host.runtime.records import EPOCHS, EpochLog
-
-if TYPE_CHECKING:  # runtime.vehicle imports the MAVLink router: see ReplayDriver.context
-    from drivers.resilient import ResilientPort
-    from firmware_host.runtime.vehicle import Context
 
 Pacing = Literal["period", "data"]
 
@@ -48,7 +44,7 @@ Pacing = Literal["period", "data"]
 class ReplayVehicle(Protocol):
     """What the driver needs of a vehicle (a part of :class:`~firmware_host.runtime.vehicle.
     Vehicle`: a replay opens no port, so ``ports``, ``mavlink`` and ``idle_s`` are not used;
-    the caller says how it starts, see :meth:`ReplayDriver.run`)."""
+    the caller starts it, see :meth:`ReplayDriver.run`)."""
 
     @property
     def pacing(self) -> Pacing: ...
@@ -145,23 +141,14 @@ class ReplayDriver:
         pipeline); None with ``records=False`` (then it builds none)."""
         return self.epochs.stream
 
-    def context(self, ports: Mapping[str, object] | None = None) -> Context:
-        """What a vehicle's ``start`` gets in a replay: the fake clock, the records, the
-        replay's ports (no MAVLink output, no router, no recorder)."""
-        # Imported here: runtime.vehicle imports the MAVLink router (pymavlink), which the
-        # rover's replay, started without a context, never loads.
-        from firmware_host.runtime.vehicle import Context
-
-        # The vehicle uses only what the replay's ports have of a port.
-        return Context(clock=self.clock, epochs=self.epochs,
-                       ports=cast("dict[str, ResilientPort]", dict(ports or {})))
-
     def run(self, vehicle: ReplayVehicle, steps: Iterable[float], *,
             start: Callable[[], None] | None = None) -> None:
-        """``start()`` the vehicle (e.g. ``vehicle.start(driver.context(ports))``), step it at
-        each time of ``steps``, finish it; ``epochs.jsonl`` is closed whatever happens. A stop
-        signal ends the steps (``interrupted_by``); any other error propagates, with nothing
-        finished."""
+        """``start()`` the vehicle (its ``start`` with a
+        :class:`~firmware_host.runtime.vehicle.Context` of the driver's ``clock`` and
+        ``epochs`` and the replay's ports; this module does not build one, so that a rover
+        replay never imports the MAVLink router), step it at each time of ``steps``, finish it;
+        ``epochs.jsonl`` is closed whatever happens. A stop signal ends the steps
+        (``interrupted_by``); any other error propagates, with nothing finished."""
         clock = self.clock
         t0 = time.perf_counter()
         try:
