@@ -3,9 +3,8 @@
 :func:`replay_text` is ``fdi-bridge replay``'s end summary (an aligned table with units, see
 :mod:`firmware_host.commands.tables`), :func:`rov_replay_text` and :func:`insgnss_replay_text`
 those of an ROV and an INS/GNSS recording, :func:`wrote_text` the files a replay wrote;
-:func:`replay_problems` says what makes a replay useless
-or doubtful: no NMEA sentence at all (exit 1); NMEA without a position, a damaged capture, an
-output that lost bytes (warnings).
+:func:`replay_problems` says what makes a replay useless or doubtful: no NMEA sentence at all
+(exit 1); NMEA without a position, a damaged capture, an output that lost bytes (warnings).
 """
 
 from __future__ import annotations
