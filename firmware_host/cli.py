@@ -288,8 +288,8 @@ class _Parser(argparse.ArgumentParser):
         return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> NoReturn:
-        from firmware_host.commands.arg_errors import unknown_option_error
-        message = unknown_option_error(self, self._args, message)
+        arg_errors = importlib.import_module("firmware_host.commands.arg_errors")  # light
+        message = arg_errors.unknown_option_error(self, self._args, message)
         self.exit(2, f"{self.prog}: error: {message} (see: {self.prog} --help)\n")
 
 

@@ -33,7 +33,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Literal, TextIO
 
 from drivers.capture import CaptureReader, is_capture
 from drivers.gps.link import LinkFit, WirePacer
@@ -42,11 +42,17 @@ from drivers.transport import SerialSettings, open_port, read_some
 from fdi.errors import CaptureFormatError, FdiBridgeError, PortClosedError
 from firmware_host.commands.port_checks import check_port_opens, output_urls
 from firmware_host.commands.replay_args import add_arguments as add_arguments
-from firmware_host.commands.summaries import replay_problems, replay_text
+from firmware_host.commands.summaries import (
+    insgnss_replay_text,
+    replay_problems,
+    replay_text,
+    rov_replay_text,
+    wrote_text,
+)
 from firmware_host.rover.outputs import MavlinkGpsSink, NmeaSink
 from firmware_host.rover.pipeline import EpochSink, RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
-from firmware_host.runtime.records import write_json_atomic
+from firmware_host.runtime.replay import ReplayDriver, ReplayPort
 
 log = logging.getLogger("fdi_bridge.replay")
 
@@ -175,6 +181,7 @@ class PtyFeeder(threading.Thread):
         self.clock = clock
         self.sleep = sleep
         self.bytes_written = 0
+        self.t_written = 0.0  # the recorded time of the last chunk written (s)
         self.done = threading.Event()
         self.error: BaseException | None = None
 
@@ -192,6 +199,7 @@ class PtyFeeder(threading.Thread):
                             batch.clear()
                         self.sleep(due - now)
                 batch += data
+                self.t_written = t
                 if len(batch) >= 4096:
                     self.bytes_written += self.pty.write(bytes(batch))
                     batch.clear()
@@ -203,6 +211,98 @@ class PtyFeeder(threading.Thread):
             self.done.set()
 
 
+class RoverFeed:
+    """The rover's pipeline as a vehicle of the replay driver
+    (:class:`~firmware_host.runtime.replay.ReplayDriver`): each step feeds it the bytes its
+    port was given (a read of the pty, or a block of the file), and it finishes by completing
+    the last epoch and closing its outputs. Nothing to start: the pipeline is built with its
+    outputs."""
+
+    name = "rover"
+    pacing: Literal["data"] = "data"
+
+    def __init__(self, pipeline: RoverPipeline, port: ReplayPort) -> None:
+        self.pipeline = pipeline
+        self.port = port
+
+    def step(self, t: float) -> int:
+        return self.pipeline.feed(self.port.read_some(len(self.port.pending)))
+
+    def check(self, now: float) -> None:
+        """Nothing: a replay's input does not go silent."""
+
+    def finish(self) -> None:
+        self.pipeline.finish()
+
+    def summary(self) -> dict[str, Any]:
+        return self.pipeline.summary()
+
+
+def _pty_steps(inp: ReplayInput, port: ReplayPort, facts: dict[str, Any], speed: float,
+               timeout_s: float, clock: Callable[[], float]) -> Iterator[float]:
+    """The input written into a real pty by a :class:`PtyFeeder` and read back on its slave
+    side by the unmodified driver (:func:`drivers.transport.open_port`): each read is one
+    step's bytes (its time: the recorded time of the last chunk written). Ends when the writer
+    is done and every byte it wrote has been read (no read timeout waited out);
+    ``facts["bytes_written"]`` then says how many it wrote."""
+    with PtyPair(baudrate=inp.baudrate) as pty:
+        serial = open_port(SerialSettings(url=pty.url, baudrate=inp.baudrate, timeout_s=0.05))
+        feeder = PtyFeeder(pty, WirePacer(inp.chunks, inp.baudrate) if speed > 0
+                           and inp.kind == "capture" else inp.chunks, speed)  # the line's pace
+        started = clock()
+        feeder.start()
+        read = 0
+        try:
+            while True:
+                try:
+                    data = read_some(serial, 65536)
+                except PortClosedError:
+                    break
+                if data:
+                    read += len(data)
+                    port.load(data)
+                    yield feeder.t_written
+                if feeder.done.is_set() and read >= feeder.bytes_written:
+                    break
+                if clock() - started > timeout_s:
+                    raise FdiBridgeError(f"replay did not finish within {timeout_s:.0f} s")
+        finally:
+            serial.close()
+        feeder.join(timeout=5.0)
+        if feeder.error is not None:
+            raise FdiBridgeError(f"pty writer failed: {feeder.error}") from feeder.error
+    facts["bytes_written"] = feeder.bytes_written
+
+
+def _direct_steps(inp: ReplayInput, port: ReplayPort) -> Iterator[float]:
+    """The input in blocks of up to 64 KiB, as a port read would return them (no pty)."""
+    block = bytearray()
+    t = 0.0
+    for t, data in inp.chunks:
+        block += data
+        if len(block) >= 65536:
+            port.load(bytes(block))
+            block.clear()
+            yield t
+    port.load(bytes(block))
+    yield t
+
+
+def _replay(driver: ReplayDriver, inp: ReplayInput, pipeline: RoverPipeline, *, use_pty: bool,
+            speed: float = 0.0, timeout_s: float = 600.0,
+            clock: Callable[[], float] = time.monotonic) -> dict[str, Any]:
+    """``inp`` through ``pipeline`` on ``driver``; returns the transport facts."""
+    port = ReplayPort()
+    facts: dict[str, Any] = {"bytes_written": inp.total_bytes} if not use_pty else {}
+    steps = (_pty_steps(inp, port, facts, speed, timeout_s, clock) if use_pty
+             else _direct_steps(inp, port))
+    driver.run(RoverFeed(pipeline, port), steps)
+    if driver.interrupted_by:
+        return {"bytes_total": inp.total_bytes, "pty": use_pty}
+    return {"bytes_total": inp.total_bytes, "bytes_written": facts["bytes_written"],
+            "pty": use_pty}
+
+
 def replay_through_pty(
     inp: ReplayInput,
     pipeline: RoverPipeline,
@@ -211,47 +311,15 @@ def replay_through_pty(
     timeout_s: float = 600.0,
     clock: Callable[[], float] = time.monotonic,
 ) -> dict[str, Any]:
-    """Run ``pipeline`` on ``inp`` through a real pty; return transport facts for the summary."""
-    with PtyPair(baudrate=inp.baudrate) as pty:
-        port = open_port(SerialSettings(url=pty.url, baudrate=inp.baudrate, timeout_s=0.05))
-        feeder = PtyFeeder(pty, WirePacer(inp.chunks, inp.baudrate) if speed > 0
-                           and inp.kind == "capture" else inp.chunks, speed)  # the line's pace
-        started = clock()
-        feeder.start()
-        try:
-            while True:
-                try:
-                    data = read_some(port, 65536)
-                except PortClosedError:
-                    break
-                if data:
-                    pipeline.feed(data)
-                # The end of the input is the end of the replay: once the writer is done and
-                # every byte it wrote has been read, no read timeout is waited out.
-                if feeder.done.is_set() and pipeline.stream.bytes_in >= feeder.bytes_written:
-                    break
-                if clock() - started > timeout_s:
-                    raise FdiBridgeError(f"replay did not finish within {timeout_s:.0f} s")
-        finally:
-            port.close()
-        feeder.join(timeout=5.0)
-        if feeder.error is not None:
-            raise FdiBridgeError(f"pty writer failed: {feeder.error}") from feeder.error
-    pipeline.finish()
-    return {"bytes_total": inp.total_bytes, "bytes_written": feeder.bytes_written, "pty": True}
+    """Run ``pipeline`` on ``inp`` through a real pty; return transport facts for the summary
+    (the pipeline writes its records to its own stream; a stop signal propagates)."""
+    return _replay(ReplayDriver(None, partial_on_signal=False), inp, pipeline, use_pty=True,
+                   speed=speed, timeout_s=timeout_s, clock=clock)
 
 
 def replay_direct(inp: ReplayInput, pipeline: RoverPipeline) -> dict[str, Any]:
     """The same without a pty (for benchmarks and tests of the pipeline alone)."""
-    block = bytearray()
-    for _, data in inp.chunks:  # blocks of up to 64 KiB, as a port read would return them
-        block += data
-        if len(block) >= 65536:
-            pipeline.feed(bytes(block))
-            block.clear()
-    pipeline.feed(bytes(block))
-    pipeline.finish()
-    return {"bytes_total": inp.total_bytes, "bytes_written": inp.total_bytes, "pty": False}
+    return _replay(ReplayDriver(None, partial_on_signal=False), inp, pipeline, use_pty=False)
 
 
 def build_sinks(
@@ -280,43 +348,21 @@ def run_replay(
     speed: float = 0.0,
     use_pty: bool = True,
     sinks: list[EpochSink] | None = None,
+    records: bool = True,
 ) -> dict[str, Any]:
-    """Replay ``capture`` into the rover pipeline; write epochs.jsonl and summary.json."""
+    """Replay ``capture`` into the rover pipeline on the replay driver; write epochs.jsonl
+    (``records=False``: none, and the pipeline builds no record) and summary.json."""
     inp = load_input(capture)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with open(out_dir / "epochs.jsonl", "w", encoding="utf-8") as jsonl:
-        # A capture's header says its line's baud rate; a plain log's is unknown (not judged).
-        pipeline = RoverPipeline(cfg.rover, jsonl=jsonl, sinks=sinks,
-                                 baudrate=inp.baudrate if inp.kind == "capture" else 0)
-        t0 = time.perf_counter()
-        partial = ""
-        try:
-            if use_pty:
-                transport = replay_through_pty(inp, pipeline, speed=speed)
-            else:
-                transport = replay_direct(inp, pipeline)
-        except KeyboardInterrupt as err:  # ^C, SIGTERM, SIGHUP: keep what was read (partial)
-            partial = getattr(err, "signame", "SIGINT")
-            pipeline.finish()
-            transport = {"bytes_total": inp.total_bytes, "pty": use_pty}
-        wall = time.perf_counter() - t0
-    summary = pipeline.summary()
-    if partial:
-        summary["partial"] = True
-        summary["interrupted_by"] = partial
-    summary["config"] = cfg.name
-    summary["input"]["file"] = str(capture)
-    summary["input"]["kind"] = inp.kind
-    summary["input"]["notes"] = inp.notes
-    summary["transport"] = transport
-    summary["wall_s"] = round(wall, 4)
-    summary["epochs_per_s"] = round(pipeline.epochs / wall, 1) if wall > 0 else None
-    _write_json(out_dir / "summary.json", summary)
-    return summary
-
-
-def _write_json(path: Path, obj: Any) -> None:
-    write_json_atomic(path, obj)
+    driver = ReplayDriver(out_dir, records=records)
+    # A capture's header says its line's baud rate; a plain log's is unknown (not judged).
+    pipeline = RoverPipeline(cfg.rover, jsonl=driver.jsonl, sinks=sinks,
+                             baudrate=inp.baudrate if inp.kind == "capture" else 0)
+    transport = _replay(driver, inp, pipeline, use_pty=use_pty, speed=speed)
+    return driver.write_summary(driver.summary(
+        pipeline.summary(), config=cfg.name,
+        input={"file": str(capture), "kind": inp.kind, "notes": inp.notes},
+        facts=transport, facts_key="transport", count_records=False, add_to_input=True,
+        throughput=True))
 
 
 class Interrupted(KeyboardInterrupt):
@@ -373,16 +419,22 @@ def print_summary(s: dict[str, Any], stream: TextIO) -> None:
 # --------------------------------------------------------------------------- CLI
 
 
-def _print_rov(args: argparse.Namespace, summary: dict[str, Any]) -> int:
+def _print(args: argparse.Namespace, summary: dict[str, Any], text: str) -> None:
     if args.json:
         print(json.dumps(summary))
+    else:
+        print(text)
+        print(wrote_text(args.out, not args.no_records))
+
+
+def _interrupted(summary: dict[str, Any]) -> int:
+    """A replay a signal stopped: said on stderr; 128 + the signal's number (else 0)."""
+    if not summary.get("partial"):
         return 0
-    r = summary["replay"]
-    print(f"ROV replay: {r['steps']} steps, {summary['epochs']} epochs, commands "
-          f"{'as recorded' if r['tx_match'] else 'DIFFERENT from the recording'} "
-          f"({r['tx_steps_same']} steps same, {r['tx_steps_differ']} differ)")
-    print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
-    return 0
+    name = summary.get("interrupted_by", "SIGINT")
+    print(f"fdi-bridge replay: interrupted ({name}) after {summary['epochs']} epochs: "
+          "summary.json is partial", file=sys.stderr)
+    return 128 + int(getattr(signal.Signals, name, signal.SIGINT))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -394,12 +446,13 @@ def _run(args: argparse.Namespace) -> int:
     if is_capture(args.capture):
         names = {c.name for c in CaptureReader(args.capture).channels}
         if {ROV_TICK, ROV_LINK_RX} <= names or ARDUSUB_TICK in names:
-            return _print_rov(args, importlib.import_module(ROV_REPLAY).run(args))
+            s = importlib.import_module(ROV_REPLAY).run(args)
+            _print(args, s, rov_replay_text(s))
+            return _interrupted(s)
         if set(INS_RX) <= names:
-            ins = importlib.import_module(INS_REPLAY)
-            s = ins.run(args)
-            print(json.dumps(s) if args.json else ins.result_text(s, args.out))
-            return 0
+            s = importlib.import_module(INS_REPLAY).run(args)
+            _print(args, s, insgnss_replay_text(s))
+            return _interrupted(s)
         if ROV_LINK_RX in names:
             raise FdiBridgeError(f"{args.capture}: an ROV recording without step ticks (made "
                                  "before they were recorded): it cannot be replayed step by "
@@ -411,7 +464,8 @@ def _run(args: argparse.Namespace) -> int:
     sinks = build_sinks(cfg, args.nmea_out, args.mavlink)
     try:
         summary = run_replay(cfg, args.capture, args.out, speed=args.speed,
-                             use_pty=not args.no_pty, sinks=sinks)
+                             use_pty=not args.no_pty, sinks=sinks,
+                             records=not args.no_records)
     finally:  # closed by the pipeline's finish, unless a signal came before or after it
         for sink in sinks:
             sink.close()
@@ -419,16 +473,10 @@ def _run(args: argparse.Namespace) -> int:
     warnings += link_warnings(summary)
     for w in warnings:
         print(f"fdi-bridge replay: warning: {w}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        print(replay_text(summary))
-        print(f"wrote {args.out / 'epochs.jsonl'} and {args.out / 'summary.json'}")
-    if summary.get("partial"):
-        name = summary.get("interrupted_by", "SIGINT")
-        print(f"fdi-bridge replay: interrupted ({name}) after {summary['epochs']} epochs: "
-              "summary.json is partial", file=sys.stderr)
-        return 128 + int(getattr(signal.Signals, name, signal.SIGINT))
+    _print(args, summary, replay_text(summary))
+    status = _interrupted(summary)
+    if status:
+        return status
     if useless is not None:
         print(f"fdi-bridge replay: {useless}", file=sys.stderr)
         return 1

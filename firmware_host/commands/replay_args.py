@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="config file or preset name (default: built-in)")
     parser.add_argument("--out", type=output_dir_arg, required=True,
                         help="output directory for epochs.jsonl and summary.json "
-                             "(created if missing)")
+                             "(created if missing; --no-records: summary.json only)")
     parser.add_argument("--speed", type=non_negative_float, default=0.0,
                         help="0 = as fast as possible; 1 = recorded pace; N = N times faster")
     parser.add_argument("--no-pty", action="store_true",
@@ -33,5 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="corrected NMEA to this pyserial URL, or pty:LINKPATH")
     parser.add_argument("--mavlink", type=mavlink_url_arg, default=None,
                         help="GPS_INPUT to this MAVLink URL, e.g. udpout:127.0.0.1:14550")
+    parser.add_argument("--no-records", action="store_true",
+                        help="summary only: no epochs.jsonl, and no per-epoch record built "
+                             "where the vehicle does not need it (the rover); summary.json "
+                             "is the same as with the records")
     parser.add_argument("--json", action="store_true",
                         help="print the summary as one JSON object instead of a table")

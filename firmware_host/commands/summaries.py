@@ -1,13 +1,15 @@
 """Human summaries of results (the ``--json`` forms are the dictionaries themselves).
 
 :func:`replay_text` is ``fdi-bridge replay``'s end summary (an aligned table with units, see
-:mod:`firmware_host.commands.tables`); :func:`replay_problems` says what makes a replay useless
-or doubtful: no NMEA sentence at all (exit 1); NMEA without a position, a damaged capture, an
-output that lost bytes (warnings).
+:mod:`firmware_host.commands.tables`), :func:`rov_replay_text` and :func:`insgnss_replay_text`
+those of an ROV and an INS/GNSS recording, :func:`wrote_text` the files a replay wrote;
+:func:`replay_problems` says what makes a replay useless or doubtful: no NMEA sentence at all
+(exit 1); NMEA without a position, a damaged capture, an output that lost bytes (warnings).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from firmware_host.commands.tables import fields, fmt
@@ -70,3 +72,27 @@ def replay_problems(s: dict[str, Any]) -> tuple[str | None, list[str]]:
         warnings.append(f"{inp.get('file', 'input')}: no position sentences (GGA, RMC, GLL), "
                         f"only {_counts(ignored)}: 0 epochs")
     return None, warnings
+
+
+def rov_replay_text(s: dict[str, Any]) -> str:
+    """An ROV recording's replay (Outland or ArduSub): steps, epochs, commands as recorded."""
+    r = s["replay"]
+    return (f"ROV replay: {r['steps']} steps, {s['epochs']} epochs, commands "
+            f"{'as recorded' if r['tx_match'] else 'DIFFERENT from the recording'} "
+            f"({r['tx_steps_same']} steps same, {r['tx_steps_differ']} differ)")
+
+
+def insgnss_replay_text(s: dict[str, Any]) -> str:
+    """A live INS/GNSS recording's replay: records, bytes, epochs by who passed them."""
+    modes = s.get("ins", {}).get("epochs", {})
+    r = s["replay"]
+    return (f"INS/GNSS replay: {r['records']} records ({r['bytes_imu']} IMU bytes, "
+            f"{r['bytes_gps']} GNSS bytes), {s['epochs']} epochs: "
+            f"{modes.get('ins', 0)} by the INS, {modes.get('rover', 0)} by the rover detector")
+
+
+def wrote_text(out_dir: Path, records: bool = True) -> str:
+    """The line a replay ends with: the files it wrote (``records=False``: ``--no-records``)."""
+    if not records:
+        return f"wrote {out_dir / 'summary.json'} (no epochs.jsonl: --no-records)"
+    return f"wrote {out_dir / 'epochs.jsonl'} and {out_dir / 'summary.json'}"

@@ -80,6 +80,7 @@ from firmware_host.commands.replay import (
     replay_direct,
     replay_through_pty,
 )
+from firmware_host.commands.replay import add_arguments as replay_arguments
 from firmware_host.devtools.insgnss_sim import bench_insgnss_step
 from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.router_bench import FLOOD_GOAL_P99_MS
@@ -518,10 +519,8 @@ GPSDECODE_NO_RECORDS_GOAL = 3.0
 
 def _no_records_option() -> bool:
     """Does ``replay`` take ``--no-records`` (summary only)?"""
-    from firmware_host.commands import replay
-
     parser = argparse.ArgumentParser()
-    replay.add_arguments(parser)
+    replay_arguments(parser)
     return "--no-records" in parser.format_usage()
 
 

@@ -77,7 +77,7 @@ import math
 import threading
 from collections import Counter
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any
 
 from drivers.mavlink import io as mio
 from drivers.mavlink.compass import heading_rate_dps, mag_from_message, tilt_compensated_heading_deg
@@ -88,9 +88,9 @@ from drivers.ratelog import RateLimitedLog
 from fdi.errors import ConfigError, DecodeError
 from fdi.heading_ft import HeadingDecision
 from fdi.lms_fir import wrap180
+from firmware_host.rov.base import RovVehicleBase
 from firmware_host.rov.config import RovConfig
 from firmware_host.rov.control import RovController, epoch_record
-from firmware_host.rov.failsafe import RovFailsafeMonitor
 from firmware_host.runtime.config_rov import ArduSubConfig
 from firmware_host.runtime.mavout import MavlinkOutput, RouterOutput, RouterPort
 from firmware_host.runtime.records import EpochLog
@@ -825,34 +825,28 @@ TX = "ardusub tx"
 """Recorder channel: each command the step sent (``RovAutopilotLoop.tx`` lines)."""
 
 
-class ArduSubRovVehicle:
+class ArduSubRovVehicle(RovVehicleBase):
     """The ROV through an ArduSub autopilot as a vehicle of the runtime (module docstring).
 
     Needs the runner's router (a ``[mavlink]`` table): ATTITUDE (and the raw compass) in,
     MANUAL_CONTROL or RC_CHANNELS_OVERRIDE out. With a flight recorder, each step writes a
     mark on :data:`TICK`, then the frames it took on :data:`RX` and its commands on
     :data:`TX`: ``fdi-bridge replay`` re-runs the steps on exactly those frames
-    (:func:`firmware_host.rov.replay.replay_ardusub`).
+    (:func:`firmware_host.rov.replay.replay_ardusub`). The step marks, records,
+    ``check``/``idle_s``/``finish`` and the summary's frame are
+    :class:`~firmware_host.rov.base.RovVehicleBase`'s.
     """
 
     name = "rov-ardusub"
-    pacing: Literal["period"] = "period"
 
     def __init__(self, cfg: RovConfig, *, ft: bool = True, vehicle_system_id: int | None = None,
                  on_epoch: Callable[[dict[str, Any]], None] | None = None) -> None:
-        self.cfg = cfg
-        self.period_s = cfg.period_s
+        super().__init__(cfg)
         self.ft = ft
         self.vehicle_system_id = (cfg.ardusub.vehicle_system_id if vehicle_system_id is None
                                   else vehicle_system_id)
         self.on_epoch = on_epoch
         self.loop: RovAutopilotLoop | None = None
-        self.monitor = RovFailsafeMonitor(cfg.period_s)
-        self.epochs = EpochLog(None)
-        self.actions: Counter[str] = Counter()
-        self.t0 = 0.0
-        self.steps = 0
-        self._tick: Tap | None = None
         self._rx: Tap | None = None
         self._tx: Tap | None = None
 
@@ -883,7 +877,7 @@ class ArduSubRovVehicle:
                                      on_epoch=self.on_epoch)  # before the router starts
         self.epochs = ctx.epochs
         url = ctx.router.cfg.autopilot.url
-        self._tick = ctx.tap(TICK, "", 0, "tx")
+        self.tick = ctx.tap(TICK, "", 0, "tx")
         self._rx = ctx.tap(RX, url, 0, "rx")
         self._tx = ctx.tap(TX, url, 0, "tx")
         self.t0 = ctx.clock()
@@ -897,8 +891,7 @@ class ArduSubRovVehicle:
 
     def step(self, t: float) -> int:
         assert self.loop is not None
-        if self._tick is not None:
-            self._tick(json.dumps({"k": self.steps, "t": t - self.t0}).encode("ascii"))
+        self._mark(t)
         frames = self.loop.inbox.take()
         if self._rx is not None:
             for raw in frames:
@@ -914,22 +907,12 @@ class ArduSubRovVehicle:
         assert self.loop is not None
         self.steps += 1
         rec = self.loop.step(frames)
-        self.monitor.observe(rec)
-        self.actions[rec["action"]] += 1
+        self._account(rec)
         self.epochs.write(rec)
         return rec
 
-    def check(self, now: float) -> None:
-        """Nothing beyond the step: the dropout rule runs in the controller every period."""
-
-    def idle_s(self) -> float:
-        return 0.0
-
-    def finish(self) -> None:
-        """Nothing pending: every period's record is written in its step."""
-
-    def summary(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"actions": dict(sorted(self.actions.items()))}
+    def _summary_fields(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
         if self.loop is not None:
             lp = self.loop
             if lp.heading is not None and lp.autopilot is not None and lp.pilot is not None:
@@ -956,6 +939,4 @@ class ArduSubRovVehicle:
             out["witness"] = {"warmup_restarts": w.warmup_restarts, "maneuvers": w.maneuvers,
                               "bias_dps": round(w.bias, 4)}
             out["ardusub_states"] = dict(sorted(lp.states.items()))
-        out["failsafe"] = {"episodes": self.monitor.episodes,
-                           "neutral": self.monitor.neutral_episodes}
         return out

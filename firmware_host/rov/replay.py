@@ -6,11 +6,12 @@ step, one record on the ``rov tick`` channel (``{"k": step, "t": seconds since s
 written, so the ``rov link rx`` bytes between tick *k* and tick *k+1* are exactly what step *k*
 read, and the ``rov link tx`` bytes there what it wrote.
 
-:func:`replay_rov` runs the same :class:`~firmware_host.rov.vehicle.OutlandRovVehicle` on a
-:class:`~firmware_host.runtime.loop.FakeClock` set to each recorded step time, with a
-:class:`ReplayPort` that hands each step its recorded bytes and keeps what the vehicle
-writes; it writes ``epochs.jsonl`` (the same bytes as the live run's) and ``summary.json``,
-and compares the written commands with the recorded ``tx`` bytes step by step.
+:func:`replay_rov` runs the same :class:`~firmware_host.rov.vehicle.OutlandRovVehicle` on the
+replay driver (:class:`~firmware_host.runtime.replay.ReplayDriver`: a
+:class:`~firmware_host.runtime.loop.FakeClock` set to each recorded step time, ``epochs.jsonl``
+and ``summary.json``), with a :class:`LinkReplayPort` that hands each step its recorded bytes and
+keeps what the vehicle writes; ``epochs.jsonl`` has the same bytes as the live run's, and the
+written commands are compared with the recorded ``tx`` bytes step by step.
 
 An ArduSub ROV recording (:func:`replay_ardusub`: channels ``ardusub tick``, ``ardusub rx``,
 ``ardusub tx`` of :mod:`firmware_host.rov.ardusub`) is replayed the same way, step by step,
@@ -43,7 +44,7 @@ from firmware_host.rov.config import RovConfig
 from firmware_host.rov.vehicle import LINK, TICK, OutlandRovVehicle, link_settings
 from firmware_host.runtime.config import load_bridge_file, rov_config, vehicle_of
 from firmware_host.runtime.loop import FakeClock
-from firmware_host.runtime.records import EpochLog
+from firmware_host.runtime.replay import ReplayDriver, TxCheck
 from firmware_host.runtime.vehicle import Context
 
 RX = f"{LINK} rx"
@@ -109,8 +110,8 @@ def recorded_steps(reader: CaptureReader, facts: dict[str, int],
         yield step
 
 
-class ReplayPort:
-    """The link's port in a replay: each step reads exactly its recorded bytes.
+class LinkReplayPort:
+    """The Outland link's port in a replay: each step reads exactly its recorded bytes.
 
     ``read`` returns the step's bytes not read yet (at most ``size``); with nothing left it
     returns ``b""`` and, like a port's read timeout, advances the fake clock by ``timeout_s``
@@ -160,58 +161,38 @@ class ReplayPort:
 
 
 def replay_rov(cfg: RovConfig, base_dir: Path, capture: Path, out_dir: Path,
-               *, config_name: str = "") -> dict[str, Any]:
-    """Replay the ROV recording ``capture``; write ``out_dir/epochs.jsonl`` and
-    ``summary.json``; return the summary."""
+               *, config_name: str = "", records: bool = True) -> dict[str, Any]:
+    """Replay the ROV recording ``capture`` on the replay driver; write
+    ``out_dir/epochs.jsonl`` (not with ``records=False``) and ``summary.json``; return the
+    summary."""
     reader = CaptureReader(capture)
     if not is_rov_capture(reader):
         raise CaptureFormatError(f"{capture}: not an ROV recording with step ticks "
                                  f"(channels {TICK!r} and {RX!r})")
-    clock = FakeClock(0.0)
-    port = ReplayPort(clock, link_settings(cfg).timeout_s)
+    driver = ReplayDriver(out_dir, records=records)
+    port = LinkReplayPort(driver.clock, link_settings(cfg).timeout_s)
     vehicle = OutlandRovVehicle(cfg, base_dir)
-    epochs = EpochLog(out_dir)
-    # The vehicle uses only read/write/in_waiting/reset_input_buffer of its port.
-    ctx = Context(clock=clock, ports={LINK: cast(ResilientPort, port)}, epochs=epochs)
     facts: dict[str, int] = {}
-    steps = tx_same = tx_differ = leftover = 0
-    first_differ: int | None = None
-    try:
-        vehicle.start(ctx)
+    tx = TxCheck()
+    leftover = 0
+
+    def steps() -> Iterator[float]:
+        nonlocal leftover
         for st in recorded_steps(reader, facts):
-            clock.now = st.t
             port.load(st.rx)
-            vehicle.step(st.t)
-            steps += 1
+            yield st.t
             leftover += port.leftover()
-            if bytes(port.written) == bytes(st.tx):
-                tx_same += 1
-            else:
-                tx_differ += 1
-                if first_differ is None:
-                    first_differ = st.k
-        vehicle.finish()
-    finally:
-        epochs.close()
-    notes = reader.all_notes()
-    summary = dict(vehicle.summary())
-    summary["vehicle"] = "rov"
-    summary["config"] = config_name
-    summary["epochs"] = epochs.lines
-    summary["input"] = {"file": str(capture), "kind": "rov capture", "notes": notes}
-    summary["replay"] = {
-        "steps": steps,
-        "bytes_rx": port.bytes_rx,
-        "bytes_tx": port.bytes_tx,
-        "rx_unread": leftover,
-        "tx_steps_same": tx_same,
-        "tx_steps_differ": tx_differ,
-        "tx_first_differ_step": first_differ,
-        "tx_match": tx_differ == 0,
-        **facts,
-    }
-    epochs.write_summary(summary)
-    return summary
+            tx.compare(st.k, bytes(port.written), bytes(st.tx))
+
+    # The vehicle uses only read/write/in_waiting/reset_input_buffer of its port.
+    ctx = Context(clock=driver.clock, ports={LINK: cast(ResilientPort, port)},
+                  epochs=driver.epochs)
+    driver.run(vehicle, steps(), start=lambda: vehicle.start(ctx))
+    return driver.write_summary(driver.summary(
+        vehicle.summary(), vehicle="rov", config=config_name,
+        input={"file": str(capture), "kind": "rov capture", "notes": reader.all_notes()},
+        facts={"steps": driver.steps, "bytes_rx": port.bytes_rx, "bytes_tx": port.bytes_tx,
+               "rx_unread": leftover, **tx.facts(), **facts}))
 
 
 def is_ardusub_capture(reader: CaptureReader) -> bool:
@@ -220,12 +201,13 @@ def is_ardusub_capture(reader: CaptureReader) -> bool:
 
 
 def replay_ardusub(cfg: RovConfig, capture: Path, out_dir: Path, *,
-                   config_name: str = "") -> dict[str, Any]:
-    """Replay the ArduSub ROV recording ``capture``: each recorded step's frames (the
-    ``ardusub rx`` records after its tick, as the live step took them from the router) through
-    the same :class:`~firmware_host.rov.ardusub.ArduSubRovVehicle`, with no router; write
-    ``out_dir/epochs.jsonl`` (the live run's bytes) and ``summary.json``, and compare each
-    step's commands with the recorded ``ardusub tx`` lines."""
+                   config_name: str = "", records: bool = True) -> dict[str, Any]:
+    """Replay the ArduSub ROV recording ``capture`` on the replay driver: each recorded step's
+    frames (the ``ardusub rx`` records after its tick, as the live step took them from the
+    router) into the inbox of the same :class:`~firmware_host.rov.ardusub.ArduSubRovVehicle`,
+    with no router; write ``out_dir/epochs.jsonl`` (the live run's bytes; not with
+    ``records=False``) and ``summary.json``, and compare each step's commands with the
+    recorded ``ardusub tx`` lines."""
     reader = CaptureReader(capture)
     if not is_ardusub_capture(reader):
         raise CaptureFormatError(f"{capture}: not an ArduSub ROV recording (no "
@@ -233,44 +215,29 @@ def replay_ardusub(cfg: RovConfig, capture: Path, out_dir: Path, *,
     if cfg.heading_source != "mavlink":
         raise FdiBridgeError(f"{capture} is an ArduSub ROV recording: its config has "
                              '[rov] heading_source = "mavlink"')
+    driver = ReplayDriver(out_dir, records=records)
     vehicle = ArduSubRovVehicle(cfg)
-    epochs = EpochLog(out_dir)
     facts: dict[str, int] = {}
-    steps = tx_same = tx_differ = frames = 0
-    first_differ: int | None = None
-    try:
-        vehicle.start_replay(epochs)
-        assert vehicle.loop is not None
+    tx = TxCheck()
+    frames = 0
+
+    def steps() -> Iterator[float]:
+        nonlocal frames
+        loop = vehicle.loop
+        assert loop is not None  # started by the driver before the first step
         for st in recorded_steps(reader, facts, (ARDUSUB_TICK, ARDUSUB_RX, ARDUSUB_TX)):
-            vehicle.step_frames(st.rx)
-            steps += 1
+            for raw in st.rx:  # what the router's thread had queued for this step
+                loop.inbox.push(raw)
             frames += len(st.rx)
-            if b"".join(vehicle.loop.tx) == bytes(st.tx):
-                tx_same += 1
-            else:
-                tx_differ += 1
-                if first_differ is None:
-                    first_differ = st.k
-        vehicle.finish()
-    finally:
-        epochs.close()
-    notes = reader.all_notes()
-    summary = dict(vehicle.summary())
-    summary["vehicle"] = "rov-ardusub"
-    summary["config"] = config_name
-    summary["epochs"] = epochs.lines
-    summary["input"] = {"file": str(capture), "kind": "rov-ardusub capture", "notes": notes}
-    summary["replay"] = {
-        "steps": steps,
-        "frames": frames,
-        "tx_steps_same": tx_same,
-        "tx_steps_differ": tx_differ,
-        "tx_first_differ_step": first_differ,
-        "tx_match": tx_differ == 0,
-        **facts,
-    }
-    epochs.write_summary(summary)
-    return summary
+            yield st.t
+            tx.compare(st.k, b"".join(loop.tx), bytes(st.tx))
+
+    driver.run(vehicle, steps(), start=lambda: vehicle.start_replay(driver.epochs))
+    return driver.write_summary(driver.summary(
+        vehicle.summary(), vehicle="rov-ardusub", config=config_name,
+        input={"file": str(capture), "kind": "rov-ardusub capture",
+               "notes": reader.all_notes()},
+        facts={"steps": driver.steps, "frames": frames, **tx.facts(), **facts}))
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
@@ -285,6 +252,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise FdiBridgeError(f"{args.capture} is an ROV recording, but {args.config} has no "
                              "[rov] table")
     rcfg, base = rov_config(bf)
+    records = not getattr(args, "no_records", False)
     if is_ardusub_capture(CaptureReader(args.capture)):
-        return replay_ardusub(rcfg, args.capture, args.out, config_name=str(args.config))
-    return replay_rov(rcfg, base, args.capture, args.out, config_name=str(args.config))
+        return replay_ardusub(rcfg, args.capture, args.out, config_name=str(args.config),
+                              records=records)
+    return replay_rov(rcfg, base, args.capture, args.out, config_name=str(args.config),
+                      records=records)

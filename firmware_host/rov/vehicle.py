@@ -5,7 +5,7 @@ newest telemetry from the link (RS-232 streaming, or an RS-485 poll by address),
 controller (:class:`~firmware_host.rov.control.RovController`: detector, substitution, PID,
 the dropout rule), sends the thruster command and writes one record to ``epochs.jsonl``.
 Failsafe: the controller holds the last command for ``dropout_hold_s`` without telemetry,
-then neutral thrust; :class:`~firmware_host.runtime.failsafe.RovFailsafeMonitor` counts the
+then neutral thrust; :class:`~firmware_host.rov.failsafe.RovFailsafeMonitor` counts the
 episodes and says when telemetry is back. With a ``[mavlink]`` router, the operator gets the
 corrected heading, the statistics and the events
 (:class:`~firmware_host.rov.ardusub.RovOperatorSink`).
@@ -18,22 +18,19 @@ bytes (:mod:`firmware_host.rov.replay`).
 
 from __future__ import annotations
 
-import json
-from collections import Counter
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from drivers.outland.framecodec import load_protocol
 from drivers.outland.link import OutlandLink, Telemetry
 from drivers.transport import SerialSettings
 from firmware_host.rov.ardusub import RovOperatorSink
+from firmware_host.rov.base import RovVehicleBase
 from firmware_host.rov.config import RovConfig, protocol_path
 from firmware_host.rov.control import RovController, epoch_record
-from firmware_host.rov.failsafe import RovFailsafeMonitor
-from firmware_host.runtime.records import EpochLog
-from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec, Tap
+from firmware_host.runtime.vehicle import Context, MavlinkSpec, PortSpec
 
 LINK = "rov link"
 TICK = "rov tick"  # the recorder channel of the step marks (docs/capture-format.md)
@@ -68,28 +65,22 @@ def link_settings(cfg: RovConfig) -> SerialSettings:
     return replace(s, timeout_s=0.0)
 
 
-class OutlandRovVehicle:
-    """See the module docstring. ``base_dir`` resolves a relative protocol path."""
+class OutlandRovVehicle(RovVehicleBase):
+    """See the module docstring. ``base_dir`` resolves a relative protocol path; the step
+    marks, records, ``check``/``idle_s``/``finish`` and the summary's frame are
+    :class:`~firmware_host.rov.base.RovVehicleBase`'s."""
 
     name = "rov"
-    pacing: Literal["period"] = "period"
 
     def __init__(self, cfg: RovConfig, base_dir: Path, *, ft: bool = True,
                  on_epoch: EpochCallback | None = None) -> None:
-        self.cfg = cfg
-        self.period_s = cfg.period_s
+        super().__init__(cfg)
         self.proto = load_protocol(protocol_path(cfg, base_dir))  # a bad file fails here
         self.ft = ft
         self.on_epoch = on_epoch
         self.link: OutlandLink | None = None
         self.ctl = RovController(cfg, ft=ft)
-        self.monitor = RovFailsafeMonitor(cfg.period_s)
         self.operator: RovOperatorSink | None = None
-        self.epochs = EpochLog(None)
-        self.actions: Counter[str] = Counter()
-        self.t0 = 0.0
-        self.tick: Tap | None = None
-        self.steps = 0
 
     def ports(self) -> list[PortSpec]:
         return [PortSpec(LINK, link_settings(self.cfg), self.cfg.link.reconnect_max_s,
@@ -122,13 +113,11 @@ class OutlandRovVehicle:
 
     def step(self, t: float) -> int:
         assert self.link is not None
-        if self.tick is not None:  # before any read: the step's bytes follow its mark
-            self.tick(json.dumps({"k": self.steps, "t": t - self.t0}).encode("ascii"))
+        self._mark(t)  # before any read: the step's bytes follow its mark
         self.steps += 1
         _, rec = link_step(self.link, self.ctl, self.cfg.period_s)
         rec["t"] = round(t - self.t0, 3)
-        self.monitor.observe(rec)
-        self.actions[rec["action"]] += 1
+        self._account(rec)
         if self.operator is not None:
             self.operator(rec)
         if self.on_epoch is not None:
@@ -136,20 +125,7 @@ class OutlandRovVehicle:
         self.epochs.write(rec)
         return 1
 
-    def check(self, now: float) -> None:
-        """Nothing beyond the step: the dropout rule runs in the controller every period."""
-
-    def idle_s(self) -> float:
-        return 0.0
-
-    def finish(self) -> None:
-        """Nothing pending: every period's record is written in its step."""
-
-    def summary(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"actions": dict(sorted(self.actions.items()))}
-        if self.link is not None:
-            out["counts"] = dict(self.link.counts)
-            out["rejects"] = dict(self.link.rejects)
-        out["failsafe"] = {"episodes": self.monitor.episodes,
-                           "neutral": self.monitor.neutral_episodes}
-        return out
+    def _summary_fields(self) -> dict[str, Any]:
+        if self.link is None:
+            return {}
+        return {"counts": dict(self.link.counts), "rejects": dict(self.link.rejects)}
