@@ -225,3 +225,52 @@ def man_page(date: dt.date | None = None) -> str:
         out += [".TP", f"\\fB{code}\\fR", _roff(text)]
     out += [".SH SEE ALSO", "The project's README.md and docs/ (architecture, evaluation)."]
     return "\n".join(out) + "\n"
+
+
+# --------------------------------------------------------------------------- markdown reference
+
+
+def _md(text: str) -> str:
+    return " ".join(text.split()).replace("|", "\\|")
+
+
+def cli_reference() -> str:
+    """``docs/reference/cli.md``: every command with its usage, arguments (defaults as
+    ``--help`` shows them) and example, from the parser (``fdi-bridge docs``)."""
+    docs = commands()
+    top, rest = docs[0], docs[1:]
+    out = [
+        "# Command-line reference",
+        "",
+        "Generated from the parser by `fdi-bridge docs --out docs/reference`; do not edit (a "
+        "test fails when this page is not what the generator writes). `fdi-bridge COMMAND -h` "
+        "prints the same; `fdi-bridge man` writes it as a man page.",
+        "",
+        _md(top.description),
+        "",
+        "Options of every command (before or after it): "
+        + ", ".join(f"`{', '.join(o.flags)}`" for o in top.options) + ".",
+        "",
+        "| command | what it does |",
+        "|---|---|",
+    ]
+    out += [f"| [`{d.path}`](#fdi-bridge-{d.path.replace(' ', '-')}) | {_md(d.description)} |"
+            for d in rest]
+    out.append("")
+    for d in rest:
+        out += [f"## fdi-bridge {d.path}", "", _md(d.description), "", "```", d.usage, "```", ""]
+        if d.subcommands and not d.options and not d.positionals:
+            out += ["Kinds: " + ", ".join(f"`{s}`" for s in d.subcommands) + ".", ""]
+        rows = [o for o in d.positionals + d.options if not set(o.flags) & COMMON]
+        if rows:
+            out += ["| argument | value | description |", "|---|---|---|"]
+            for o in rows:
+                name = ", ".join(o.flags) if o.flags else (o.metavar or "")
+                value = "{" + ",".join(o.choices) + "}" if o.choices else (
+                    o.metavar if o.flags and o.metavar else "")
+                out.append(f"| `{name}` | {f'`{value}`' if value else ''} | {_md(o.help)} |")
+            out.append("")
+        example = d.epilog.split("example:\n", 1)
+        if len(example) == 2:
+            out += ["Example:", "", "```", example[1].strip(), "```", ""]
+    return "\n".join(out).rstrip("\n") + "\n"
