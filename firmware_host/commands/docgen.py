@@ -258,7 +258,11 @@ def cli_reference() -> str:
             for d in rest]
     out.append("")
     for d in rest:
-        out += [f"## fdi-bridge {d.path}", "", _md(d.description), "", "```", d.usage, "```", ""]
+        example = d.epilog.split("example:\n", 1)
+        how = f"Usage: `{d.usage.removeprefix('usage: ')}`."
+        if len(example) == 2:
+            how += f" Example: `{' '.join(example[1].split())}`."
+        out += [f"## fdi-bridge {d.path}", "", _md(d.description), "", how, ""]
         if d.subcommands and not d.options and not d.positionals:
             out += ["Kinds: " + ", ".join(f"`{s}`" for s in d.subcommands) + ".", ""]
         rows = [o for o in d.positionals + d.options if not set(o.flags) & COMMON]
@@ -270,7 +274,4 @@ def cli_reference() -> str:
                     o.metavar if o.flags and o.metavar else "")
                 out.append(f"| `{name}` | {f'`{value}`' if value else ''} | {_md(o.help)} |")
             out.append("")
-        example = d.epilog.split("example:\n", 1)
-        if len(example) == 2:
-            out += ["Example:", "", "```", example[1].strip(), "```", ""]
     return "\n".join(out).rstrip("\n") + "\n"

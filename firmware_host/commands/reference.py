@@ -78,7 +78,7 @@ def _is_table(tp: Any) -> bool:
 
 
 def _type_name(tp: Any) -> str:
-    tp, optional = _strip_optional(tp)
+    tp, _ = _strip_optional(tp)
     item = _item(tp)
     if item is not None:
         return f"list of {_type_name(item)}"
@@ -105,9 +105,9 @@ def _toml(value: Any) -> str:
         given = []
         for f in toml_fields(cls).values():
             v = getattr(value, f.name)
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                given.append(f"{f.name} = {_toml(v)}")
-            elif f.default is not dataclasses.MISSING and v != f.default:
+            required = (f.default is dataclasses.MISSING
+                        and f.default_factory is dataclasses.MISSING)
+            if required or (f.default is not dataclasses.MISSING and v != f.default):
                 given.append(f"{f.name} = {_toml(v)}")
         return "{" + ", ".join(given) + "}"
     return repr(value)
@@ -265,8 +265,8 @@ def config_reference() -> str:
         "A file holds any of the sections below; a key it leaves out takes the default shown. "
         "`fdi-bridge config check FILE` validates a file and `fdi-bridge config show FILE` prints "
         "it with every default filled in. A range `[a, b]` includes its ends, `(a, b)` excludes "
-        f"them; a float without an upper (lower) bound of its own is at most {MAX_MAGNITUDE:g} "
-        f"(at least {-MAX_MAGNITUDE:g}). `0 (off) or [...]`: the value 0 turns the feature off. "
+        f"them; a float without an upper (lower) bound of its own is at most "
+        f"{_number(MAX_MAGNITUDE)} (at least {_number(-MAX_MAGNITUDE)}). `0 (off) or [...]`: the value 0 turns the feature off. "
         "Units: `m`, `s`, `Hz`, `deg`, `deg/s`, `m/s`, `%` (percent), `-` (dimensionless).",
         "",
         "Sections: " + ", ".join(f"[`[{t.path}]`](#{_anchor(t.path)})"

@@ -191,6 +191,8 @@ class RoverOutputs:
 
 @dataclass(frozen=True)
 class RoverConfig:
+    """The rover: the GNSS receiver's port, the detector, the outputs (the ``[rover]`` table)."""
+
     port: SerialSettings = field(
         default_factory=lambda: SerialSettings(url="/dev/ttyUSB0", baudrate=9600)
     )
