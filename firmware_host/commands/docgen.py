@@ -13,6 +13,7 @@ import copy
 import datetime as dt
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from firmware_host import cli
 
@@ -230,8 +231,14 @@ def man_page(date: dt.date | None = None) -> str:
 # --------------------------------------------------------------------------- markdown reference
 
 
+_OUTSIDE = str(Path(__file__).resolve().parents[3]) + "/"  # the checkout's parent directory
+
+
 def _md(text: str) -> str:
-    return " ".join(text.split()).replace("|", "\\|")
+    """One line for a table cell; a default under the checkout's parent directory (the shared
+    corpus) as the path relative to the project (``../shared/corpus``), the same on every
+    machine."""
+    return " ".join(text.split()).replace("|", "\\|").replace(_OUTSIDE, "../")
 
 
 def cli_reference() -> str:
