@@ -112,7 +112,7 @@ class MavlinkConfig:
     param_file: str = field(default="", metadata={
         "range": "a file path, or \"\"",
         "doc": "where parameters set by a ground station are kept across starts (TOML); empty: "
-               "not kept"})
+               "they last until the bridge stops"})
     signing_key_file: str = field(default="", metadata={
         "range": "a file path, or \"\"",
         "doc": "the MAVLink 2 signing key; needed when a GCS link has signing = true"})
