@@ -266,8 +266,10 @@ def config_reference() -> str:
         "`fdi-bridge config check FILE` validates a file and `fdi-bridge config show FILE` prints "
         "it with every default filled in. A range `[a, b]` includes its ends, `(a, b)` excludes "
         f"them; a float without an upper (lower) bound of its own is at most "
-        f"{_number(MAX_MAGNITUDE)} (at least {_number(-MAX_MAGNITUDE)}). `0 (off) or [...]`: the value 0 turns the feature off. "
-        "Units: `m`, `s`, `Hz`, `deg`, `deg/s`, `m/s`, `%` (percent), `-` (dimensionless).",
+        f"{_number(MAX_MAGNITUDE)} (at least {_number(-MAX_MAGNITUDE)}). `0 (off) or [...]`: "
+        "the value 0 turns the feature off. Units: `m`, `s`, `Hz`, `deg`, `deg/s`, `m/s`, `%` "
+        "(percent of full command or thrust), `σ` (standard deviations of the quantity tested), "
+        "`epochs` and `samples` (counts), `-` (dimensionless).",
         "",
         "Sections: " + ", ".join(f"[`[{t.path}]`](#{_anchor(t.path)})"
                                  for t in tables() if t.path and "." not in t.path),

@@ -136,7 +136,6 @@ class ReferencePoint:
         "doc": "latitude of the local frame's origin (WGS-84)"})
     lon_deg: float = field(default=0.0, metadata={
         "ge": -180.0, "le": 180.0, "unit": "deg", "doc": "longitude of the origin"})
-    # ellipsoidal
     alt_m: float = field(default=0.0, metadata={
         "ge": -12000.0, "le": 100000.0, "unit": "m", "doc": "ellipsoidal height of the origin"})
 
@@ -154,7 +153,6 @@ class RoverOutputs:
     mavlink_url: str = field(default="", metadata={
         "url": "mavlink_out", "doc": "where GPS_INPUT goes (e.g. udpout:127.0.0.1:14550, or a "
                                      "serial device, reopened if lost); empty: none"})
-    # serial mavlink_url only
     mavlink_baudrate: int = field(default=57600, metadata={
         "gt": 0, "unit": "baud", "doc": "line speed of a serial mavlink_url"})
     mavlink_system: int = field(default=1, metadata={
@@ -166,7 +164,6 @@ class RoverOutputs:
         "doc": "the autopilot's system id (the mode request on an alarm)"})
     hold_on_alarm: bool = field(default=True, metadata={
         "doc": "on an alarm, ask the autopilot for alarm_mode"})
-    # rover, boat, sub, copter, plane (ArduPilot's mode tables)
     vehicle: str = field(default="rover", metadata={
         "choices": ["rover", "boat", "sub", "copter", "plane"],
         "doc": "ArduPilot's vehicle, whose mode table names alarm_mode"})
@@ -205,7 +202,6 @@ class RoverConfig:
     silence_s: float = field(default=2.0, metadata={
         "ge": 0.1, "le": 3600.0, "unit": "s",
         "doc": "no valid fix this long: the failsafe (a no-fix GPS_INPUT and a STATUSTEXT)"})
-    # reopen cap
     reconnect_max_s: float = field(default=5.0, metadata={
         "ge": 0.1, "le": 3600.0, "unit": "s", "doc": "longest wait between reopens of a lost port"})
 

@@ -47,8 +47,6 @@ class EndpointConfig:
     block_in: tuple[str, ...] = field(default=(), metadata={
         "range": "message names of the dialect",
         "doc": "messages from this endpoint that are dropped"})
-    # empty: everything not in block_out
-    # empty: everything not in block_out
     allow_out: tuple[str, ...] = field(default=(), metadata={
         "range": "message names of the dialect",
         "doc": "only these messages are sent to it (empty: everything not in block_out)"})

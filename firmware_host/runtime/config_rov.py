@@ -37,7 +37,6 @@ class LinkConfig:
     reply_timeout_s: float = field(default=0.05, metadata={
         "ge": 0.001, "lt": 1.0, "unit": "s",
         "doc": "wait this long for the vehicle's telemetry reply to a poll"})
-    # reopen cap
     reconnect_max_s: float = field(default=5.0, metadata={
         "ge": 0.1, "le": 3600.0, "unit": "s", "doc": "longest wait between reopens of a lost port"})
 
