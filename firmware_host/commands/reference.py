@@ -146,7 +146,7 @@ def _range(tp: Any, meta: typing.Mapping[str, Any]) -> str:
     item = _item(tp)
     if item is not None:
         inner = _range(item, meta)
-        return f"each {inner}" if inner else ""
+        return f"each {inner}" if inner and _numeric(item) else inner
     if get_origin(tp) is Literal:
         return ", ".join(_toml(a) for a in get_args(tp))
     if tp is bool:

@@ -36,7 +36,7 @@ class EndpointConfig:
     # Unsigned messages a signing link still passes (they command nothing; they teach no route).
     allow_unsigned: tuple[str, ...] = field(default=DEFAULT_ALLOW_UNSIGNED, metadata={
         "doc": "signing links: message names passed unsigned (never teach a route)",
-        "range": "message names of the dialect"})
+        "range": "MAVLink message names"})
     peer_timeout_s: float = field(default=0.0, metadata={
         "ge": 0.0, "le": 86400.0, "doc": "udpin: forget a peer silent this long; 0 never",
         "unit": "s"})
@@ -45,13 +45,13 @@ class EndpointConfig:
     )
     # Per-endpoint message filters (names): what it may send us, what we send it.
     block_in: tuple[str, ...] = field(default=(), metadata={
-        "range": "message names of the dialect",
+        "range": "MAVLink message names",
         "doc": "messages from this endpoint that are dropped"})
     allow_out: tuple[str, ...] = field(default=(), metadata={
-        "range": "message names of the dialect",
+        "range": "MAVLink message names",
         "doc": "only these messages are sent to it (empty: everything not in block_out)"})
     block_out: tuple[str, ...] = field(default=(), metadata={
-        "range": "message names of the dialect", "doc": "messages never sent to it"})
+        "range": "MAVLink message names", "doc": "messages never sent to it"})
     max_out_pps: float = field(default=0.0, metadata={
         "ge": 0.0, "le": 1e6, "doc": "packets/s towards this endpoint; 0 = no cap",
         "unit": "packets/s"})
