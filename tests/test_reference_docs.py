@@ -7,13 +7,15 @@ no page of ``docs/`` is over 600 lines or reads as a log of passes."""
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Literal, get_type_hints
 
 import pytest
 
 from firmware_host.cli import main
-from firmware_host.commands import reference
-from firmware_host.commands.reference import REGENERATE, missing, pages, tables
+from firmware_host.commands.docgen import COMMON, commands
+from firmware_host.commands.reference import REGENERATE, lacks, missing, pages, tables
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -46,20 +48,20 @@ def test_the_walk_reaches_every_section_and_detector() -> None:
 
 
 def test_a_key_without_metadata_is_reported() -> None:
-    """The check itself: a key stripped of its doc, unit and bounds is named."""
-    from dataclasses import dataclass, field
+    """The check itself: a key stripped of its doc, unit and bounds is named for each."""
 
     @dataclass(frozen=True)
     class Bare:
         gain: float = 1.0
+        count: int | None = field(default=None, metadata={"doc": "a count"})
+        mode: Literal["a", "b"] = "a"
+        label: str = field(default="", metadata={"doc": "a label"})
         told: float = field(default=1.0, metadata={"doc": "a gain", "unit": "-", "ge": 0.0})
 
-    rows = []
-    for name, f in Bare.__dataclass_fields__.items():
-        meta = f.metadata
-        rows.append((name, bool(meta.get("doc")), bool(meta.get("unit")),
-                     bool(reference._range(float, meta))))
-    assert rows == [("gain", False, False, False), ("told", True, True, True)]
+    hints = get_type_hints(Bare)
+    found = {f.name: lacks(hints[f.name], f.metadata) for f in fields(Bare)}
+    assert found == {"gain": ["doc", "unit", "range"], "count": ["unit", "range"],
+                     "mode": ["doc"], "label": ["range"], "told": []}
 
 
 @pytest.mark.parametrize("name", ["config.md", "cli.md"])
@@ -76,6 +78,16 @@ def test_config_reference_lists_every_key_with_its_default() -> None:
     for table in tables():
         for key in table.keys:
             assert f"| `{key.name}` |" in text
+
+
+def test_cli_reference_has_every_command_and_option() -> None:
+    text = pages()["cli.md"]
+    for d in commands()[1:]:
+        assert f"\n## fdi-bridge {d.path}\n" in text, d.path
+        for o in d.positionals + d.options:
+            if o.flags and not set(o.flags) & COMMON:
+                assert f"| `{', '.join(o.flags)}` |" in text, (d.path, o.flags)
+    assert "/work/" not in text and str(ROOT.parent) not in text  # the same on every machine
 
 
 def test_docs_command_checks_and_writes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -242,16 +242,18 @@ def _numeric(tp: Any) -> bool:
     return _numeric(item) if item is not None else tp in (int, float)
 
 
+def lacks(tp: Any, meta: typing.Mapping[str, Any]) -> list[str]:
+    """What a key of type ``tp`` with this metadata lacks of doc, unit (numbers) and range."""
+    tp, _ = _strip_optional(tp)
+    return [w for w, ok in (("doc", bool(meta.get("doc"))),
+                            ("unit", not _numeric(tp) or bool(meta.get("unit"))),
+                            ("range", bool(_range(tp, meta)))) if not ok]
+
+
 def missing() -> list[str]:
-    """Every key without a doc, a unit (a number) or a range, as ``key: what``."""
-    out = []
-    for key, tp, meta in _leaf_fields():
-        lacks = [w for w, ok in (("doc", bool(meta.get("doc"))),
-                                 ("unit", not _numeric(tp) or bool(meta.get("unit"))),
-                                 ("range", bool(_range(tp, meta)))) if not ok]
-        if lacks:
-            out.append(f"{key}: no {', no '.join(lacks)}")
-    return out
+    """Every key without a doc, a unit (a number) or a range, as ``key: no doc, no unit``."""
+    return [f"{key}: no {', no '.join(what)}" for key, tp, meta in _leaf_fields()
+            if (what := lacks(tp, meta))]
 
 
 def config_reference() -> str:
@@ -335,4 +337,5 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["Key", "Table", "config_reference", "missing", "number_range", "pages", "tables"]
+__all__ = ["Key", "Table", "config_reference", "lacks", "missing", "number_range", "pages",
+           "tables"]
