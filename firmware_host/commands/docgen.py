@@ -224,7 +224,8 @@ def man_page(date: dt.date | None = None) -> str:
     out.append(".SH EXIT STATUS")
     for code, text in EXIT_STATUS:
         out += [".TP", f"\\fB{code}\\fR", _roff(text)]
-    out += [".SH SEE ALSO", "The project's README.md and docs/ (architecture, evaluation)."]
+    out += [".SH SEE ALSO", "The project's README.md and docs/ (architecture, evaluation; "
+            "reference/config.md: every configuration key, from \\fBfdi\\-bridge docs\\fR)."]
     return "\n".join(out) + "\n"
 
 
