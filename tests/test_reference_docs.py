@@ -75,6 +75,8 @@ def test_committed_reference_is_current(name: str) -> None:
 def test_config_reference_lists_every_key_with_its_default() -> None:
     text = pages()["config.md"]
     assert "| `alpha` | float | `0.05` | - | [1e-15, 0.5] |" in text
+    assert "| `gate_sigmas` | float | `6.0` | σ | 0 or [1, 100] |" in text  # its documented off
+    assert '| `strategy` | string | `"grey"` |  | "grey", "three_zone", "combined" |' in text
     for table in tables():
         for key in table.keys:
             assert f"| `{key.name}` |" in text

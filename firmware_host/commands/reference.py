@@ -135,7 +135,7 @@ def number_range(meta: typing.Mapping[str, Any], integer: bool) -> str:
         hi = "inf)" if integer else _number(MAX_MAGNITUDE) + "]"
     text = f"{lo}, {hi}"
     if "off" in meta:
-        text = f"{_number(meta['off'])} (off) or {text}"
+        text = f"{_number(meta['off'])} or {text}"
     if "ne" in meta:
         text += f", not {_number(meta['ne'])}"
     return text
@@ -268,8 +268,8 @@ def config_reference() -> str:
         "`fdi-bridge config check FILE` validates a file and `fdi-bridge config show FILE` prints "
         "it with every default filled in. A range `[a, b]` includes its ends, `(a, b)` excludes "
         f"them; a float without an upper (lower) bound of its own is at most "
-        f"{_number(MAX_MAGNITUDE)} (at least {_number(-MAX_MAGNITUDE)}). `0 (off) or [...]`: "
-        "the value 0 turns the feature off. Units: `m`, `s`, `Hz`, `deg`, `deg/s`, `m/s`, `%` "
+        f"{_number(MAX_MAGNITUDE)} (at least {_number(-MAX_MAGNITUDE)}). `0 or [a, b]`: 0 is "
+        "accepted beside the range, meaning what the description says (mostly: off). Units: `m`, `s`, `Hz`, `deg`, `deg/s`, `m/s`, `%` "
         "(percent of full command or thrust), `σ` (standard deviations of the quantity tested), "
         "`epochs` and `samples` (counts), `-` (dimensionless).",
         "",
