@@ -269,7 +269,8 @@ def config_reference() -> str:
         "it with every default filled in. A range `[a, b]` includes its ends, `(a, b)` excludes "
         f"them; a float without an upper (lower) bound of its own is at most "
         f"{_number(MAX_MAGNITUDE)} (at least {_number(-MAX_MAGNITUDE)}). `0 or [a, b]`: 0 is "
-        "accepted beside the range, meaning what the description says (mostly: off). Units: `m`, `s`, `Hz`, `deg`, `deg/s`, `m/s`, `%` "
+        "accepted beside the range, meaning what the description says (mostly: off). Units: "
+        "`m`, `s`, `Hz`, `deg`, `deg/s`, `m/s`, `%` "
         "(percent of full command or thrust), `σ` (standard deviations of the quantity tested), "
         "`epochs` and `samples` (counts), `-` (dimensionless).",
         "",
