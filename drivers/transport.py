@@ -53,24 +53,36 @@ class Port(Protocol):
 class RS485Config:
     """pyserial's RS-485 driver-enable settings, for adapters that need the kernel's help."""
 
-    rts_level_for_tx: bool = True
-    rts_level_for_rx: bool = False
-    loopback: bool = False
-    delay_before_tx: float | None = None
-    delay_before_rx: float | None = None
+    rts_level_for_tx: bool = field(default=True, metadata={
+        "doc": "RTS level while sending (pyserial RS485Settings)"})
+    rts_level_for_rx: bool = field(default=False, metadata={"doc": "RTS level while receiving"})
+    loopback: bool = field(default=False, metadata={
+        "doc": "the adapter's local echo of what it sends (pyserial RS485Settings.loopback)"})
+    delay_before_tx: float | None = field(default=None, metadata={
+        "ge": 0.0, "le": 1.0, "unit": "s", "doc": "wait after raising RTS before sending (not "
+                                                  "set: none)"})
+    delay_before_rx: float | None = field(default=None, metadata={
+        "ge": 0.0, "le": 1.0, "unit": "s", "doc": "wait after sending before dropping RTS (not "
+                                                  "set: none)"})
 
 
 @dataclass(frozen=True)
 class SerialSettings:
     """A port URL and its line settings (a ``[... .port]`` table in the config)."""
 
-    url: str = "loop://"
-    baudrate: int = field(default=9600, metadata={"gt": 0})
-    bytesize: int = field(default=8, metadata={"ge": 5, "le": 8})
-    parity: Parity = "N"
-    stopbits: float = field(default=1.0, metadata={"ge": 1.0, "le": 2.0})
-    timeout_s: float = field(default=0.05, metadata={"ge": 0.0})
-    rs485: RS485Config | None = None
+    url: str = field(default="loop://", metadata={
+        "doc": "the port: a device path, a pty or a pyserial URL"})
+    baudrate: int = field(default=9600, metadata={
+        "gt": 0, "unit": "baud", "doc": "line speed of a serial device"})
+    bytesize: int = field(default=8, metadata={
+        "ge": 5, "le": 8, "unit": "bits", "doc": "data bits per character"})
+    parity: Parity = field(default="N", metadata={"doc": "N none, E even, O odd, M mark, S space"})
+    stopbits: float = field(default=1.0, metadata={
+        "ge": 1.0, "le": 2.0, "unit": "bits", "doc": "stop bits: 1, 1.5 or 2"})
+    timeout_s: float = field(default=0.05, metadata={
+        "ge": 0.0, "unit": "s", "doc": "a read returns after at most this long without bytes"})
+    rs485: RS485Config | None = field(default=None, metadata={
+        "doc": "RS-485 driver-enable settings (not set: RS-232 behaviour)"})
 
 
 def open_port(

@@ -39,101 +39,163 @@ State = Literal["normal", "suspect", "fault_fir", "fault_comp", "fault_gyro"]
 class FtConfig:
     """The substitution and stuck/recovery rules (the ``[ft]`` table)."""
 
-    substitute_while_suspect: bool = True
-    offset_compensation: bool = True
-    offset_samples: int = field(default=10, metadata={"ge": 2})
-    offset_max_std_deg: float = field(default=1.5, metadata={"gt": 0.0})
-    recover_gate_deg: float = field(default=3.0, metadata={"gt": 0.0})
-    recover_samples: int = field(default=10, metadata={"ge": 1})
-    stuck_samples: int = field(default=10, metadata={"ge": 0, "doc": "0 disables"})
-    stuck_eps_deg: float = field(default=1e-6, metadata={"ge": 0.0})
-    smooth_gain: float = field(default=0.2, metadata={"gt": 0.0, "le": 1.0})
+    substitute_while_suspect: bool = field(default=True, metadata={
+        "doc": "while the detector suspects a fault (criterion 1 open), steer on the FIR heading"})
+    offset_compensation: bool = field(default=True, metadata={
+        "doc": "a confirmed fault whose reading sits at a steady offset from the FIR heading is "
+               "compensated (the reading less the offset)"})
+    offset_samples: int = field(default=10, metadata={
+        "ge": 2, "unit": "samples", "doc": "the offset is the mean residual over this many "
+                                           "samples"})
+    offset_max_std_deg: float = field(default=1.5, metadata={
+        "gt": 0.0, "unit": "deg", "doc": "... taken only when their σ is below this"})
+    recover_gate_deg: float = field(default=3.0, metadata={
+        "gt": 0.0, "unit": "deg", "doc": "the reading agrees with the FIR heading within this: a "
+                                         "sample towards recovery (and the smallest offset "
+                                         "compensated)"})
+    recover_samples: int = field(default=10, metadata={
+        "ge": 1, "unit": "samples", "doc": "agreeing samples in a row that end a fault"})
+    stuck_samples: int = field(default=10, metadata={
+        "ge": 0, "unit": "samples", "doc": "a reading unchanged this many samples in a row is "
+                                           "stuck (0 disables)"})
+    stuck_eps_deg: float = field(default=1e-6, metadata={
+        "ge": 0.0, "unit": "deg", "doc": "unchanged: a change at most this"})
+    smooth_gain: float = field(default=0.2, metadata={
+        "gt": 0.0, "le": 1.0, "unit": "-",
+        "doc": "normal state: heading used = prediction + gain × (reading − prediction)"})
     stuck_recover_increments: bool = field(default=True, metadata={
         "doc": "no gyro: a stuck compass is taken back once its increments fit the FIR again"})
     # The gyro witness (fdi.gyro_witness), used when the controller is given a yaw rate.
     # No gyro: after a setpoint change (the controller knows it: an input, not a guess) the
     # FIR's prediction error is at its largest; theta is raised by this factor for a while.
     turn_window_s: float = field(default=0.0, metadata={
-        "ge": 0.0, "doc": "after a setpoint change, theta x turn_theta_factor (0: off)"})
-    turn_theta_factor: float = field(default=1.0, metadata={"ge": 1.0})
+        "ge": 0.0, "doc": "after a setpoint change, theta x turn_theta_factor (0: off)",
+        "unit": "s"})
+    turn_theta_factor: float = field(default=1.0, metadata={
+        "ge": 1.0, "unit": "-", "doc": "theta's factor within turn_window_s of a setpoint change"})
     level_sigmas: float = field(default=5.0, metadata={
         "ge": 0.0, "doc": "no gyro: also confirm when the reading stays this * sigma_e off the "
-                          "substitution heading for the detector's persist samples (0: off)"})
+                          "substitution heading for the detector's persist samples (0: off)",
+        "unit": "σ"})
     level_min_deg: float = field(default=5.0, metadata={
-        "ge": 0.0, "doc": "... and at least this far (the smallest drift step of interest)"})
+        "ge": 0.0, "doc": "... and at least this far (the smallest drift step of interest)",
+        "unit": "deg"})
     level_burst_ratio: float = field(default=2.5, metadata={
-        "gt": 0.0, "doc": "... unless the short scale of e > this * sigma_e (a noise burst)"})
-    gyro_enabled: bool = True
-    gyro_heading_tau_s: float = field(default=10.0, metadata={"gt": 0.0})
-    gyro_test_tau_s: float = field(default=30.0, metadata={"gt": 0.0})
-    gyro_bias_tau_s: float = field(default=600.0, metadata={"gt": 0.0})
-    gyro_bias_delay_s: float = field(default=15.0, metadata={"ge": 0.0})
-    gyro_ref_tau_s: float = field(default=5.0, metadata={"gt": 0.0})
-    gyro_max_suspect_s: float = field(default=20.0, metadata={"gt": 0.0})
-    gyro_sigma0_deg: float = field(default=1.0, metadata={"gt": 0.0})
+        "gt": 0.0, "doc": "... unless the short scale of e > this * sigma_e (a noise burst)",
+        "unit": "-"})
+    gyro_enabled: bool = field(default=True, metadata={
+        "doc": "use the yaw-rate gyro witness when the link carries a rate"})
+    gyro_heading_tau_s: float = field(default=10.0, metadata={
+        "gt": 0.0, "unit": "s", "doc": "time constant of the witness's output heading loop "
+                                       "(compass into integrated gyro)"})
+    gyro_test_tau_s: float = field(default=30.0, metadata={
+        "gt": 0.0, "unit": "s", "doc": "time constant of the test heading's loop"})
+    gyro_bias_tau_s: float = field(default=600.0, metadata={
+        "gt": 0.0, "unit": "s", "doc": "forgetting time of the gyro bias fit"})
+    gyro_bias_delay_s: float = field(default=15.0, metadata={
+        "ge": 0.0, "unit": "s", "doc": "the bias fit uses trusted samples this old"})
+    gyro_ref_tau_s: float = field(default=5.0, metadata={
+        "gt": 0.0, "unit": "s", "doc": "time constant of the innovation's slow mean"})
+    gyro_max_suspect_s: float = field(default=20.0, metadata={
+        "gt": 0.0, "unit": "s", "doc": "a suspect not confirmed by then is dismissed"})
+    gyro_sigma0_deg: float = field(default=1.0, metadata={
+        "gt": 0.0, "unit": "deg", "doc": "the innovation's initial σ"})
     # The floor of the innovation's sigma. ArduSub's EKF yaw is smooth (0.001 deg of noise)
     # but wanders +-0.4 deg against its own integrated rates over tens of seconds (0.02-0.04
     # deg/s: its magnetometer corrections; ../shared/corpus/ardusub-sitl), and RAW_IMU's gyro
     # bias walks (ArduPilot's SIM_DRIFT_SPEED): at 0.2 both captures of a healthy vehicle
     # confirmed a fault, at 0.5 their CUSUMs peaked at 0.2 % and 22 % of confirmation. The
     # Outland preset (config/rov.toml: a noisy compass whose sigma is well above it) keeps 0.2.
-    gyro_sigma_min_deg: float = field(default=0.5, metadata={"gt": 0.0, "doc": "deg"})
-    gyro_sigma_samples: int = field(default=150, metadata={"ge": 1})
-    gyro_clip: float = field(default=4.5, metadata={"gt": 0.0})
-    gyro_kappa: float = field(default=1.5, metadata={"ge": 0.0})
-    gyro_h: float = field(default=11.0, metadata={"gt": 0.0})
-    gyro_slow_clip: float = field(default=2.5, metadata={"gt": 0.0})
-    gyro_slow_kappa: float = field(default=0.75, metadata={"ge": 0.0})
-    gyro_slow_h: float = field(default=20.0, metadata={"gt": 0.0})
-    gyro_h_suspect: float = field(default=3.0, metadata={"gt": 0.0})
-    gyro_jump_sigmas: float = field(default=4.0, metadata={"gt": 0.0})
-    gyro_burst_ratio: float = field(default=2.5, metadata={"gt": 1.0})
-    gyro_spread_ratio: float = field(default=1.6, metadata={"gt": 0.0})
+    gyro_sigma_min_deg: float = field(default=0.5, metadata={
+        "gt": 0.0, "unit": "deg", "doc": "floor of the innovation's σ (ArduSub's EKF yaw wanders "
+                                         "±0.4 deg against its own rates)"})
+    gyro_sigma_samples: int = field(default=150, metadata={
+        "ge": 1, "unit": "samples", "doc": "EWMA length of the innovation's σ²"})
+    gyro_clip: float = field(default=4.5, metadata={
+        "gt": 0.0, "unit": "σ", "doc": "fast CUSUM: score clip"})
+    gyro_kappa: float = field(default=1.5, metadata={
+        "ge": 0.0, "unit": "σ", "doc": "fast CUSUM: drift (allowance)"})
+    gyro_h: float = field(default=11.0, metadata={
+        "gt": 0.0, "unit": "-", "doc": "fast CUSUM: confirmation level (> 3 (clip − kappa))"})
+    gyro_slow_clip: float = field(default=2.5, metadata={
+        "gt": 0.0, "unit": "σ", "doc": "slow CUSUM: score clip"})
+    gyro_slow_kappa: float = field(default=0.75, metadata={
+        "ge": 0.0, "unit": "σ", "doc": "slow CUSUM: drift (allowance)"})
+    gyro_slow_h: float = field(default=20.0, metadata={
+        "gt": 0.0, "unit": "-", "doc": "slow CUSUM: confirmation level"})
+    gyro_h_suspect: float = field(default=3.0, metadata={
+        "gt": 0.0, "unit": "-", "doc": "the fast CUSUM above this opens a suspect"})
+    gyro_jump_sigmas: float = field(default=4.0, metadata={
+        "gt": 0.0, "unit": "σ", "doc": "an innovation this large opens a suspect at once (a jump)"})
+    gyro_burst_ratio: float = field(default=2.5, metadata={
+        "gt": 1.0, "unit": "-", "doc": "the innovation's short-scale σ above this × σ: a noise "
+                                       "burst, not a bias"})
+    gyro_spread_ratio: float = field(default=1.6, metadata={
+        "gt": 0.0, "unit": "-", "doc": "a level's samples lie on a line within this × σ (a step, "
+                                       "not noise)"})
     gyro_step_min_deg: float = field(default=3.5, metadata={
         "ge": 0.0, "doc": "the fast CUSUM confirms a level only this far off the innovation's "
-        "mean (the smallest step of interest, less the noise; 0: any)"})
-    gyro_warmup_samples: int = field(default=100, metadata={"ge": 0})
-    gyro_recover_gate_deg: float = field(default=1.5, metadata={"gt": 0.0})
-    gyro_recover_samples: int = field(default=10, metadata={"ge": 1})
+                          "mean (the smallest step of interest, less the noise; 0: any)",
+        "unit": "deg"})
+    gyro_warmup_samples: int = field(default=100, metadata={
+        "ge": 0, "unit": "samples", "doc": "samples before the witness tests (its bias fit's "
+                                           "warm-up)"})
+    gyro_recover_gate_deg: float = field(default=1.5, metadata={
+        "gt": 0.0, "unit": "deg", "doc": "recovery: the innovation's mean within this (or 3 σ)"})
+    gyro_recover_samples: int = field(default=10, metadata={
+        "ge": 1, "unit": "samples", "doc": "recovery: this many agreeing samples"})
     gyro_comp_samples: int = field(default=50, metadata={
-        "ge": 0, "doc": "after a step: learn its offset over this many samples (0: off)"})
-    gyro_comp_max_slope_dps: float = field(default=0.25, metadata={"gt": 0.0})
+        "ge": 0, "doc": "after a step: learn its offset over this many samples (0: off)",
+        "unit": "samples"})
+    gyro_comp_max_slope_dps: float = field(default=0.25, metadata={
+        "gt": 0.0, "unit": "deg/s", "doc": "... only if a level: its slope within this"})
     gyro_fast_margin_s: float = field(default=2.0, metadata={
-        "ge": 0.0, "doc": "a step's (or stuck run's) compass trusted up to this before it"})
+        "ge": 0.0, "doc": "a step's (or stuck run's) compass trusted up to this before it",
+        "unit": "s"})
     gyro_drift_window_s: float = field(default=90.0, metadata={
-        "gt": 1.0, "doc": "the hinge test's window (compass minus integrated gyro)"})
+        "gt": 1.0, "doc": "the hinge test's window (compass minus integrated gyro)", "unit": "s"})
     gyro_drift_glr: float = field(default=30.0, metadata={
-        "ge": 0.0, "doc": "the hinge test's confirmation level (likelihood ratio; 0: off)"})
+        "ge": 0.0, "doc": "the hinge test's confirmation level (likelihood ratio; 0: off)",
+        "unit": "-"})
     gyro_drift_sigma_min_deg: float = field(default=1.5, metadata={
-        "gt": 0.0, "doc": "the hinge test's noise floor (the integrated gyro noise's walk)"})
+        "gt": 0.0, "doc": "the hinge test's noise floor (the integrated gyro noise's walk)",
+        "unit": "deg"})
     gyro_drift_max_turn_deg: float = field(default=10.0, metadata={
-        "gt": 0.0, "doc": "the hinge test only while the heading spans at most this (window)"})
+        "gt": 0.0, "doc": "the hinge test only while the heading spans at most this (window)",
+        "unit": "deg"})
     gyro_bias_hold_deg: float = field(default=10.0, metadata={
-        "ge": 0.0, "doc": "the warm-up's bias line goes on while the heading stays this near "
-        "its end's (0: the later samples their own segment)"})
+        "ge": 0.0, "doc": "the warm-up's bias line goes on while the heading stays this near its "
+                          "end's (0: the later samples their own segment)", "unit": "deg"})
     gyro_comp_drift_glr: float = field(default=30.0, metadata={
         "ge": 0.0, "doc": "the hinge test on a step's compensated compass: a drift after the "
-        "step is a second fault (likelihood ratio; 0: off)"})
+                          "step is a second fault (likelihood ratio; 0: off)", "unit": "-"})
     gyro_comp_drift_bias_sd_dps: float = field(default=0.005, metadata={
         "ge": 0.0, "doc": "... the bias before the step known to no better than this (0: its "
-        "fit's information)"})
+                          "fit's information)", "unit": "deg/s"})
     gyro_drift_recover_s: float = field(default=20.0, metadata={
         "ge": 0.0, "doc": "after a drift under a step's compensation, the compass is taken back "
-        "only once its innovation's slope over this long (0: off) ..."})
+                          "only once its innovation's slope over this long (0: off) ...",
+        "unit": "s"})
     gyro_drift_recover_max_dps: float = field(default=0.05, metadata={
-        "gt": 0.0, "doc": "... is within this (a drifting compass crossing the dead reckoning)"})
+        "gt": 0.0, "doc": "... is within this (a drifting compass crossing the dead reckoning)",
+        "unit": "deg/s"})
     gyro_maneuver_lag_s: float = field(default=0.15, metadata={
-        "ge": 0.0, "le": 2.0, "doc": "s: the compass's lag behind the gyro, a bound "
-        "(ArduSub's RAW_IMU compass: 0.12-0.17 s)"})
+        "ge": 0.0, "le": 2.0, "doc": "s: the compass's lag behind the gyro, a bound (ArduSub's "
+                                     "RAW_IMU compass: 0.12-0.17 s)", "unit": "s"})
     gyro_maneuver_deg: float = field(default=1.0, metadata={
         "ge": 0.0, "doc": "deg: a period whose lag + rate-sampling bound exceeds this is a "
-        "manoeuvre, carried by the gyro alone (0: off)"})
+                          "manoeuvre, carried by the gyro alone (0: off)", "unit": "deg"})
     gyro_maneuver_settle: int = field(default=2, metadata={
-        "ge": 0, "le": 50, "doc": "periods after a manoeuvre still carried by the gyro"})
+        "ge": 0, "le": 50, "doc": "periods after a manoeuvre still carried by the gyro",
+        "unit": "periods"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
-    gyro_vote_gate_deg: float = field(default=1.0, metadata={"gt": 0.0, "doc": "sigmas"})
-    gyro_hold_samples: int = field(default=5, metadata={"ge": 0, "doc": "last rate kept"})
+    gyro_vote_gate_deg: float = field(default=1.0, metadata={
+        "gt": 0.0, "unit": "σ", "doc": "the FIR's vote blames the gyro only beyond this many σ "
+                                       "of the witness's innovation"})
+    gyro_hold_samples: int = field(default=5, metadata={
+        "ge": 0, "unit": "samples", "doc": "a missing rate is replaced by the last one for at "
+                                           "most this many samples"})
 
     def witness_params(self) -> WitnessParams:
         """The witness's parameters: each ``gyro_X`` key is ``WitnessParams.X``."""

@@ -67,22 +67,20 @@ class EarthModel:
 class FaultStateParams:
     """The ``[filter.fault_state]`` table of ``config/insgnss.toml``."""
 
-    alpha_onset: float = field(
-        default=0.01, metadata={"ge": 1e-15, "le": 0.5,
-                                "doc": "onset significance: T_on = χ²₃(1 − α_on)"})
-    window: int = field(
-        default=4, metadata={"ge": 1, "le": 64, "doc": "innovation history of the jump test"})
-    return_log_lr: float = field(
-        default=2.3026,  # ln 10
-        metadata={"gt": 0.0, "doc": "CUSUM threshold on ln L(H0)/L(H1) to return"})
-    bias_sigma0_m: float = field(
-        default=1000.0, metadata={"gt": 0.0, "doc": "prior 1σ of the bias at an onset, m"})
-    bias_rw_m_sqrt_s: float = field(
-        default=0.01, metadata={"ge": 0.0, "doc": "random walk of the bias while faulted"})
-    max_prior_ratio: float = field(
-        default=0.25, metadata={"gt": 0.0,
-                                "doc": "open a fault only while P⁻_ii ≤ ratio · R_ii (coasting "
-                                       "on the INS beats the fix)"})
+    alpha_onset: float = field(default=0.01, metadata={
+        "ge": 1e-15, "le": 0.5, "doc": "onset significance: T_on = χ²₃(1 − α_on)", "unit": "-"})
+    window: int = field(default=4, metadata={
+        "ge": 1, "le": 64, "doc": "innovation history of the jump test", "unit": "epochs"})
+    return_log_lr: float = field(default=2.3026, metadata={
+        "gt": 0.0, "unit": "-", "doc": "CUSUM threshold on ln L(H0)/L(H1) to return (ln 10: ten "
+                                       "to one)"})
+    bias_sigma0_m: float = field(default=1000.0, metadata={
+        "gt": 0.0, "unit": "m", "doc": "prior 1σ of the bias at an onset"})
+    bias_rw_m_sqrt_s: float = field(default=0.01, metadata={
+        "ge": 0.0, "doc": "random walk of the bias while faulted", "unit": "m/√s"})
+    max_prior_ratio: float = field(default=0.25, metadata={
+        "gt": 0.0, "doc": "open a fault only while P⁻_ii ≤ ratio · R_ii (coasting on the INS "
+                          "beats the fix)", "unit": "-"})
 
     @cached_property
     def t_onset(self) -> float:
@@ -97,18 +95,18 @@ class ImuErrorModel:
     Defaults: a MEMS autopilot IMU after its turn-on calibration (ICM-42688 / BMI088 class).
     """
 
-    gyro_bias_deg_h: float = field(default=30.0, metadata={"ge": 0.0, "doc": "1σ gyro bias"})
-    gyro_arw_deg_sqrt_h: float = field(
-        default=0.2, metadata={"ge": 0.0, "doc": "angle random walk"}
-    )
-    accel_bias_ug: float = field(default=2000.0, metadata={"ge": 0.0, "doc": "1σ accel bias"})
-    accel_vrw_ug_sqrt_hz: float = field(
-        default=70.0, metadata={"ge": 0.0, "doc": "accelerometer white noise density"}
-    )
-    gyro_bias_drift_deg_s_per_min: float = field(
-        default=0.0, metadata={"ge": 0.0, "doc": "how fast the gyro bias may drift (a MEMS "
-                               "gyro warming up; ArduPilot's simulated IMU: 0.05): its random "
-                               "walk reaches this change in one minute at 1σ"})
+    gyro_bias_deg_h: float = field(default=30.0, metadata={
+        "ge": 0.0, "doc": "1σ gyro bias", "unit": "deg/h"})
+    gyro_arw_deg_sqrt_h: float = field(default=0.2, metadata={
+        "ge": 0.0, "doc": "angle random walk", "unit": "deg/√h"})
+    accel_bias_ug: float = field(default=2000.0, metadata={
+        "ge": 0.0, "doc": "1σ accel bias", "unit": "µg"})
+    accel_vrw_ug_sqrt_hz: float = field(default=70.0, metadata={
+        "ge": 0.0, "doc": "accelerometer white noise density", "unit": "µg/√Hz"})
+    gyro_bias_drift_deg_s_per_min: float = field(default=0.0, metadata={
+        "ge": 0.0, "doc": "how fast the gyro bias may drift (a MEMS gyro warming up; ArduPilot's "
+                          "simulated IMU: 0.05): its random walk reaches this change in one "
+                          "minute at 1σ", "unit": "(deg/s)/min"})
 
     @property
     def gyro_bias_rad_s(self) -> float:
@@ -147,19 +145,33 @@ class InsGnssParams:
     three_zone: ThreeZoneParams = field(default_factory=ThreeZoneParams)
     fault_state: FaultStateParams = field(default_factory=FaultStateParams)
     imu: ImuErrorModel = field(default_factory=ImuErrorModel)
-    gnss_sigma_h_m: float = field(default=3.0, metadata={"gt": 0.0, "doc": "R: E/N 1σ"})
-    gnss_sigma_v_m: float = field(default=5.0, metadata={"gt": 0.0, "doc": "R: up 1σ"})
-    gnss_sigma_vel_m_s: float = field(default=0.1, metadata={"gt": 0.0, "doc": "R: velocity"})
+    gnss_sigma_h_m: float = field(default=3.0, metadata={
+        "gt": 0.0, "doc": "R: E/N 1σ", "unit": "m"})
+    gnss_sigma_v_m: float = field(default=5.0, metadata={"gt": 0.0, "doc": "R: up 1σ", "unit": "m"})
+    gnss_sigma_vel_m_s: float = field(default=0.1, metadata={
+        "gt": 0.0, "unit": "m/s", "doc": "R: GNSS velocity 1σ per axis"})
     use_velocity: bool = field(default=True, metadata={"doc": "use GNSS velocity when given"})
-    latitude_deg: float = field(default=34.25, metadata={"ge": -89.0, "le": 89.0})
-    earth_rotation: bool = True
-    min_imu_rate_hz: float = field(default=20.0, metadata={"ge": 10.0})
-    max_imu_gap_s: float = field(default=0.25, metadata={"gt": 0.0})
-    cov_rate_hz: float = field(default=10.0, metadata={"gt": 0.0, "doc": "P propagation rate"})
-    init_sigma_pos_m: float = field(default=3.0, metadata={"gt": 0.0})
-    init_sigma_vel_m_s: float = field(default=0.1, metadata={"gt": 0.0})
-    init_sigma_tilt_deg: float = field(default=0.5, metadata={"gt": 0.0})
-    init_sigma_yaw_deg: float = field(default=2.0, metadata={"gt": 0.0})
+    latitude_deg: float = field(default=34.25, metadata={
+        "ge": -89.0, "le": 89.0, "unit": "deg",
+        "doc": "latitude of the tangent plane (normal gravity, Earth rate)"})
+    earth_rotation: bool = field(default=True, metadata={
+        "doc": "model the Earth's rotation in the mechanisation"})
+    min_imu_rate_hz: float = field(default=20.0, metadata={
+        "ge": 10.0, "unit": "Hz", "doc": "an IMU slower than this (median of the first "
+                                         "intervals) is refused"})
+    max_imu_gap_s: float = field(default=0.25, metadata={
+        "gt": 0.0, "unit": "s", "doc": "a gap between IMU samples longer than this is refused "
+                                       "(the mechanisation cannot bridge it)"})
+    cov_rate_hz: float = field(default=10.0, metadata={
+        "gt": 0.0, "doc": "P propagation rate", "unit": "Hz"})
+    init_sigma_pos_m: float = field(default=3.0, metadata={
+        "gt": 0.0, "unit": "m", "doc": "initial 1σ of the position"})
+    init_sigma_vel_m_s: float = field(default=0.1, metadata={
+        "gt": 0.0, "unit": "m/s", "doc": "initial 1σ of the velocity"})
+    init_sigma_tilt_deg: float = field(default=0.5, metadata={
+        "gt": 0.0, "unit": "deg", "doc": "initial 1σ of roll and pitch"})
+    init_sigma_yaw_deg: float = field(default=2.0, metadata={
+        "gt": 0.0, "unit": "deg", "doc": "initial 1σ of the heading"})
 
     @property
     def earth(self) -> EarthModel:

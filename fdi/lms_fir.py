@@ -43,28 +43,44 @@ from fdi.noise_scale import RobustVariance, TrimmedScale
 class DetectorConfig:
     """Parameters of the FIR, LMS and both criteria (the ``[detector]`` table)."""
 
-    order: int = field(default=70, metadata={"ge": 1, "le": 1000, "doc": "M, FIR taps"})
-    mu: float = field(default=0.01, metadata={"gt": 0.0, "lt": 1.0, "doc": "LMS step"})
-    bias_tap: bool = True
-    u_op: float = field(default=0.0, metadata={"doc": "operating point of u, %"})
-    u_op_samples: int = field(default=50, metadata={"ge": 0, "doc": "EMA of u_op, 0: fixed"})
-    u_scale: float = field(default=100.0, metadata={"gt": 0.0, "doc": "% per unit input"})
-    y_scale: float = field(default=30.0, metadata={"gt": 0.0, "doc": "deg per unit output"})
-    theta_deg2: float = field(default=9.0, metadata={"gt": 0.0, "doc": "theta of eq. (7)"})
-    snr_window: int = field(default=50, metadata={"ge": 3, "doc": "n of eq. (8)-(11), samples"})
-    n0: float = field(default=4.0, metadata={"gt": 0.0, "doc": "n0 of eq. (12)"})
-    persist: int = field(default=4, metadata={"ge": 1, "doc": "samples R > n0 in a row"})
-    confirm_window: int = field(default=5, metadata={"ge": 1, "doc": "samples after suspect"})
-    warmup_samples: int = field(default=100, metadata={"ge": 0, "doc": "train only, no check"})
-    store_average_samples: int = field(default=50, metadata={"ge": 0, "doc": "0: C_k itself"})
+    order: int = field(default=70, metadata={
+        "ge": 1, "le": 1000, "doc": "M, FIR taps", "unit": "taps"})
+    mu: float = field(default=0.01, metadata={"gt": 0.0, "lt": 1.0, "doc": "LMS step", "unit": "-"})
+    bias_tap: bool = field(default=True, metadata={
+        "doc": "the FIR has a constant tap (learns a steady offset between command and heading "
+               "change)"})
+    u_op: float = field(default=0.0, metadata={
+        "doc": "operating point of u, %", "ge": -100.0, "le": 100.0, "unit": "%"})
+    u_op_samples: int = field(default=50, metadata={
+        "ge": 0, "doc": "EMA of u_op, 0: fixed", "unit": "samples"})
+    u_scale: float = field(default=100.0, metadata={
+        "gt": 0.0, "doc": "% per unit input", "unit": "%"})
+    y_scale: float = field(default=30.0, metadata={
+        "gt": 0.0, "doc": "deg per unit output", "unit": "deg"})
+    theta_deg2: float = field(default=9.0, metadata={
+        "gt": 0.0, "doc": "theta of eq. (7)", "unit": "deg^2"})
+    snr_window: int = field(default=50, metadata={
+        "ge": 3, "doc": "n of eq. (8)-(11), samples", "unit": "samples"})
+    n0: float = field(default=4.0, metadata={"gt": 0.0, "doc": "n0 of eq. (12)", "unit": "-"})
+    persist: int = field(default=4, metadata={
+        "ge": 1, "doc": "samples R > n0 in a row", "unit": "samples"})
+    confirm_window: int = field(default=5, metadata={
+        "ge": 1, "doc": "samples after suspect", "unit": "samples"})
+    warmup_samples: int = field(default=100, metadata={
+        "ge": 0, "doc": "train only, no check", "unit": "samples"})
+    store_average_samples: int = field(default=50, metadata={
+        "ge": 0, "doc": "0: C_k itself", "unit": "samples"})
     # Thresholds that follow the noise (extensions; 0 disables each, as in the paper preset).
     theta_sigmas: float = field(default=4.0, metadata={
-        "ge": 0.0, "doc": "theta = max(theta_deg2, (theta_sigmas * sigma_e)^2)"})
-    sigma_samples: int = field(default=150, metadata={"ge": 1, "doc": "EWMA length of sigma_e^2"})
+        "ge": 0.0, "doc": "theta = max(theta_deg2, (theta_sigmas * sigma_e)^2)", "unit": "σ"})
+    sigma_samples: int = field(default=150, metadata={
+        "ge": 1, "doc": "EWMA length of sigma_e^2", "unit": "samples"})
     mean_sigmas: float = field(default=3.0, metadata={
-        "ge": 0.0, "doc": "confirm only if |mean e| since the suspect >= this * sigma_e/sqrt(n)"})
+        "ge": 0.0, "doc": "confirm only if |mean e| since the suspect >= this * sigma_e/sqrt(n)",
+        "unit": "σ"})
     burst_ratio: float = field(default=0.0, metadata={
-        "ge": 0.0, "doc": "no confirmation while the short scale of e > this * sigma_e"})
+        "ge": 0.0, "doc": "no confirmation while the short scale of e > this * sigma_e",
+        "unit": "-"})
 
     def __post_init__(self) -> None:
         if self.persist > self.confirm_window:

@@ -20,22 +20,31 @@ from fdi.lms_fir import wrap180
 class PidConfig:
     """Gains (% per deg, % per deg*s, % per deg/s) and limits (the ``[pid]`` table)."""
 
-    kp: float = field(default=3.0, metadata={"ge": 0.0})
-    ki: float = field(default=0.3, metadata={"ge": 0.0})
-    kd: float = field(default=2.0, metadata={"ge": 0.0})
-    d_tau_s: float = field(default=0.2, metadata={"ge": 0.0})
+    kp: float = field(default=3.0, metadata={
+        "ge": 0.0, "unit": "%/deg", "doc": "proportional gain on the wrapped heading error"})
+    ki: float = field(default=0.3, metadata={
+        "ge": 0.0, "unit": "%/(deg s)", "doc": "integral gain (anti-windup: see i_band_deg and "
+                                               "the output limits)"})
+    kd: float = field(default=2.0, metadata={
+        "ge": 0.0, "unit": "%/(deg/s)", "doc": "derivative gain on the measured heading rate (not "
+                                               "the error: no kick on a setpoint change)"})
+    d_tau_s: float = field(default=0.2, metadata={
+        "ge": 0.0, "unit": "s", "doc": "time constant of the derivative's first-order low-pass"})
     i_band_deg: float = field(default=10.0, metadata={
-        "ge": 0.0, "doc": "integrate only while |error| < this (0: always)"})
-    out_min: float = -100.0
-    out_max: float = 100.0
+        "ge": 0.0, "doc": "integrate only while |error| < this (0: always)", "unit": "deg"})
+    out_min: float = field(default=-100.0, metadata={
+        "ge": -100.0, "le": 100.0, "unit": "%", "doc": "lower output limit (differential thrust); "
+                                                       "the integral is bounded to it too"})
+    out_max: float = field(default=100.0, metadata={
+        "ge": -100.0, "le": 100.0, "unit": "%", "doc": "upper output limit; must exceed out_min"})
     # The thrusters' curve, inverted so that the PID's output is thrust, not command (what
     # ArduSub's MOT_THST_EXPO and MOT_SPIN_MIN do): thrust fraction T = (1 - e) x + e x^2 of
     # x = (|c| - db) / (100 - db) outside the dead band db. 0 and 0: the identity (a linear
     # thruster, the Nomoto plant's and the paper's).
     thrust_dead_band_pct: float = field(default=0.0, metadata={
-        "ge": 0.0, "lt": 100.0, "doc": "thruster dead band to step over (% command)"})
+        "ge": 0.0, "lt": 100.0, "doc": "thruster dead band to step over (% command)", "unit": "%"})
     thrust_expo: float = field(default=0.0, metadata={
-        "ge": 0.0, "le": 1.0, "doc": "thrust curve: 0 linear, 1 quadratic (c|c|)"})
+        "ge": 0.0, "le": 1.0, "doc": "thrust curve: 0 linear, 1 quadratic (c|c|)", "unit": "-"})
 
     def __post_init__(self) -> None:
         if self.out_min >= self.out_max:

@@ -63,6 +63,7 @@ from typing import Literal, NamedTuple
 
 from fdi.chi2 import threshold
 from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
+from fdi.fielddoc import documented
 from fdi.grey import gm11_predict_shifted_enu
 from fdi.kalman import GpsKalman
 from fdi.level import BACK_AT_OLD_FRAC, HoldParams, LevelHold
@@ -116,7 +117,118 @@ _LONG_S = {"off": 0.0, "ge": 1.0, "le": 86400.0}  # a calibration time, 0: none
 _LAG_S = {"off": 0.0, "ge": 0.001, "le": 10.0}  # the Doppler's lag (fdi-bridge calibrate: 1 ms)
 _COUNT = {"ge": 1, "le": 1000}  # a count of epochs
 
+# Unit and doc of each field (docs/reference/config.md is generated from them), attached by
+# @documented below so that each field's own line stays as it is.
+_DOC: dict[str, dict[str, str]] = {
+    "strategy": {"doc": "grey: the chi-square + GM(1,1) grey tests (Zhou & Zhang); three_zone: "
+                 "Cai & Shao's per-axis zones on the Kalman innovation; combined: both"},
+    "alpha": {"unit": "-", "doc": "significance level of the residual chi-square test "
+              "(section 1; 3 degrees of freedom)"},
+    "chi2_enabled": {"doc": "run the residual chi-square test"},
+    "sigma_m": {"unit": "m", "doc": "horizontal noise σ per axis: R = σ² when the receiver "
+                "sends no GST (or use_gst = false)"},
+    "sigma_up_m": {"unit": "m", "doc": "vertical noise σ: R's up term when there is no GST"},
+    "use_gst": {"doc": "take R from the receiver's GST σ when it sends them"},
+    "q_accel": {"unit": "m^2/s^3", "doc": "the Kalman filter's process noise: white-"
+                "acceleration spectral density"},
+    "window": {"unit": "epochs", "doc": "GM(1,1) window: the accepted fixes the grey model "
+               "is fitted on (section 2)"},
+    "predictor": {"doc": "raw: GM(1,1) on the positions; doppler: GM(1,1) on the Doppler-free "
+                  "positions, moved by the receiver's Doppler displacement"},
+    "shift_m": {"unit": "m", "doc": "offset added to each axis of the window so that GM(1,1) "
+                "sees positive values (the window's minimum becomes this)"},
+    "gate_m": {"unit": "m", "doc": "grey test's horizontal gate (fixed; the floor when "
+               "gate_sigmas > 0)"},
+    "gate_up_m": {"unit": "m", "doc": "grey test's vertical gate (fixed; the floor when "
+                  "gate_sigmas > 0)"},
+    "gate_axes": {"doc": "per_axis: east and north gated apart; horizontal: the horizontal "
+                  "distance against gate_m"},
+    "gate_sigmas": {"unit": "σ", "doc": "adaptive gate: this many σ of the grey residual "
+                    "learned on accepted fixes, at least gate_m (0: the fixed gate)"},
+    "gate_tau_epochs": {"unit": "epochs", "doc": "time constant of the adaptive gate's "
+                        "running residual variance (EWMA weight 1/tau)"},
+    "gate_sigma0_m": {"unit": "m", "doc": "the adaptive gate's prior residual σ "
+                      "(horizontal; twice it up)"},
+    "test_up": {"doc": "the grey test also gates the vertical residual"},
+    "doppler_test": {"doc": "the Doppler consistency test: the fix against the accepted fix of "
+                     "window epochs ago moved by the Doppler displacement since"},
+    "doppler_sigmas": {"unit": "σ", "doc": "Doppler test's width: this many σ of its residual "
+                       "RMS on accepted fixes, at least doppler_floor_m"},
+    "doppler_floor_m": {"unit": "m", "doc": "Doppler test's smallest gate"},
+    "doppler_s0_m": {"unit": "m", "doc": "Doppler residual's prior σ per axis over a 1 s span "
+                     "(scaled by sqrt of the window's span), then learned"},
+    "max_coast_s": {"unit": "s", "doc": "at an alarm, coast on the Doppler at most this long "
+                    "when the receiver disagrees with its own Doppler (0: no coast)"},
+    "drift_test": {"doc": "the slow-fault test on the Doppler-free value (fdi/drift.py); needs "
+                   "predictor = doppler and strategy = grey"},
+    "drift_horizons_s": {"unit": "s", "doc": "horizons over which the Doppler-free value's "
+                         "change is tested (ascending)"},
+    "drift_sigma_m": {"unit": "m", "doc": "per-axis σ of the Doppler-free value's change over "
+                      "each horizon (until the calibration at start replaces them)"},
+    "drift_calibrate_s": {"unit": "s", "doc": "calibrate drift_sigma_m once on this many "
+                          "seconds of trusted fixes (0: as configured, e.g. by fdi-bridge "
+                          "calibrate)"},
+    "drift_precal_s": {"unit": "s", "doc": "a provisional calibration after this long "
+                       "(0: none), widened by drift_prefactor, until the calibration proper"},
+    "drift_prefactor": {"unit": "-", "doc": "factor on the provisional calibration's σ; "
+                        "shrinks as 1 + (f - 1) sqrt(drift_precal_s / elapsed)"},
+    "drift_floor_frac": {"unit": "-", "doc": "the calibration never goes below this fraction "
+                         "of drift_sigma_m (0: no floor)"},
+    "drift_cal_k": {"unit": "-", "doc": "the calibration's own uncertainty: each σ_H times "
+                    "1 + k / sqrt(n_H), n_H its independent differences (0: none)"},
+    "drift_cal_min_h": {"unit": "s", "doc": "the horizon H at least this in drift_cal_k's "
+                        "count of independent differences"},
+    "drift_sigmas": {"unit": "σ", "doc": "drift test's threshold on its statistic (the "
+                     "largest over the horizons)"},
+    "drift_warn_sigmas": {"unit": "σ", "doc": "flag (warn) from this drift statistic on, the "
+                          "fix passed on as it is (0: off)"},
+    "ramp_window_s": {"unit": "s", "doc": "the one horizon whose drift statistic alone flags "
+                      "a ramp (drift_watch; 0: off)"},
+    "ramp_sigmas": {"unit": "σ", "doc": "threshold of that horizon's statistic (0: off)"},
+    "drift_lag_s": {"unit": "s", "doc": "the receiver's Doppler lag behind its position, "
+                    "taken out of the Doppler-free value (fdi-bridge calibrate measures it)"},
+    "drift_lag_sd_s": {"unit": "s", "doc": "σ of that lag (its uncertainty, in the drift and "
+                       "Doppler tests' widths)"},
+    "stale_s": {"unit": "s", "doc": "a whole fix repeated this long is frozen"},
+    "stale_move_m": {"unit": "m", "doc": "a position repeated while the receiver's own speed "
+                     "says it moved this far is frozen (0: off)"},
+    "stale_move_quanta": {"unit": "-", "doc": "... and by at least this many of its coordinate "
+                          "quanta, learned from the fixes (0: stale_move_m alone)"},
+    "stale_p": {"unit": "-", "doc": "frozen after n repeats in a row whose chance p^n, p the "
+                "receiver's learned repeat rate, is at most this (0: off)"},
+    "hold_exit_sigmas": {"unit": "σ", "doc": "a hold ends when the fixes agree with the old "
+                         "track within this many drift σ (fdi/level.py)"},
+    "hold_side_sigmas": {"unit": "σ", "doc": "an older level is the other side only when the "
+                         "old track is this many σ(30 s) off it (fdi/level.py)"},
+    "hold_exit_s": {"unit": "s", "doc": "the hold's short fixed lag: evidence for the new "
+                    "fixes must last this long"},
+    "hold_level_s": {"unit": "s", "doc": "a slow hold's new level: fixes that stepped there by "
+                     "less than half the distance sit there this long (0: hold_exit_s)"},
+    "hold_output_s": {"unit": "s", "doc": "the held old track is passed on (flagged) this "
+                      "long, then the alarm with no output"},
+    "hold_max_s": {"unit": "s", "doc": "after this long the receiver's level is accepted "
+                   "again under the alarm (no lock-in)"},
+    "step_pair_s": {"unit": "s", "doc": "an abrupt step the track accepted is remembered this "
+                    "long: fixes stepping back to the level before it end it (0: off)"},
+    "replaced_r_factor": {"unit": "-", "doc": "a replaced fix (its prediction) updates the "
+                          "Kalman filter with R times this"},
+    "grey_fed_sigmas": {"unit": "σ", "doc": "after two or more replacements a fix only the "
+                        "grey test flags, drift statistic at most this, is passed on (0: off)"},
+    "max_consecutive": {"unit": "epochs", "doc": "replacements in a row before the alarm "
+                        "(section 2.2)"},
+    "recover_epochs": {"unit": "epochs", "doc": "good fixes in a row that end an alarm"},
+    "three_zone": {"doc": "the three_zone and combined strategies' parameters"},
+    "min_sats": {"unit": "satellites", "doc": "quality screen: a fix with fewer satellites is "
+                 "not trusted (0: off)"},
+    "max_hdop": {"unit": "-", "doc": "quality screen: a fix with a larger HDOP is not trusted "
+                 "(0: off)"},
+    "max_gap_s": {"unit": "s", "doc": "a gap between fixes longer than this restarts the "
+                  "filter (a clock step back beyond it: a time reset)"},
+}
 
+
+
+@documented(_DOC)
 @dataclass(frozen=True)
 class RoverDetectorParams:
     """Detector parameters (the ``[rover.detector]`` config table)."""

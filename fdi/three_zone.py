@@ -130,19 +130,18 @@ class Action(enum.Enum):
 class ThreeZoneParams:
     """Parameters of the three-zone gate (the paper's: α1 = 0.10, α2 = 0.01, n = 4)."""
 
-    alpha1: float = field(
-        default=0.10, metadata={"ge": 1e-15, "le": 0.5, "doc": "no-fault/deviation significance"}
-    )
-    alpha2: float = field(
-        default=0.01, metadata={"ge": 1e-15, "le": 0.5, "doc": "deviation/over-limit significance"}
-    )
+    alpha1: float = field(default=0.10, metadata={
+        "ge": 1e-15, "le": 0.5, "doc": "no-fault/deviation significance", "unit": "-"})
+    alpha2: float = field(default=0.01, metadata={
+        "ge": 1e-15, "le": 0.5, "doc": "deviation/over-limit significance", "unit": "-"})
     weight: WeightFunction = field(default="linear", metadata={"doc": "equivalent-weight function"})
-    window: int = field(default=4, metadata={"ge": 2, "le": 32, "doc": "fit window n (epochs)"})
-    degree: int = field(default=1, metadata={"ge": 0, "le": 5, "doc": "fit polynomial degree"})
-    max_replacements: int = field(
-        default=5, metadata={"ge": 1, "le": 1000,
-                             "doc": "consecutive replacements before the window restarts"}
-    )
+    window: int = field(default=4, metadata={
+        "ge": 2, "le": 32, "doc": "fit window n (epochs)", "unit": "epochs"})
+    degree: int = field(default=1, metadata={
+        "ge": 0, "le": 5, "doc": "fit polynomial degree", "unit": "-"})
+    max_replacements: int = field(default=5, metadata={
+        "ge": 1, "le": 1000, "doc": "consecutive replacements before the window restarts",
+        "unit": "epochs"})
     track_jumps: bool = field(
         default=True,
         metadata={"doc": "lock-in breaker: test fixes against their own history (module doc)"},

@@ -104,6 +104,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "print a shell completion script generated from this parser",
     ),
     "man": ("firmware_host.commands.manpage", "print the fdi-bridge(1) man page (roff)"),
+    "docs": ("firmware_host.commands.reference",
+             "write the reference pages (config keys, commands) generated from the code"),
 }
 
 # ``fdi-bridge sim KIND``: KIND -> (module, help).
@@ -170,6 +172,7 @@ EXAMPLES: dict[str, str] = {
     "config": "fdi-bridge config check rover   (or: fdi-bridge config show my-rover.toml)",
     "completion": "fdi-bridge completion bash --out ~/.fdi-bridge.bash   (then: source it)",
     "man": "fdi-bridge man --out fdi-bridge.1 && man -l fdi-bridge.1",
+    "docs": "fdi-bridge docs --out docs/reference   (--check: exit 1 when they are stale)",
     "sim": "fdi-bridge sim rover --duration 60 --out run",
     "sim rover": "fdi-bridge sim rover --duration 60 --kinds jump,ramp --out run",
     "sim rover-harness": "fdi-bridge sim rover-harness --seeds 1,2 --rates 10 --duration 600",

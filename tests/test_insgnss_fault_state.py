@@ -108,7 +108,7 @@ def test_continuous_no_seed_far_from_the_others() -> None:
 def test_fault_state_ends_the_paper_presets_lock_in(seed: int) -> None:
     # The same logic on the paper preset's data (position only, navigation-grade INS), where the
     # three-zone filter with the jump tracker locked in (seed 21: 174 m, seed 44: 129 m 3-D RMS
-    # against 90 m without robust filtering; docs/insgnss-baseline-issue15.md).
+    # against 90 m without robust filtering; docs/insgnss-results.md).
     setup = _setup("insgnss-paper")
     params = replace(setup.filter, fault_state=_setup("insgnss").filter.fault_state)
     data = _data("insgnss-paper", "paper-continuous", seed)

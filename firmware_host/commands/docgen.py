@@ -15,6 +15,7 @@ import copy
 import datetime as dt
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 
 
 @dataclass(frozen=True)
@@ -237,5 +238,62 @@ def man_page(tree: ParserTree, date: dt.date | None = None) -> str:
     out.append(".SH EXIT STATUS")
     for code, text in EXIT_STATUS:
         out += [".TP", f"\\fB{code}\\fR", _roff(text)]
-    out += [".SH SEE ALSO", "The project's README.md and docs/ (architecture, evaluation)."]
+    out += [".SH SEE ALSO", "The project's README.md and docs/ (architecture, evaluation; "
+            "reference/config.md: every configuration key, from \\fBfdi\\-bridge docs\\fR)."]
     return "\n".join(out) + "\n"
+
+
+# --------------------------------------------------------------------------- markdown reference
+
+
+_OUTSIDE = str(Path(__file__).resolve().parents[3]) + "/"  # the checkout's parent directory
+
+
+def _md(text: str) -> str:
+    """One line for a table cell; a default under the checkout's parent directory (the shared
+    corpus) as the path relative to the project (``../shared/corpus``), the same on every
+    machine."""
+    return " ".join(text.split()).replace("|", "\\|").replace(_OUTSIDE, "../")
+
+
+def cli_reference() -> str:
+    """``docs/reference/cli.md``: every command with its usage, arguments (defaults as
+    ``--help`` shows them) and example, from the parser (``fdi-bridge docs``)."""
+    docs = commands()
+    top, rest = docs[0], docs[1:]
+    out = [
+        "# Command-line reference",
+        "",
+        "Generated from the parser by `fdi-bridge docs --out docs/reference`; do not edit (a "
+        "test fails when this page is not what the generator writes). `fdi-bridge COMMAND -h` "
+        "prints the same; `fdi-bridge man` writes it as a man page.",
+        "",
+        _md(top.description),
+        "",
+        "Options of every command (before or after it): "
+        + ", ".join(f"`{', '.join(o.flags)}`" for o in top.options) + ".",
+        "",
+        "| command | what it does |",
+        "|---|---|",
+    ]
+    out += [f"| [`{d.path}`](#fdi-bridge-{d.path.replace(' ', '-')}) | {_md(d.description)} |"
+            for d in rest]
+    out.append("")
+    for d in rest:
+        example = d.epilog.split("example:\n", 1)
+        how = f"Usage: `{d.usage.removeprefix('usage: ')}`."
+        if len(example) == 2:
+            how += f" Example: `{' '.join(example[1].split())}`."
+        out += [f"## fdi-bridge {d.path}", "", _md(d.description), "", how, ""]
+        if d.subcommands and not d.options and not d.positionals:
+            out += ["Kinds: " + ", ".join(f"`{s}`" for s in d.subcommands) + ".", ""]
+        rows = [o for o in d.positionals + d.options if not set(o.flags) & COMMON]
+        if rows:
+            out += ["| argument | value | description |", "|---|---|---|"]
+            for o in rows:
+                name = ", ".join(o.flags) if o.flags else (o.metavar or "")
+                value = "{" + ",".join(o.choices) + "}" if o.choices else (
+                    o.metavar if o.flags and o.metavar else "")
+                out.append(f"| `{name}` | {f'`{value}`' if value else ''} | {_md(o.help)} |")
+            out.append("")
+    return "\n".join(out).rstrip("\n") + "\n"

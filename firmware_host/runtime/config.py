@@ -129,31 +129,55 @@ def resolve_protocol(protocol: str | Path, base: Path | None) -> Path:
 class ReferencePoint:
     """The local frame's origin; without it, the first valid fix."""
 
-    lat_deg: float = field(default=0.0, metadata={"ge": -90.0, "le": 90.0})
-    lon_deg: float = field(default=0.0, metadata={"ge": -180.0, "le": 180.0})
-    alt_m: float = field(default=0.0, metadata={"ge": -12000.0, "le": 100000.0})  # ellipsoidal
+    lat_deg: float = field(default=0.0, metadata={
+        "ge": -90.0, "le": 90.0, "unit": "deg",
+        "doc": "latitude of the local frame's origin (WGS-84)"})
+    lon_deg: float = field(default=0.0, metadata={
+        "ge": -180.0, "le": 180.0, "unit": "deg", "doc": "longitude of the origin"})
+    alt_m: float = field(default=0.0, metadata={
+        "ge": -12000.0, "le": 100000.0, "unit": "m", "doc": "ellipsoidal height of the origin"})
 
 
 @dataclass(frozen=True)
 class RoverOutputs:
     """Where corrected data goes. URLs are pyserial URLs; ``pty:PATH`` makes a pty, linked."""
 
-    nmea_url: str = field(default="", metadata={"url": "nmea_out"})
-    nmea_baudrate: int = field(default=9600, metadata={"gt": 0})
+    nmea_url: str = field(default="", metadata={
+        "url": "nmea_out", "doc": "where the corrected NMEA goes: a serial device, a pyserial "
+                                  "URL or pty:PATH (a pty made and linked at PATH); empty: none"})
+    nmea_baudrate: int = field(default=9600, metadata={
+        "gt": 0, "unit": "baud", "doc": "line speed of a serial nmea_url"})
     # e.g. "udpout:127.0.0.1:14550", or a serial device (reopened if lost)
-    mavlink_url: str = field(default="", metadata={"url": "mavlink_out"})
-    mavlink_baudrate: int = field(default=57600, metadata={"gt": 0})  # serial mavlink_url only
-    mavlink_system: int = field(default=1, metadata={"ge": 1, "le": 255})
-    mavlink_component: int = field(default=191, metadata={"ge": 1, "le": 255})
-    target_system: int = field(default=1, metadata={"ge": 1, "le": 255})
-    hold_on_alarm: bool = True
-    vehicle: str = "rover"  # rover, boat, sub, copter, plane (ArduPilot's mode tables)
+    mavlink_url: str = field(default="", metadata={
+        "url": "mavlink_out", "doc": "where GPS_INPUT goes (e.g. udpout:127.0.0.1:14550, or a "
+                                     "serial device, reopened if lost); empty: none"})
+    mavlink_baudrate: int = field(default=57600, metadata={
+        "gt": 0, "unit": "baud", "doc": "line speed of a serial mavlink_url"})
+    mavlink_system: int = field(default=1, metadata={
+        "ge": 1, "le": 255, "unit": "-", "doc": "the bridge's MAVLink system id"})
+    mavlink_component: int = field(default=191, metadata={
+        "ge": 1, "le": 255, "unit": "-", "doc": "the bridge's MAVLink component id"})
+    target_system: int = field(default=1, metadata={
+        "ge": 1, "le": 255, "unit": "-",
+        "doc": "the autopilot's system id (the mode request on an alarm)"})
+    hold_on_alarm: bool = field(default=True, metadata={
+        "doc": "on an alarm, ask the autopilot for alarm_mode"})
+    vehicle: str = field(default="rover", metadata={
+        "choices": ["rover", "boat", "sub", "copter", "plane"],
+        "doc": "ArduPilot's vehicle, whose mode table names alarm_mode"})
     # Mode requested on an alarm; "" = the vehicle's default (rover HOLD, sub ALT_HOLD; copter
     # and plane must name one). Checked at load (drivers.mavlink.modes.alarm_mode).
-    alarm_mode: str = ""
-    gps_id: int = field(default=0, metadata={"ge": 0, "le": 1, "doc": "GPS_INPUT gps_id: 1 = GPS2"})
+    alarm_mode: str = field(default="", metadata={
+        "range": "a mode of the vehicle's table, or \"\"",
+        "doc": "mode requested on an alarm; empty: the vehicle's default (rover HOLD, sub "
+               "ALT_HOLD; copter and plane must name one); checked at load"})
+    gps_id: int = field(default=0, metadata={
+        "ge": 0, "le": 1, "doc": "GPS_INPUT gps_id: 1 = GPS2", "unit": "-"})
     # Accuracy reported with a replaced fix is the prediction's, raised by this factor.
-    replaced_accuracy_factor: float = field(default=3.0, metadata={"ge": 1.0, "le": 1000.0})
+    replaced_accuracy_factor: float = field(default=3.0, metadata={
+        "ge": 1.0, "le": 1000.0, "unit": "-",
+        "doc": "the accuracy reported with a replaced fix is the prediction's, raised by this "
+               "factor"})
 
     def __post_init__(self) -> None:
         if self.hold_on_alarm:
@@ -162,15 +186,22 @@ class RoverOutputs:
 
 @dataclass(frozen=True)
 class RoverConfig:
+    """The rover: the GNSS receiver's port, the detector, the outputs (the ``[rover]`` table)."""
+
     port: SerialSettings = field(
         default_factory=lambda: SerialSettings(url="/dev/ttyUSB0", baudrate=9600)
     )
     detector: RoverDetectorParams = field(default_factory=RoverDetectorParams)
     reference: ReferencePoint | None = None
     output: RoverOutputs = field(default_factory=RoverOutputs)
-    max_line: int = field(default=120, metadata={"ge": 82, "le": 4096})
-    silence_s: float = field(default=2.0, metadata={"ge": 0.1, "le": 3600.0})
-    reconnect_max_s: float = field(default=5.0, metadata={"ge": 0.1, "le": 3600.0})  # reopen cap
+    max_line: int = field(default=120, metadata={
+        "ge": 82, "le": 4096, "unit": "bytes",
+        "doc": "longest NMEA sentence taken; a longer line is dropped and counted"})
+    silence_s: float = field(default=2.0, metadata={
+        "ge": 0.1, "le": 3600.0, "unit": "s",
+        "doc": "no valid fix this long: the failsafe (a no-fix GPS_INPUT and a STATUSTEXT)"})
+    reconnect_max_s: float = field(default=5.0, metadata={
+        "ge": 0.1, "le": 3600.0, "unit": "s", "doc": "longest wait between reopens of a lost port"})
 
 
 @dataclass(frozen=True)
@@ -190,8 +221,11 @@ class BridgeConfig:
 class BridgeFile:
     """A whole configuration file; a section it does not have is ``None``."""
 
-    name: str = ""
-    description: str = ""
+    name: str = field(default="", metadata={
+        "range": "any text", "doc": "the configuration's name, shown in the banner and the "
+                                    "summary"})
+    description: str = field(default="", metadata={
+        "range": "any text", "doc": "one line about it (fdi-bridge presets lists it)"})
     rover: RoverConfig | None = None
     rov: RovConfig | None = None
     insgnss: InsGnssSetup | None = None

@@ -22,31 +22,39 @@ DEFAULT_ALLOW_UNSIGNED = ("RADIO_STATUS", "RADIO")
 class EndpointConfig:
     """One link: ``url`` in the mavutil spelling (see :mod:`drivers.mavlink.links`)."""
 
-    url: str = field(metadata={"url": "mavlink"})
-    baud: int = field(default=115200, metadata={"gt": 0, "doc": "serial links only"})
+    url: str = field(metadata={
+        "url": "mavlink", "doc": "the link, in the mavutil spelling (udpin:HOST:PORT, "
+                                 "udpout:HOST:PORT, tcp:HOST:PORT, a serial device)"})
+    baud: int = field(default=115200, metadata={
+        "gt": 0, "doc": "serial links only", "unit": "baud"})
     signing: bool = field(
         default=False, metadata={"doc": "GCS links: only correctly signed packets pass"}
     )
-    name: str = ""
+    name: str = field(default="", metadata={
+        "range": "any text",
+        "doc": "the endpoint's name in the logs and counters (empty: autopilot, gcs0, ...)"})
     # Unsigned messages a signing link still passes (they command nothing; they teach no route).
-    allow_unsigned: tuple[str, ...] = field(
-        default=DEFAULT_ALLOW_UNSIGNED,
-        metadata={"doc": "signing links: message names passed unsigned (never teach a route)"})
-    peer_timeout_s: float = field(
-        default=0.0, metadata={"ge": 0.0, "le": 86400.0,
-                                "doc": "udpin: forget a peer silent this long; 0 never"}
-    )
+    allow_unsigned: tuple[str, ...] = field(default=DEFAULT_ALLOW_UNSIGNED, metadata={
+        "doc": "signing links: message names passed unsigned (never teach a route)",
+        "range": "MAVLink message names"})
+    peer_timeout_s: float = field(default=0.0, metadata={
+        "ge": 0.0, "le": 86400.0, "doc": "udpin: forget a peer silent this long; 0 never",
+        "unit": "s"})
     accept_any: bool = field(
         default=False, metadata={"doc": "udpout: take datagrams from any sender"}
     )
     # Per-endpoint message filters (names): what it may send us, what we send it.
-    block_in: tuple[str, ...] = ()
-    allow_out: tuple[str, ...] = ()  # empty: everything not in block_out
-    block_out: tuple[str, ...] = ()
-    max_out_pps: float = field(
-        default=0.0, metadata={"ge": 0.0, "le": 1e6,
-                                "doc": "packets/s towards this endpoint; 0 = no cap"}
-    )
+    block_in: tuple[str, ...] = field(default=(), metadata={
+        "range": "MAVLink message names",
+        "doc": "messages from this endpoint that are dropped"})
+    allow_out: tuple[str, ...] = field(default=(), metadata={
+        "range": "MAVLink message names",
+        "doc": "only these messages are sent to it (empty: everything not in block_out)"})
+    block_out: tuple[str, ...] = field(default=(), metadata={
+        "range": "MAVLink message names", "doc": "messages never sent to it"})
+    max_out_pps: float = field(default=0.0, metadata={
+        "ge": 0.0, "le": 1e6, "doc": "packets/s towards this endpoint; 0 = no cap",
+        "unit": "packets/s"})
 
     def __post_init__(self) -> None:
         for key in ("allow_unsigned", "block_in", "allow_out", "block_out"):
@@ -70,43 +78,58 @@ class MavlinkConfig:
 
     autopilot: EndpointConfig = EndpointConfig("udpin:127.0.0.1:14555")
     gcs: tuple[EndpointConfig, ...] = (EndpointConfig("udpin:127.0.0.1:14550"),)
-    system_id: int = field(default=1, metadata={"ge": 1, "le": 255})
-    component_id: int = field(default=191, metadata={"ge": 1, "le": 255})
-    pilot_system_id: int = field(
-        default=255, metadata={"ge": 1, "le": 255, "doc": "GCS id for MANUAL_CONTROL"}
-    )
-    heartbeat_hz: float = field(default=1.0, metadata={"ge": 0.1, "le": 50.0})
-    stats_hz: float = field(default=2.0, metadata={"ge": 0.0, "le": 50.0})
-    statustext_per_s: float = field(default=5.0, metadata={"ge": 0.1, "le": 50.0})
-    queue_packets: int = field(default=2000, metadata={"ge": 16})
-    read_burst: int = field(default=64, metadata={"ge": 1})
-    tlog_dir: str = ""
-    tlog_max_bytes: int = field(default=64 * 1024 * 1024, metadata={"ge": 4096})
-    tlog_dir_max_bytes: int = field(
-        default=1024 * 1024 * 1024, metadata={"ge": 4096, "doc": "oldest .tlog deleted beyond"}
-    )
-    tlog_min_free_bytes: int = field(
-        default=200 * 1024 * 1024, metadata={"ge": 0, "doc": "stop the tlog below this free"}
-    )
-    param_file: str = ""
-    signing_key_file: str = ""
-    signing_state_file: str = field(
-        default="", metadata={"doc": "last signing timestamps; default <signing_key_file>.state"}
-    )
-    command_retries: int = field(default=5, metadata={"ge": 1, "le": 20})
-    command_retry_s: float = field(default=1.0, metadata={"ge": 0.05, "le": 60.0})
-    report_stats_s: float = field(
-        default=0.0,
-        metadata={"ge": 0.0, "le": 86400.0, "doc": "log the counters this often; 0 = off"}
-    )
-    reconnect_max_s: float = field(
-        default=5.0, metadata={"ge": 0.1, "le": 3600.0,
-                                "doc": "serial links: longest wait between reopens"}
-    )
-    route_timeout_s: float = field(
-        default=10.0, metadata={"ge": 0.0, "le": 3600.0,
-                                 "doc": "forget a (system, component) route silent "
-                                        "this long, s; 0 = never"})
+    system_id: int = field(default=1, metadata={
+        "ge": 1, "le": 255, "unit": "-", "doc": "the bridge's own MAVLink system id"})
+    component_id: int = field(default=191, metadata={
+        "ge": 1, "le": 255, "unit": "-", "doc": "the bridge's own MAVLink component id"})
+    pilot_system_id: int = field(default=255, metadata={
+        "ge": 1, "le": 255, "doc": "GCS id for MANUAL_CONTROL", "unit": "-"})
+    heartbeat_hz: float = field(default=1.0, metadata={
+        "ge": 0.1, "le": 50.0, "unit": "Hz", "doc": "the bridge's HEARTBEAT rate"})
+    stats_hz: float = field(default=2.0, metadata={
+        "ge": 0.0, "le": 50.0, "unit": "Hz",
+        "doc": "rate of the detector statistics sent as NAMED_VALUE_FLOAT (0: none)"})
+    statustext_per_s: float = field(default=5.0, metadata={
+        "ge": 0.1, "le": 50.0, "unit": "1/s",
+        "doc": "at most this many STATUSTEXT a second (oldest dropped when the queue is full)"})
+    queue_packets: int = field(default=2000, metadata={
+        "ge": 16, "unit": "packets", "doc": "each destination's queue of packets the kernel did "
+                                            "not yet take (oldest dropped when full)"})
+    read_burst: int = field(default=64, metadata={
+        "ge": 1, "unit": "packets", "doc": "packets read from one endpoint per round (a flood on "
+                                           "one link stalls no other)"})
+    tlog_dir: str = field(default="", metadata={
+        "range": "a directory path, or \"\"",
+        "doc": "write a telemetry log (.tlog) of the traffic here; empty: none"})
+    tlog_max_bytes: int = field(default=64 * 1024 * 1024, metadata={
+        "ge": 4096, "unit": "bytes", "doc": "a new .tlog file beyond this size"})
+    tlog_dir_max_bytes: int = field(default=1024 * 1024 * 1024, metadata={
+        "ge": 4096, "doc": "oldest .tlog deleted beyond", "unit": "bytes"})
+    tlog_min_free_bytes: int = field(default=200 * 1024 * 1024, metadata={
+        "ge": 0, "doc": "stop the tlog below this free", "unit": "bytes"})
+    param_file: str = field(default="", metadata={
+        "range": "a file path, or \"\"",
+        "doc": "where parameters set by a ground station are kept across starts (TOML); empty: "
+               "they last until the bridge stops"})
+    signing_key_file: str = field(default="", metadata={
+        "range": "a file path, or \"\"",
+        "doc": "the MAVLink 2 signing key; needed when a GCS link has signing = true"})
+    signing_state_file: str = field(default="", metadata={
+        "doc": "last signing timestamps; default <signing_key_file>.state",
+        "range": "a file path, or \"\""})
+    command_retries: int = field(default=5, metadata={
+        "ge": 1, "le": 20, "unit": "attempts",
+        "doc": "a COMMAND_LONG without COMMAND_ACK is sent this many times"})
+    command_retry_s: float = field(default=1.0, metadata={
+        "ge": 0.05, "le": 60.0, "unit": "s",
+        "doc": "wait this long for a COMMAND_ACK before sending again"})
+    report_stats_s: float = field(default=0.0, metadata={
+        "ge": 0.0, "le": 86400.0, "doc": "log the counters this often; 0 = off", "unit": "s"})
+    reconnect_max_s: float = field(default=5.0, metadata={
+        "ge": 0.1, "le": 3600.0, "doc": "serial links: longest wait between reopens", "unit": "s"})
+    route_timeout_s: float = field(default=10.0, metadata={
+        "ge": 0.0, "le": 3600.0, "doc": "forget a (system, component) route silent this long, s; "
+                                        "0 = never", "unit": "s"})
 
     def __post_init__(self) -> None:
         if any(g.signing for g in self.gcs) and not self.signing_key_file:

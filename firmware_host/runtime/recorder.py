@@ -55,12 +55,21 @@ SUFFIX = ".cap"
 class RecorderConfig:
     """The ``[recorder]`` table. An empty ``dir`` records nothing (``--record DIR`` overrides)."""
 
-    dir: str = ""
-    file_max_mb: float = field(default=64.0, metadata={"gt": 0.0})
-    dir_max_mb: float = field(default=4096.0, metadata={"gt": 0.0})
-    flush_interval_s: float = field(default=0.5, metadata={"gt": 0.0, "le": 1.0})
-    buffer_max_kb: int = field(default=256, metadata={"ge": 1})
-    prefix: str = "fdi"
+    dir: str = field(default="", metadata={
+        "range": "a directory path, or \"\"",
+        "doc": "where the flight recorder writes; empty: nothing recorded (--record DIR "
+               "overrides)"})
+    file_max_mb: float = field(default=64.0, metadata={
+        "gt": 0.0, "unit": "MB", "doc": "a new file once the current one holds this much (10^6 "
+                                        "bytes)"})
+    dir_max_mb: float = field(default=4096.0, metadata={
+        "gt": 0.0, "unit": "MB", "doc": "the oldest recordings are deleted beyond this total"})
+    flush_interval_s: float = field(default=0.5, metadata={
+        "gt": 0.0, "le": 1.0, "unit": "s", "doc": "flush and fsync at least this often"})
+    buffer_max_kb: int = field(default=256, metadata={
+        "ge": 1, "unit": "kB", "doc": "a buffer this full is written at once"})
+    prefix: str = field(default="fdi", metadata={
+        "range": "a file-name prefix", "doc": "recordings are named PREFIX-<time>-<seq>"})
 
 
 class RecorderError(FdiBridgeError):
