@@ -82,6 +82,17 @@ CONSISTENT_S = 30.0  # a receiver consistent with its own Doppler this long ends
 # A fix within this fraction of the track's departure from an older level is back at it: the
 # isolator's step back (rover.py, _back_at_old_level) and a hold entered after one.
 BACK_AT_OLD_FRAC = 0.6
+# ... and, in a hold not entered after such a step, within this fraction (``new_level``).
+OLD_LEVEL_FRAC = 1.0 / 3.0
+# The horizon (s) of the σ the old track must be off an older level by (``side_sigmas`` of
+# it) for that level to be the other side: not grown with the age (the DGPS error is bounded).
+SIDE_HORIZON_S = 30.0
+# Older trusted levels are at least this long (s) before the anchor (the long-term levels of
+# fdi/drift.py, up to LEVEL_KEEP_S).
+OLD_LEVEL_MIN_AGE_S = 20.0
+# ``ended``: the fixes stepped back towards the old track by more than this fraction of their
+# distance from it.
+ENDED_FRAC = 0.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,7 +112,7 @@ class HoldParams:
     def side_m(self) -> float:
         """How far the old track must be off an older level for that level to be the other
         side: ``side_sigmas`` σ(30 s), not grown with the age (the DGPS error is bounded)."""
-        return self.side_sigmas * sigma_at(30.0, self.horizons_s, self.sigma_m)
+        return self.side_sigmas * sigma_at(SIDE_HORIZON_S, self.horizons_s, self.sigma_m)
 
 
 @dataclass(frozen=True, slots=True)
@@ -271,18 +282,19 @@ class LevelHold:
         dev, before, back = ep.dev, ep.before, ep.back
         return (self.slow and not ep.stale and ep.self_ok and not self.frozen
                 and ep.t - ep.t_b >= p.exit_lag_s
-                and ((dev <= 0.5 * before and before - dev >= s1)
+                and ((dev <= ENDED_FRAC * before and before - dev >= s1)
                      or (back >= before and dev <= before and back >= 2.0 * s1) or across))
 
     def _find_old(self, ep: _Epoch) -> None:
         """The older level the new fix sits at, if any (``ep.at_old``, and the old track's
         distance from it ``ep.e_old``): within a third of the old track's distance from it
-        (after a step back to an older level, ``prefer_raw``, the caller's BACK_AT_OLD_FRAC),
+        (OLD_LEVEL_FRAC; after a step back to an older level, ``prefer_raw``, the caller's
+        BACK_AT_OLD_FRAC),
         the old track at least ``side_sigmas`` σ(30 s) off it."""
         if not self.old or ep.stale:
             return
         s_side = self.p.side_m
-        frac = BACK_AT_OLD_FRAC if self.prefer_raw else 1.0 / 3.0
+        frac = BACK_AT_OLD_FRAC if self.prefer_raw else OLD_LEVEL_FRAC
         b = ep.b
         for t_o, (oe, on) in self.old:
             e_new = math.hypot(b[0] - oe, b[1] - on)

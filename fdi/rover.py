@@ -65,7 +65,14 @@ from fdi.chi2 import threshold
 from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
 from fdi.grey import gm11_predict_shifted_enu
 from fdi.kalman import GpsKalman
-from fdi.level import BACK_AT_OLD_FRAC, HoldParams, HoldStep, LevelHold
+from fdi.level import (
+    BACK_AT_OLD_FRAC,
+    OLD_LEVEL_MIN_AGE_S,
+    SIDE_HORIZON_S,
+    HoldParams,
+    HoldStep,
+    LevelHold,
+)
 from fdi.rover_evidence import (
     TIME_RESET_EPOCHS as TIME_RESET_EPOCHS,
 )
@@ -118,6 +125,12 @@ SLOW_MAX_MPS = 1.0
 # horizon) up to REVERSAL_MAX_FRAC x its size, whichever is wider: for small steps the epoch's
 # noise is more than REVERSAL_FRAC x the step (fdi/rover_evidence.py, Step.reversed_by).
 REVERSAL_FLOOR_SIGMAS = 3.0
+# A fix is back before a remembered step when the track is within STEPPED_LEVEL_FRAC of the
+# step of the stepped level, and the fix at least STEP_AWAY_FRAC x the step away from the
+# track and within BACK_NEARER_FRAC of that distance of the level before (_step_back_to).
+STEPPED_LEVEL_FRAC = 0.5
+STEP_AWAY_FRAC = 0.6
+BACK_NEARER_FRAC = 0.5
 _new = tuple.__new__
 # A GST σ at or above this is no error estimate (its square would not be a finite float): the
 # configured σ is used instead (`RoverIsolator._r`).
@@ -903,7 +916,7 @@ class RoverIsolator:
             anchor = anchor_or_none
         a_t, a_b, a_v = anchor
         drift.forget_after(a_t)  # a fault may have been building since
-        old = drift.levels_between(a_t - LEVEL_KEEP_S, a_t - 20.0)
+        old = drift.levels_between(a_t - LEVEL_KEEP_S, a_t - OLD_LEVEL_MIN_AGE_S)
         stale_m = 0.0
         if self._stale_run > 0:  # the Doppler is void since the whole fix repeats
             stale_m = math.hypot(*a_v) * (t_s - self._whole_since)
@@ -987,16 +1000,13 @@ class RoverIsolator:
 
     def _passed_reversal(self, t_s: float, b: tuple[float, float], dt: float) -> None:
         """A remembered step that ended with no fault to show it: fixes that pass the tests
-        reverse it (this epoch's step from the track within 0.4 x its size: not the noise
-        floor :meth:`_step_back_to` adds, with which passing fixes forgot the 0.55 m step of
-        ``multipath`` 1 Hz seed 9001 before its end) and stay there, passing, for
-        ``hold_exit_s`` (within ``hold_exit_sigmas`` of the drift σ of where they began). The
-        step is then forgotten. Kept, a later step that happened to be its reverse was taken
-        for its end (``multipath`` 1 Hz seed 2001, offline-calibrated: a 0.79 m multipath step
-        passed on as a step back, and its own end held 7 s as a new fault, 0.73 m against
-        0.22 m raw).
-        Forgotten at the first passing epoch, a step whose end then became a fault was no
-        longer matched (the same seed at 10 Hz: 0.31 against 0.29 m raw)."""
+        reverse it (this epoch's step from the track within REVERSAL_FRAC x its size: not the
+        noise floor :meth:`_step_back_to` adds, with which passing fixes forgot a small step
+        before its end) and stay there, passing, for ``hold_exit_s`` (within
+        ``hold_exit_sigmas`` of the drift σ of where they began). The step is then forgotten:
+        kept, a later step that happened to be its reverse was taken for its end (a multipath
+        step passed on as a step back, and its own end held as a new fault). Forgotten at the
+        first passing epoch, a step whose end then became a fault was no longer matched."""
         drift, p = self._drift, self.p
         assert drift is not None
         pr = self._passed
@@ -1100,8 +1110,8 @@ class RoverIsolator:
 
         The track was seen at the stepped level after it (:meth:`_track_at`: the step was
         accepted, not replaced). Then either this epoch's step from the track is the
-        remembered step reversed, within 0.4 x its size or the epoch's noise
-        (:meth:`_reversal_floor`, up to 0.6 x its size; both steps are measured over an
+        remembered step reversed, within REVERSAL_FRAC x its size or the epoch's noise
+        (:meth:`_reversal_floor`, up to REVERSAL_MAX_FRAC x its size; both are measured over an
         epoch, so the slow DGPS error between them cancels out); or the track is within half
         the step of the stepped level and the fix is at least 0.6 x the step away from it and
         twice as close to the level before. A jump that happens to land there costs that
@@ -1122,11 +1132,11 @@ class RoverIsolator:
             if st.reversed_by(je, jn, floor):
                 return t0  # the reverse of the remembered step (slow drift cancels out)
             size = math.hypot(se, sn)
-            if math.hypot(ce - b0e - se, cn - b0n - sn) > 0.5 * size:
+            if math.hypot(ce - b0e - se, cn - b0n - sn) > STEPPED_LEVEL_FRAC * size:
                 continue  # the track is not at the stepped level
             e_track = math.hypot(je, jn)
             e_old = math.hypot(b[0] - b0e, b[1] - b0n)
-            if e_track >= 0.6 * size and e_old <= 0.5 * e_track:
+            if e_track >= STEP_AWAY_FRAC * size and e_old <= BACK_NEARER_FRAC * e_track:
                 return t0
         return None
 
@@ -1144,12 +1154,10 @@ class RoverIsolator:
         ``hold_exit_sigmas`` of the drift σ at the level's age. The σ are the drift test's
         :attr:`~fdi.drift.DriftTest.working_sigmas`: while it calibrates, from its provisional
         σ on (D7), those instead of the wide configured ones, whose σ(30 s) of 0.9 m asked a
-        missed ramp for 1.8 m before its end was seen as a return (`dgps` 1 Hz seed 9001: a
-        0.039 m/s ramp's 1.4 m step back at 134 s held, 1.86 against 0.21 m raw; 1.5 x instead
-        of 2 x passed ramps' first fixes on at their start: docs/evaluation.md, fifteenth
-        pass). It only chooses what is passed on (the caller's state goes on as for a
-        replacement), so a jump that happens to land there costs that epoch the raw fix,
-        never more."""
+        missed ramp for 1.8 m before its end was seen as a return (a slow ramp's 1.4 m step
+        back held; docs/evaluation.md). It only chooses what is passed on (the caller's state
+        goes on as for a replacement), so a jump that happens to land there costs that epoch
+        the raw fix, never more."""
         drift, hp = self._drift, self._hold_p
         assert drift is not None and hp is not None
         ref = drift.at_or_before(t_s)
@@ -1157,8 +1165,9 @@ class RoverIsolator:
             return None
         r_t, (re_, rn), _ = ref
         sig = drift.working_sigmas
-        s_side = hp.side_sigmas * sigma_at(30.0, hp.horizons_s, sig)
-        for t_o, (oe, on) in drift.levels_between(r_t - LEVEL_KEEP_S, r_t - 20.0):
+        s_side = hp.side_sigmas * sigma_at(SIDE_HORIZON_S, hp.horizons_s, sig)
+        for t_o, (oe, on) in drift.levels_between(r_t - LEVEL_KEEP_S,
+                                                  r_t - OLD_LEVEL_MIN_AGE_S):
             e_track = math.hypot(re_ - oe, rn - on)
             s_age = sigma_at(t_s - t_o, hp.horizons_s, sig)
             if e_track < s_side:
@@ -1312,8 +1321,8 @@ class RoverIsolator:
         replaces them by the values between the fixes on either side (linear in the epoch):
         from the second on, each was GM(1,1) extrapolating its own predictions, which is not
         the receiver's level, and left in the window they biased the next predictions enough
-        to replace a clean fix (`coarse` 1 Hz seed 3001, after a 4-epoch burst: 1.07 m off
-        against 0.19 m raw). A single prediction was made from fixes and stays. The paper's
+        to replace a clean fix (after a 4-epoch burst at 1 Hz: 1.07 m off against 0.19 m
+        raw). A single prediction was made from fixes and stays. The paper's
         raw predictor keeps its self-fed window (section 2)."""
         y = (value[0] - d[0], value[1] - d[1], value[2] - d[2])
         w = self._win
