@@ -99,6 +99,7 @@ from fdi.rover_rules import (
     r_drift_watch,
     r_hold_no_doppler,
     r_step_end_passing,
+    r_zones,
 )
 from fdi.three_zone import Action as ZoneAction
 from fdi.three_zone import ThreeZoneGate, ThreeZoneParams, Zone
@@ -549,8 +550,9 @@ class RoverIsolator:
             self.kf.predict(ev.dt)
             return self._hold_step(ev)
         self._test_evidence(ev)
-        if self.p.strategy != "grey":
-            return self._step_zones(ev)
+        dec = r_zones(self, ev)
+        if dec is not None:
+            return dec
         if not ev.any_fault:
             return self._pass_clean(ev)
         self._find(ev)

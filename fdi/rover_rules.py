@@ -211,6 +211,16 @@ def r_restart(iso: RoverIsolator, ev: Evidence) -> Decision | None:
 
 RESTARTS: tuple[EvidenceRule, ...] = (r_restart_quality, r_restart)
 
+# ----------------------------------------------------------------------- R24: the zones
+
+
+def r_zones(iso: RoverIsolator, ev: Evidence) -> Decision | None:
+    """R24: strategies three_zone and combined: Cai & Shao's three zones per axis decide."""
+    if iso.p.strategy == "grey":
+        return None
+    return iso._step_zones(ev)
+
+
 # ----------------------------------------------------------------------- no test fails
 
 
@@ -472,8 +482,21 @@ def markdown() -> str:
         modes = "any" if r.modes == ANY else (
             "not HOLD" if r.modes == NOT_HOLD else ", ".join(m.name for m in r.modes))
         params = ", ".join(f"`{p}`" for p in r.params)
-        lines.append(f"| {r.id} | {r.name} | {modes} | {r.guard} | {r.source.name} | "
-                     f"{r.next_mode} | {r.equation} | {params} | {r.reason} |")
+        cells = (r.id, r.name, modes, r.guard, r.source.name, r.next_mode, r.equation, params,
+                 r.reason)
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    lines += ["", "## Parameters the rules read", "",
+              "The default preset's values (`RoverDetectorParams`, the `[rover.detector]` table);",
+              "their units and ranges are in `fdi/rover.py`.", "",
+              "| parameter | default | rules |", "| --- | --- | --- |"]
+    from fdi.rover import RoverDetectorParams
+
+    defaults = RoverDetectorParams()
+    for name in sorted({p for r in RULES for p in r.params}):
+        users = ", ".join(r.id for r in RULES if name in r.params)
+        value = getattr(defaults, name)
+        shown = "(table)" if name == "three_zone" else repr(value)
+        lines.append(f"| `{name}` | {shown} | {users} |")
     return "\n".join(lines) + "\n"
 
 
@@ -482,7 +505,7 @@ def rule_functions() -> dict[str, list[Callable[..., object]]]:
     out: dict[str, list[Callable[..., object]]] = {}
     fns: tuple[Callable[..., object], ...] = (
         *SCREENS, *RESTARTS, r_step_end_passing, r_drift_warn, r_drift_watch, r_accept,
-        *FAULT_RULES, r_alarm, r_hold_no_doppler, *HOLD_RULES)
+        *FAULT_RULES, r_alarm, r_hold_no_doppler, *HOLD_RULES, r_zones)
     for fn in fns:
         doc = fn.__doc__ or ""
         out.setdefault(doc.split(":")[0].split(" ")[0], []).append(fn)
