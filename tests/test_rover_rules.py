@@ -177,6 +177,18 @@ def test_r20_an_abrupt_step_that_stays_times_out_and_r11_ends_it_on_its_reverse(
     assert decs[k11].reason == "step_end" and decs[k11].out_enu == fixes[k11].enu
 
 
+def test_r11_fixes_that_pass_the_tests_confirm_a_steps_end() -> None:
+    # A 0.65 m step that the drift test alone flags is held, then kept; its reverse is
+    # flagged (R14), and the fixes after it, which pass every test, end it.
+    params = dataclasses.replace(CAL, drift_sigma_m=(0.12, 0.15, 0.2, 0.3, 0.4))
+    fixes = drive(130, offset=step_at(60.0, 100.0, 0.0, 0.65))
+    _, decs = run(params, fixes)
+    assert rules(decs[100:103]) == ["R14", "R9", "R11"]
+    d = decs[102]
+    assert d.reason == "step_end" and not d.fault and d.out_enu == fixes[102].enu
+    assert d.drift is not None and d.drift < params.drift_sigmas
+
+
 def test_r16_replacements_that_run_out_at_a_steps_end_restart_on_the_receiver() -> None:
     fixes, decs = _multipath(10.0)
     k = first(decs, "R16")
