@@ -531,17 +531,19 @@ class RoverIsolator:
         gate_h, gate_u = self._gates()
         t = Stats(gate_h, gate_u, self._doppler_gate())
         dt = None if self._last_t is None else fix.t_s - self._last_t
-        for screen in SCREENS:
-            dec = screen(self, fix, dt, t)
-            if dec is not None:
-                return dec
+        if fix.enu is None or (dt is not None and dt <= 0.0):  # R1-R3 can only hold then
+            for screen in SCREENS:
+                dec = screen(self, fix, dt, t)
+                if dec is not None:
+                    return dec
         self._reset_run = 0
         self._reset_t = None
         ev = self._fix_evidence(fix, dt, t)
-        for restart in RESTARTS:
-            dec = restart(self, ev)
-            if dec is not None:
-                return dec
+        if ev.restart:  # R4-R5 can only hold then
+            for restart in RESTARTS:
+                dec = restart(self, ev)
+                if dec is not None:
+                    return dec
         self._doppler_evidence(ev)
         if self._hold is not None:
             dec = r_hold_no_doppler(self, ev)
@@ -637,7 +639,7 @@ class RoverIsolator:
         d = ev.d = self._disp
         if p.doppler_test and ev.have_doppler:
             self._doppler_residuals(ev)
-        self._raw_hist.append(RawFix(z[0], z[1], d[0], d[1]))
+        self._raw_hist.append(_new(RawFix, (z[0], z[1], d[0], d[1])))
         # Slow faults (fdi/drift.py, D1-D4) and the hold after a level change (fdi/level.py).
         b: tuple[float, float] | None = None
         if self._drift is not None and ev.have_doppler and v is not None:
@@ -1237,7 +1239,7 @@ class RoverIsolator:
             self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, w)
         d = self._disp
         lv = self._last_v or (0.0, 0.0)
-        self._acc_hist.append(Accepted(z[0], z[1], d[0], d[1], lv[0], lv[1]))
+        self._acc_hist.append(_new(Accepted, (z[0], z[1], d[0], d[1], lv[0], lv[1])))
         if learn and t.pred is not None:
             self._learn_spread(z, t.pred, t.res_u is not None)
 
