@@ -93,6 +93,10 @@ OLD_LEVEL_MIN_AGE_S = 20.0
 # ``ended``: the fixes stepped back towards the old track by more than this fraction of their
 # distance from it.
 ENDED_FRAC = 0.5
+# ``new_level`` in a slow hold: fixes that stepped there by at least this fraction of the old
+# track's distance from the level are a fault's end at the short lag; a smaller step asks for
+# ``level_lag_s`` there.
+LEVEL_STEP_FRAC = 0.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -270,7 +274,7 @@ class LevelHold:
         back = -((re - h0.re) * h0.re + (rn - h0.rn) * h0.rn) / before if before > 0.0 else 0.0
         ep.dev, ep.before, ep.back, ep.t_b = dev, before, back, h0.t
         return (self.slow and not ep.stale and not self.frozen and back >= before
-                and back >= 2.0 * s1 and last_step is not None and last_step[0] >= h0.t
+                and back >= 2.0 * s1 and last_step is not None and _step_time(last_step) >= h0.t
                 and self._nearer_old(ep.b))
 
     def _ended(self, ep: _Epoch, across: bool) -> bool:
@@ -323,9 +327,12 @@ class LevelHold:
         p = self.p
         if (self.slow and not self.frozen and p.level_lag_s > 0.0
                 and self._old_since is not None):
-            if last_step is None or self._old_since - last_step[0] > p.level_lag_s + 1e-9:
+            if last_step is None:
                 return math.inf
-            if last_step[1] < 0.5 * ep.e_old:
+            step_t, step_m = last_step
+            if self._old_since - step_t > p.level_lag_s + 1e-9:
+                return math.inf
+            if step_m < LEVEL_STEP_FRAC * ep.e_old:
                 return p.level_lag_s
         return 0.0
 
@@ -367,6 +374,12 @@ class LevelHold:
                     t - o.t, p.horizons_s, p.sigma_m):
                 return False
         return True
+
+
+def _step_time(last_step: tuple[float, float]) -> float:
+    """The time of the caller's last step of b, (t, m)."""
+    step_t, _ = last_step
+    return step_t
 
 
 class _Point(NamedTuple):

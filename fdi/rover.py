@@ -79,6 +79,7 @@ from fdi.rover_evidence import (
 from fdi.rover_evidence import (
     Accepted,
     Evidence,
+    FixSignature,
     LastStep,
     Mode,
     PassedReversal,
@@ -369,7 +370,7 @@ class RoverIsolator:
         self._hold_up = 0.0
         self._hold_reason = ""
         self._run_t0 = 0.0  # time of the first replacement of the current run
-        self._prev_sig: tuple[object, ...] | None = None
+        self._prev_sig: FixSignature | None = None
         self._prev_t = 0.0
         self._stale_since: float | None = None  # the position repeated since
         self._stale_run = 0  # repeats in a row of the whole fix, this epoch's included
@@ -855,9 +856,9 @@ class RoverIsolator:
         it moved stale_move_m, or its whole fix (position, speed, course) repeated for stale_s
         or more often in a row than this receiver's own repeat rate makes likely (stale_p)."""
         enu = fix.enu
-        sig = (enu, fix.speed_mps, fix.course_deg)
+        sig = _new(FixSignature, (enu, fix.speed_mps, fix.course_deg))
         prev = self._prev_sig
-        same_pos = prev is not None and enu == prev[0]
+        same_pos = prev is not None and enu == prev.enu
         if prev is not None:  # every pair of fixes, frozen or not
             self._pairs += 1
         if same_pos and sig == prev:

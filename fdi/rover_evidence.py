@@ -143,6 +143,14 @@ class RawFix(NamedTuple):
     dn: float
 
 
+class FixSignature(NamedTuple):
+    """What the frozen test compares between consecutive fixes: the whole fix."""
+
+    enu: Vec3 | None
+    speed_mps: float | None
+    course_deg: float | None
+
+
 class LastStep(NamedTuple):
     """The last step of the Doppler-free value between two epochs."""
 
