@@ -72,7 +72,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 from fdi.drift import sigma_at
 
@@ -82,6 +82,21 @@ CONSISTENT_S = 30.0  # a receiver consistent with its own Doppler this long ends
 # A fix within this fraction of the track's departure from an older level is back at it: the
 # isolator's step back (rover.py, _back_at_old_level) and a hold entered after one.
 BACK_AT_OLD_FRAC = 0.6
+# ... and, in a hold not entered after such a step, within this fraction (``new_level``).
+OLD_LEVEL_FRAC = 1.0 / 3.0
+# The horizon (s) of the σ the old track must be off an older level by (``side_sigmas`` of
+# it) for that level to be the other side: not grown with the age (the DGPS error is bounded).
+SIDE_HORIZON_S = 30.0
+# Older trusted levels are at least this long (s) before the anchor (the long-term levels of
+# fdi/drift.py, up to LEVEL_KEEP_S).
+OLD_LEVEL_MIN_AGE_S = 20.0
+# ``ended``: the fixes stepped back towards the old track by more than this fraction of their
+# distance from it.
+ENDED_FRAC = 0.5
+# ``new_level`` in a slow hold: fixes that stepped there by at least this fraction of the old
+# track's distance from the level are a fault's end at the short lag; a smaller step asks for
+# ``level_lag_s`` there.
+LEVEL_STEP_FRAC = 0.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,7 +116,7 @@ class HoldParams:
     def side_m(self) -> float:
         """How far the old track must be off an older level for that level to be the other
         side: ``side_sigmas`` σ(30 s), not grown with the age (the DGPS error is bounded)."""
-        return self.side_sigmas * sigma_at(30.0, self.horizons_s, self.sigma_m)
+        return self.side_sigmas * sigma_at(SIDE_HORIZON_S, self.horizons_s, self.sigma_m)
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,10 +157,9 @@ class LevelHold:
         self._agree_b = (0.0, 0.0)
         self._old_since: float | None = None  # the new fixes at an older level since, and
         self._old_b = (0.0, 0.0)  # ... their Doppler-free value then
-        # (t, |b − b_a|, b − b_a) over 2L
-        self._dev: deque[tuple[float, float, float, float]] = deque()
-        self._recent: deque[tuple[float, float, float]] = deque()  # the receiver's (t, b)
-        self._long: deque[tuple[float, float, float]] = deque()  # ... over CONSISTENT_S
+        self._dev: deque[_Deviation] = deque()  # over 2L
+        self._recent: deque[_Point] = deque()  # the receiver's b over L
+        self._long: deque[_Point] = deque()  # ... over CONSISTENT_S
 
     def _nearer_old(self, b: tuple[float, float]) -> bool:
         """``b`` is nearer every older level than the old track (the anchor) is, and the
@@ -167,7 +181,38 @@ class LevelHold:
              last_step: tuple[float, float] | None = None) -> HoldStep:
         """The receiver's Doppler-free value ``b`` at ``t``, its Doppler ``v`` and the
         integrated displacement ``d``; ``stale``: the receiver repeats its whole fix;
-        ``fresh``: this fix differs from the previous one (position, speed or course)."""
+        ``fresh``: this fix differs from the previous one (position, speed or course);
+        ``last_step``: the caller's last step of b between two epochs, (t, m)."""
+        ep = self._evidence(t, b, v, d, stale, dt)
+        if self._agreed(ep):
+            return HoldStep("exit", ep.track, ep.g)
+        across = self._across(ep, last_step)
+        if self._ended(ep, across):
+            return HoldStep("ended", ep.track, ep.g)
+        if self._at_new_level(ep, last_step):
+            return HoldStep("new_level", ep.track, ep.g)
+        if self._consistent(ep):
+            return HoldStep("consistent", ep.track, ep.g)
+        lg = self._long
+        while len(lg) > 1 and lg[1].t <= t - CONSISTENT_S:
+            lg.popleft()
+        p = self.p
+        if t - self.t0 > (p.max_s if self.slow else p.output_s):
+            return HoldStep("give_up", ep.track, ep.g)
+        if not stale and (ep.g <= p.exit_sigmas or not math.isnan(ep.at_old) or across
+                          or (self.frozen and fresh)
+                          or ((self.prefer_raw or self.was_raw) and ep.self_ok)):
+            self.was_raw = True
+            return HoldStep("raw", ep.track, ep.g)
+        self.was_raw = False
+        if t - self.t0 <= p.output_s:
+            return HoldStep("track", ep.track, ep.g)
+        return HoldStep("alarm", ep.track, ep.g)
+
+    def _evidence(self, t: float, b: tuple[float, float], v: tuple[float, float],
+                  d: tuple[float, float], stale: bool, dt: float) -> _Epoch:
+        """The old track (L1), the new fix against it in σ (g), and the receiver against its
+        own Doppler over the fixed lag."""
         p = self.p
         lag = p.lag_s
         track = (self.anchor_b[0] + d[0] + lag * v[0], self.anchor_b[1] + d[1] + lag * v[1])
@@ -183,15 +228,20 @@ class LevelHold:
         g = math.sqrt((re * re + rn * rn) / var)
         # The receiver against its own Doppler over the fixed lag.
         rec = self._recent
-        rec.append((t, b[0], b[1]))
-        while len(rec) > 1 and rec[1][0] <= t - p.exit_lag_s:
+        rec.append(_Point(t, b[0], b[1]))
+        while len(rec) > 1 and rec[1].t <= t - p.exit_lag_s:
             rec.popleft()
-        t_old, be, bn = rec[0]
-        self_ok = math.hypot(b[0] - be, b[1] - bn) <= p.exit_sigmas * sigma_at(
-            max(t - t_old, 1e-3), p.horizons_s, p.sigma_m)
-        # After a frozen stretch the old track rests on a void Doppler: the receiver, live
-        # again and consistent with its own Doppler over the lag, is the evidence.
-        agrees = not stale and (g <= p.exit_sigmas or (self.frozen and self_ok))
+        first = rec[0]
+        self_ok = math.hypot(b[0] - first.e, b[1] - first.n) <= p.exit_sigmas * sigma_at(
+            max(t - first.t, 1e-3), p.horizons_s, p.sigma_m)
+        return _Epoch(t, b, stale, track, g, re, rn, self_ok)
+
+    def _agreed(self, ep: _Epoch) -> bool:
+        """``exit``: the new fixes have agreed with the old track within ``exit_sigmas`` for
+        ``exit_lag_s``, consistent with their own Doppler since (after a frozen stretch, the
+        old track rests on a void Doppler: the receiver's own consistency is the evidence)."""
+        p, t, b = self.p, ep.t, ep.b
+        agrees = not ep.stale and (ep.g <= p.exit_sigmas or (self.frozen and ep.self_ok))
         if agrees and self._agree_since is not None:
             # ... and the receiver stays consistent with itself since the agreement began.
             ab = self._agree_b
@@ -203,114 +253,167 @@ class LevelHold:
         elif self._agree_since is None:
             self._agree_since = t
             self._agree_b = b
-        if self._agree_since is not None and t - self._agree_since >= p.exit_lag_s - 1e-9:
-            return HoldStep("exit", track, g)
-        # A slow fault that ended: a step back towards the old track, then consistency. Or a
-        # step back *across* it (at least the whole way back, ending no further off): the
-        # anchor sat inside a slow drift, and the drift's end overshoots it.
+        return self._agree_since is not None and t - self._agree_since >= p.exit_lag_s - 1e-9
+
+    def _across(self, ep: _Epoch, last_step: tuple[float, float] | None) -> bool:
+        """Record the fix's deviation from the old track over 2L; a *step* back across the
+        old track that ends further off, nearer every older level than the old track: the
+        anchor sat deep inside a slow drift (found late), and the drift's end took the fixes
+        back past it to where they were before it. Passed on at once (``raw``), ended once
+        consistent with their own Doppler over the lag."""
+        p, t, re, rn = self.p, ep.t, ep.re, ep.rn
         dev = math.hypot(re, rn)
         hist = self._dev
-        hist.append((t, dev, re, rn))
-        while len(hist) > 1 and hist[1][0] <= t - 2.0 * p.exit_lag_s:
+        hist.append(_Deviation(t, dev, re, rn))
+        while len(hist) > 1 and hist[1].t <= t - 2.0 * p.exit_lag_s:
             hist.popleft()
-        t_b, before, re0, rn0 = hist[0]
+        h0 = hist[0]
+        before = h0.dev
         s1 = p.exit_sigmas * p.sigma_m[0]
         # the move since then towards the old track, along the line from it
-        back = -((re - re0) * re0 + (rn - rn0) * rn0) / before if before > 0.0 else 0.0
-        # A *step* back across it that ends further off, nearer every older level than the
-        # old track: the anchor sat deep inside a slow drift (found late), and the drift's
-        # end took the fixes back past it to where they were before it (multipath 10 Hz seed
-        # 2002, offline-calibrated: a 0.045 m/s ramp found at 32 s, the hold anchored 1.1 m
-        # into it; its end held 27 s, 1.16 m RMS against 0.30 raw). Passed on at once
-        # ("raw"), ended once consistent with their own Doppler over the lag.
-        across = (self.slow and not stale and not self.frozen and back >= before
-                  and back >= 2.0 * s1 and last_step is not None and last_step[0] >= t_b
-                  and self._nearer_old(b))
-        if (self.slow and not stale and self_ok and not self.frozen
-                and t - t_b >= p.exit_lag_s
-                and ((dev <= 0.5 * before and before - dev >= s1)
-                     or (back >= before and dev <= before and back >= 2.0 * s1) or across)):
-            return HoldStep("ended", track, g)
-        at_old = math.nan
-        e_old = math.nan  # the old track's distance from that level
-        if self.old and not stale:
-            s_side = p.side_m
-            # After a step back to an older level (prefer_raw) the caller's rule for that
-            # step (BACK_AT_OLD_FRAC); else a third.
-            frac = BACK_AT_OLD_FRAC if self.prefer_raw else 1.0 / 3.0
-            for t_o, (oe, on) in self.old:
-                e_new = math.hypot(b[0] - oe, b[1] - on)
-                e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)
-                if e_new <= frac * e_track and e_track >= s_side:
-                    at_old, e_old = t_o, e_track
-                    break
-        # How long the new fixes have sat at an older level, consistent with their own Doppler
-        # since (within exit_sigmas of the drift σ of where they were then).
-        if math.isnan(at_old) or not self_ok or (self._old_since is not None and math.hypot(
+        back = -((re - h0.re) * h0.re + (rn - h0.rn) * h0.rn) / before if before > 0.0 else 0.0
+        ep.dev, ep.before, ep.back, ep.t_b = dev, before, back, h0.t
+        return (self.slow and not ep.stale and not self.frozen and back >= before
+                and back >= 2.0 * s1 and last_step is not None and _step_time(last_step) >= h0.t
+                and self._nearer_old(ep.b))
+
+    def _ended(self, ep: _Epoch, across: bool) -> bool:
+        """``ended``: in a slow hold, a step back towards the old track (by more than half its
+        distance and ``exit_sigmas`` of the 1 s σ) or at least the whole way back, or
+        ``across`` it, then consistent with their own Doppler for L."""
+        p = self.p
+        s1 = p.exit_sigmas * p.sigma_m[0]
+        dev, before, back = ep.dev, ep.before, ep.back
+        return (self.slow and not ep.stale and ep.self_ok and not self.frozen
+                and ep.t - ep.t_b >= p.exit_lag_s
+                and ((dev <= ENDED_FRAC * before and before - dev >= s1)
+                     or (back >= before and dev <= before and back >= 2.0 * s1) or across))
+
+    def _find_old(self, ep: _Epoch) -> None:
+        """The older level the new fix sits at, if any (``ep.at_old``, and the old track's
+        distance from it ``ep.e_old``): within a third of the old track's distance from it
+        (OLD_LEVEL_FRAC; after a step back to an older level, ``prefer_raw``, the caller's
+        BACK_AT_OLD_FRAC),
+        the old track at least ``side_sigmas`` σ(30 s) off it."""
+        if not self.old or ep.stale:
+            return
+        s_side = self.p.side_m
+        frac = BACK_AT_OLD_FRAC if self.prefer_raw else OLD_LEVEL_FRAC
+        b = ep.b
+        for t_o, (oe, on) in self.old:
+            e_new = math.hypot(b[0] - oe, b[1] - on)
+            e_track = math.hypot(self.anchor_b[0] - oe, self.anchor_b[1] - on)
+            if e_new <= frac * e_track and e_track >= s_side:
+                ep.at_old, ep.e_old = t_o, e_track
+                return
+
+    def _track_old_since(self, ep: _Epoch) -> None:
+        """How long the new fixes have sat at an older level, consistent with their own
+        Doppler since (within ``exit_sigmas`` of the drift σ of where they were then)."""
+        p, t, b = self.p, ep.t, ep.b
+        at_old = not math.isnan(ep.at_old)
+        if not at_old or not ep.self_ok or (self._old_since is not None and math.hypot(
                 b[0] - self._old_b[0], b[1] - self._old_b[1]) > p.exit_sigmas * sigma_at(
                 max(t - self._old_since, 1e-3), p.horizons_s, p.sigma_m)):
             self._old_since = None
-        if self._old_since is None and not math.isnan(at_old) and self_ok:
+        if self._old_since is None and at_old and ep.self_ok:
             self._old_since, self._old_b = t, b
-        # In a hold on a slow fault, fixes that *stepped* (``last_step``, the caller's last
-        # step of b between two epochs: (t, m)) by half the old track's distance from that
-        # level or more, at most level_lag_s before they arrived there, are a fault's end:
-        # the short lag. A smaller step asks for level_lag_s there: a ramp still running
-        # sits, for a second or two, where some older level of a wandering DGPS error happens
-        # to be (the ramp then ran on unflagged, and the next hold anchored inside it).
-        # Fixes that *drifted* there (no step of theirs within level_lag_s before they
-        # arrived) never end the hold as a new level: a slow ramp lingers near older levels
-        # of an error that wanders over metres, and taking it forgets every reference since
-        # that level (`coarse` 1 Hz seed 10001: a 0.063 m/s ramp taken at 1047 s for the
-        # level of 751 s, 256 s before the anchor; its end 13 s later was replaced by the
-        # ramp's track, 1.55 m worse than the receiver). They are passed on (``raw``) while
-        # they sit there; the hold ends on a step, on consistency (``consistent``) or at
-        # ``max_s``.
-        need = 0.0
+
+    def _level_need(self, ep: _Epoch, last_step: tuple[float, float] | None) -> float:
+        """How long (s) the fixes must sit at the older level: in a slow hold, none after a
+        step of half the old track's distance from it or more within ``level_lag_s`` before
+        they arrived; ``level_lag_s`` after a smaller one; never after no step (fixes that
+        drifted there: a slow ramp lingers near older levels of an error that wanders)."""
+        p = self.p
         if (self.slow and not self.frozen and p.level_lag_s > 0.0
                 and self._old_since is not None):
-            if last_step is None or self._old_since - last_step[0] > p.level_lag_s + 1e-9:
-                need = math.inf
-            elif last_step[1] < 0.5 * e_old:
-                need = p.level_lag_s
-        if (not math.isnan(at_old) and self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
-                and t - rec[0][0] >= p.exit_lag_s - 1e-9
+            if last_step is None:
+                return math.inf
+            step_t, step_m = last_step
+            if self._old_since - step_t > p.level_lag_s + 1e-9:
+                return math.inf
+            if step_m < LEVEL_STEP_FRAC * ep.e_old:
+                return p.level_lag_s
+        return 0.0
+
+    def _at_new_level(self, ep: _Epoch, last_step: tuple[float, float] | None) -> bool:
+        """``new_level``: the new fixes sit at an older trusted level while the old track
+        does not, consistent with their own Doppler for the lag (and as long as
+        :meth:`_level_need` asks): the old track was the faulty side."""
+        self._find_old(ep)
+        self._track_old_since(ep)
+        need = self._level_need(ep, last_step)
+        p, t = self.p, ep.t
+        if (not math.isnan(ep.at_old) and ep.self_ok and t - self.t0 >= p.exit_lag_s - 1e-9
+                and t - self._recent[0].t >= p.exit_lag_s - 1e-9
                 and self._old_since is not None and t - self._old_since >= need - 1e-9):
-            self.matched_t = at_old
-            return HoldStep("new_level", track, g)
-        # A slow hold whose receiver has been consistent with its own Doppler at every
-        # horizon up to CONSISTENT_S, for that long: a drift still running at 0.05 m/s would
-        # show there (1.5 m against σ(30 s) of 0.2-0.6 m); the fault is over.
+            self.matched_t = ep.at_old
+            return True
+        return False
+
+    def _consistent(self, ep: _Epoch) -> bool:
+        """``consistent``: a slow hold whose receiver has been consistent with its own
+        Doppler at every horizon up to CONSISTENT_S, for that long: a drift still running at
+        0.05 m/s would show there (1.5 m against σ(30 s) of 0.2-0.6 m); the fault is over."""
+        p, t, b = self.p, ep.t, ep.b
         lg = self._long
-        if stale or not self_ok:
+        if ep.stale or not ep.self_ok:
             lg.clear()
         else:
-            lg.append((t, b[0], b[1]))
-        if self.slow and lg and t - lg[0][0] >= CONSISTENT_S - 1e-9:
-            ok = True
-            for h in p.horizons_s:
-                if h > CONSISTENT_S:
-                    break
-                j = 0
-                while j + 1 < len(lg) and lg[j + 1][0] <= t - h:
-                    j += 1
-                _, oe, on = lg[j]
-                if math.hypot(b[0] - oe, b[1] - on) > p.exit_sigmas * sigma_at(
-                        t - lg[j][0], p.horizons_s, p.sigma_m):
-                    ok = False
-                    break
-            if ok:
-                return HoldStep("consistent", track, g)
-        while len(lg) > 1 and lg[1][0] <= t - CONSISTENT_S:
-            lg.popleft()
-        if t - self.t0 > (p.max_s if self.slow else p.output_s):
-            return HoldStep("give_up", track, g)
-        if not stale and (g <= p.exit_sigmas or not math.isnan(at_old) or across
-                          or (self.frozen and fresh)
-                          or ((self.prefer_raw or self.was_raw) and self_ok)):
-            self.was_raw = True
-            return HoldStep("raw", track, g)
-        self.was_raw = False
-        if t - self.t0 <= p.output_s:
-            return HoldStep("track", track, g)
-        return HoldStep("alarm", track, g)
+            lg.append(_Point(t, b[0], b[1]))
+        if not (self.slow and lg and t - lg[0].t >= CONSISTENT_S - 1e-9):
+            return False
+        for h in p.horizons_s:
+            if h > CONSISTENT_S:
+                break
+            j = 0
+            while j + 1 < len(lg) and lg[j + 1].t <= t - h:
+                j += 1
+            o = lg[j]
+            if math.hypot(b[0] - o.e, b[1] - o.n) > p.exit_sigmas * sigma_at(
+                    t - o.t, p.horizons_s, p.sigma_m):
+                return False
+        return True
+
+
+def _step_time(last_step: tuple[float, float]) -> float:
+    """The time of the caller's last step of b, (t, m)."""
+    step_t, _ = last_step
+    return step_t
+
+
+class _Point(NamedTuple):
+    """The receiver's Doppler-free value at a time."""
+
+    t: float
+    e: float
+    n: float
+
+
+class _Deviation(NamedTuple):
+    """The new fix's deviation from the old track at a time: its length and (east, north)."""
+
+    t: float
+    dev: float
+    re: float
+    rn: float
+
+
+@dataclass(slots=True)
+class _Epoch:
+    """One epoch of the hold: what :meth:`LevelHold.step`'s tests decide on."""
+
+    t: float
+    b: tuple[float, float]
+    stale: bool
+    track: tuple[float, float]  # (L1)
+    g: float  # the new fix against the old track, in σ
+    re: float  # the new fix minus the anchor (east, north)
+    rn: float
+    self_ok: bool  # the receiver consistent with its own Doppler over the lag
+    dev: float = 0.0  # |(re, rn)|
+    before: float = 0.0  # ... 2L ago (at t_b)
+    back: float = 0.0  # the move since then towards the old track
+    t_b: float = 0.0
+    at_old: float = math.nan  # the older level the new fix sits at
+    e_old: float = math.nan  # the old track's distance from it

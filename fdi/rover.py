@@ -66,7 +66,43 @@ from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
 from fdi.fielddoc import documented
 from fdi.grey import gm11_predict_shifted_enu
 from fdi.kalman import GpsKalman
-from fdi.level import BACK_AT_OLD_FRAC, HoldParams, LevelHold
+from fdi.level import (
+    BACK_AT_OLD_FRAC,
+    OLD_LEVEL_MIN_AGE_S,
+    SIDE_HORIZON_S,
+    HoldParams,
+    HoldStep,
+    LevelHold,
+)
+from fdi.rover_evidence import (
+    TIME_RESET_EPOCHS as TIME_RESET_EPOCHS,
+)
+from fdi.rover_evidence import (
+    Accepted,
+    Evidence,
+    FixSignature,
+    LastStep,
+    Mode,
+    PassedReversal,
+    RawFix,
+    Source,
+    Stats,
+    Step,
+    StepEndWatch,
+)
+from fdi.rover_rules import (
+    FAULT_RULES,
+    HOLD_RULES,
+    RESTARTS,
+    SCREENS,
+    r_accept,
+    r_alarm,
+    r_drift_warn,
+    r_drift_watch,
+    r_hold_no_doppler,
+    r_step_end_passing,
+    r_zones,
+)
 from fdi.three_zone import Action as ZoneAction
 from fdi.three_zone import ThreeZoneGate, ThreeZoneParams, Zone
 
@@ -84,25 +120,24 @@ STEP_END_EPOCHS = 3
 # No slow fault moves the Doppler-free value faster than this (m/s; the ramps of issue 13 run
 # at 0.02-0.3 m/s): a drift fault whose value stepped since the previous epoch by more than
 # this rate plus hold_exit_sigmas of the drift σ over the interval is a step, and its hold an
-# abrupt one (`multipath` 5 Hz seed 12004: a 0.7 m multipath step's end that only the drift
-# and Doppler tests flagged was held as a slow fault, 20 s of track and alarm, 48 clean epochs
-# flagged; docs/evaluation.md, fifteenth pass).
+# abrupt one (a multipath step's end that only the drift and Doppler tests flagged, held as a
+# slow fault, kept 20 s of track and alarm; docs/evaluation.md).
 SLOW_MAX_MPS = 1.0
-# A step is the reverse of a remembered one within 0.4 x its size, or within this many σ of
-# the difference of two one-epoch steps (√2 x the calibrated drift σ at its shortest horizon)
-# up to 0.6 x its size, whichever is wider: for small steps the epoch's noise is more than
-# 0.4 x the step (`multipath` 1 Hz seed 9001: a 0.55 m step's end 0.28 m from its reverse was
-# held 8 s as a new fault, 0.23 m worse than raw; docs/evaluation.md, sixteenth pass).
+# A step is the reverse of a remembered one within REVERSAL_FRAC x its size, or within this
+# many σ of the difference of two one-epoch steps (√2 x the calibrated drift σ at its shortest
+# horizon) up to REVERSAL_MAX_FRAC x its size, whichever is wider: for small steps the epoch's
+# noise is more than REVERSAL_FRAC x the step (fdi/rover_evidence.py, Step.reversed_by).
 REVERSAL_FLOOR_SIGMAS = 3.0
+# A fix is back before a remembered step when the track is within STEPPED_LEVEL_FRAC of the
+# step of the stepped level, and the fix at least STEP_AWAY_FRAC x the step away from the
+# track and within BACK_NEARER_FRAC of that distance of the level before (_step_back_to).
+STEPPED_LEVEL_FRAC = 0.5
+STEP_AWAY_FRAC = 0.6
+BACK_NEARER_FRAC = 0.5
 _new = tuple.__new__
 # A GST σ at or above this is no error estimate (its square would not be a finite float): the
 # configured σ is used instead (`RoverIsolator._r`).
 _SD_MAX = math.sqrt(1.7976931348623157e308)
-
-TIME_RESET_EPOCHS = 3
-"""A receiver's clock that jumps back by more than ``max_gap_s`` is believed (the filter
-restarts on the new time base) once this many fixes in a row follow the new time, each after
-the last: one corrupt time cannot restart the filter on its fix."""
 
 
 # Bounds of the detector's parameters, in which it works as documented: the loader
@@ -393,6 +428,8 @@ class Decision(NamedTuple):
     kf_enu: tuple[float, float, float] | None
     zones: tuple[int, ...] | None = None  # three_zone/combined: per axis 0/1/2 (e, n[, u])
     drift: float | None = None  # the drift test's statistic (D4), or the hold's, in σ
+    rule: str = ""  # the rule of fdi/rover_rules.py that decided (R1 ...)
+    source: Source = Source.NONE  # where the estimate comes from (under the alarm: carried)
 
 
 class RoverIsolator:
@@ -418,10 +455,10 @@ class RoverIsolator:
         self._back_t: float | None = None  # ... to the older level of this time (or None)
         # Accepted fixes (east, north) with the Doppler displacement at each, last `window`.
         # ... and the Doppler velocity at each (for the lag's share, with the drift test).
-        self._acc_hist: deque[tuple[float, float, float, float, float, float]] = deque(maxlen=n)
+        self._acc_hist: deque[Accepted] = deque(maxlen=n)
         # The receiver's own recent fixes with the Doppler displacement at each: is it
         # consistent with itself over the window (a frozen or wandering fix is not)?
-        self._raw_hist: deque[tuple[float, float, float, float]] = deque(maxlen=RAW_HORIZON)
+        self._raw_hist: deque[RawFix] = deque(maxlen=RAW_HORIZON)
         self._coast_since: float | None = None
         # The Doppler residual's variance per axis: its prior scaled to the window's span
         # once the fix interval is known (_set_inc_prior), then learned from accepted fixes.
@@ -445,7 +482,7 @@ class RoverIsolator:
         self._hold_up = 0.0
         self._hold_reason = ""
         self._run_t0 = 0.0  # time of the first replacement of the current run
-        self._prev_sig: tuple[object, ...] | None = None
+        self._prev_sig: FixSignature | None = None
         self._prev_t = 0.0
         self._stale_since: float | None = None  # the position repeated since
         self._stale_run = 0  # repeats in a row of the whole fix, this epoch's included
@@ -454,17 +491,14 @@ class RoverIsolator:
         # receiver's chance of a repeat (_stale_check).
         self._pairs = 0
         self._repeats = 0
-        # Abrupt steps seen at the start of a run of faults, newest last; and the step back
-        # being confirmed (the step's time, the fix's Doppler-free value and time when it
-        # began, the epochs since).
-        self._steps: list[_Step] = []
-        self._rev: tuple[float, tuple[float, float], float, int] | None = None
-        # ... and a remembered step reversed by fixes that pass the tests (its time, the
-        # first such fix's Doppler-free value and time, the last such fix's time)
-        self._passed_rev: tuple[float, tuple[float, float], float, float] | None = None
+        # Abrupt steps seen at the start of a run of faults, newest last; the step back being
+        # confirmed; and a remembered step reversed by fixes that pass the tests.
+        self._steps: list[Step] = []
+        self._end_watch: StepEndWatch | None = None
+        self._passed: PassedReversal | None = None
         self._prev_b: tuple[float, float] | None = None  # the last epoch's b ...
         self._prev_bt = 0.0  # ... and its time
-        self._last_step: tuple[float, float] | None = None  # the last step of b: (t, m)
+        self._last_step: LastStep | None = None  # the last step of b
         # The coordinates' quantum per axis: the smallest non-zero change between consecutive
         # fixes (fdi/drift.py, D6); inf until seen.
         self._last_e = self._last_n = math.nan
@@ -507,12 +541,12 @@ class RoverIsolator:
             else:
                 self._drift.reset()
                 self._steps.clear()
-        self._rev = None
+        self._end_watch = None
         self._prev_b = None  # the displacement's origin moves
         self._last_step = None
         self._acc_hist.clear()
         lv = self._last_v or (0.0, 0.0)
-        self._acc_hist.append((z[0], z[1], 0.0, 0.0, lv[0], lv[1]))
+        self._acc_hist.append(Accepted(z[0], z[1], 0.0, 0.0, lv[0], lv[1]))
         self._coast_since = None
         self._window_clear()
         self._disp = [0.0, 0.0, 0.0]
@@ -581,6 +615,19 @@ class RoverIsolator:
 
     # -------------------------------------------------------------- the step
 
+    @property
+    def mode(self) -> Mode:
+        """What the isolator is doing, from its memory (the alarm latches apart from it)."""
+        if self._hold is not None:
+            return Mode.HOLD
+        if self._coast_since is not None:
+            return Mode.COAST
+        if self._end_watch is not None:
+            return Mode.STEP_END
+        if self._stepped_back:
+            return Mode.STEP_BACK
+        return Mode.REPLACE if self._consec else Mode.TRACK
+
     def step(self, fix: FixInput) -> Decision:
         last_up = self._last_up
         d = self._step(fix)
@@ -592,34 +639,56 @@ class RoverIsolator:
         return d
 
     def _step(self, fix: FixInput) -> Decision:
-        p = self.p
+        """One epoch: the time screens (R1-R3), the evidence (once), then the rules of
+        :mod:`fdi.rover_rules` in their order; the first that answers decides."""
         gate_h, gate_u = self._gates()
-        t = _Tests(gate_h, gate_u, self._doppler_gate())
-        if fix.enu is None:
-            return self._decision("no_fix", False, "no_fix", None, t)
+        t = Stats(gate_h, gate_u, self._doppler_gate())
         dt = None if self._last_t is None else fix.t_s - self._last_t
-        if dt is not None and -p.max_gap_s <= dt <= 0.0:
-            # A stale or repeated epoch: its fix is not passed on.
-            reason = "time_backwards" if dt < 0 else "duplicate_time"
-            return self._decision("no_fix", False, reason, None, t)
-        if dt is not None and dt < 0.0:
-            # The clock jumped back by more than a gap: one such sentence (a corrupt time)
-            # must not restart the filter on its fix (the pipeline fuzzer's: 10:00:00 at 18 deg
-            # N in a track at 32 deg N was accepted, and the next fixes went out 166 km below
-            # the ground). The new time base is taken once TIME_RESET_EPOCHS fixes in a row
-            # follow it, each after the last; until then they are not passed on.
-            ok = (self._reset_t is not None and 0.0 < fix.t_s - self._reset_t <= p.max_gap_s)
-            self._reset_run = self._reset_run + 1 if ok else 1
-            self._reset_t = fix.t_s
-            if self._reset_run < TIME_RESET_EPOCHS:
-                return self._decision("no_fix", False, "time_backwards", None, t)
+        if fix.enu is None or (dt is not None and dt <= 0.0):  # R1-R3 can only hold then
+            for screen in SCREENS:
+                dec = screen(self, fix, dt, t)
+                if dec is not None:
+                    return dec
         self._reset_run = 0
         self._reset_t = None
+        ev = self._fix_evidence(fix, dt, t)
+        if ev.restart:  # R4-R5 can only hold then
+            for restart in RESTARTS:
+                dec = restart(self, ev)
+                if dec is not None:
+                    return dec
+        self._doppler_evidence(ev)
+        if self._hold is not None:
+            dec = r_hold_no_doppler(self, ev)
+            if dec is not None:
+                return dec
+            self.kf.predict(ev.dt)
+            return self._hold_step(ev)
+        self._test_evidence(ev)
+        dec = r_zones(self, ev)
+        if dec is not None:
+            return dec
+        if not ev.any_fault:
+            return self._pass_clean(ev)
+        self._find(ev)
+        for rule in FAULT_RULES:
+            dec = rule(self, ev)
+            if dec is not None:
+                return dec
+        return r_alarm(self, ev)
+
+    # -------------------------------------------------------------- the evidence
+
+    def _fix_evidence(self, fix: FixInput, dt: float | None, t: Stats) -> Evidence:
+        """The fix itself: its variance, height, Doppler velocity, the frozen test and the
+        quality screens; and whether the filter restarts on it."""
+        p = self.p
         if (not self._inc_prior_set and p.doppler_test and dt is not None
                 and 0.0 < dt <= p.max_gap_s):
             self._set_inc_prior(dt)
             t.doppler_gate = self._doppler_gate()
         z = fix.enu
+        assert z is not None
         r = self._r(fix)
         # A 2D fix (no altitude: RMC/GLL only) has NaN up: hold the last known height with a
         # huge variance, so it neither moves the filter nor is tested.
@@ -628,11 +697,7 @@ class RoverIsolator:
             z = (z[0], z[1], self._last_up)
             r = (r[0], r[1], 1e12)
         elif not self._up_seen:
-            self._up_seen = True
-            self._win = deque(((w[0], w[1], z[2]) for w in self._win), maxlen=self.p.window)
-            if self.kf.initialised:
-                ax = self.kf.axes[2]
-                ax.p, ax.v, ax.P00, ax.P01, ax.P11 = z[2], 0.0, r[2], 0.0, 25.0
+            self._first_height(z, r)
             up_known = False  # nothing to test it against yet
         self._last_up = z[2]
         v = self._velocity(fix)
@@ -646,96 +711,103 @@ class RoverIsolator:
         quant = self._quant
         if 1e-4 < de < quant[0] or 1e-4 < dn < quant[1]:  # rare: NaN compares false
             self._learn_quantum(de, dn)
-
         quality = []
         if p.min_sats and fix.num_sats is not None and fix.num_sats < p.min_sats:
             quality.append("sats")
         if p.max_hdop and fix.hdop is not None and fix.hdop > p.max_hdop:
             quality.append("hdop")
-
-        restart_reason = ""
+        restart = ""
         if dt is None or not self.kf.initialised:
-            restart_reason = "start"
+            restart = "start"
         elif dt > p.max_gap_s:
-            restart_reason = "gap_restart"
+            restart = "gap_restart"
         elif dt < 0.0:
-            restart_reason = "time_reset"  # the receiver's clock jumped back by more than a gap
-        if restart_reason:
-            self._last_v = v
-            if quality:  # nothing to replace it with: not passed on
-                return self._raise_alarm(z, r, "+".join(quality), t)
-            self._restart(z, r)
-            return self._accept(z, t, restart_reason)
-        assert dt is not None
+            restart = "time_reset"  # the receiver's clock jumped back by more than a gap
+        return Evidence(fix.t_s, 0.0 if dt is None else dt, z, r, v, up_known, quality, frozen,
+                        stale, t, restart)
 
-        # Doppler displacement over the interval (trapezoid); no Doppler breaks the chain.
-        lv = self._last_v
+    def _first_height(self, z: tuple[float, float, float],
+                      r: tuple[float, float, float]) -> None:
+        """The first fix with a height: the window and the filter take it."""
+        self._up_seen = True
+        self._win = deque(((w[0], w[1], z[2]) for w in self._win), maxlen=self.p.window)
+        if self.kf.initialised:
+            ax = self.kf.axes[2]
+            ax.p, ax.v, ax.P00, ax.P01, ax.P11 = z[2], 0.0, r[2], 0.0, 25.0
+
+    def _doppler_evidence(self, ev: Evidence) -> None:
+        """The Doppler displacement (trapezoid; no Doppler breaks the chain), the Doppler
+        residual against the accepted fix of ``window`` epochs ago, the receiver against its
+        own Doppler over RAW_HORIZON epochs, and the Doppler-free value b (D1)."""
+        p = self.p
+        v, lv, dt, z = ev.v, self._last_v, ev.dt, ev.z
         if p.predictor == "doppler":
             if v is not None and lv is not None:
                 self._disp[0] += 0.5 * (v[0] + lv[0]) * dt
                 self._disp[1] += 0.5 * (v[1] + lv[1]) * dt
             else:
-                # The window's Doppler-free values no longer line up: start it again.
-                self._window_clear()
-                self._disp = [0.0, 0.0, 0.0]
-                self._acc_hist.clear()
-                self._raw_hist.clear()
-                if self._drift is not None:
-                    self._drift.reset()
-                    self._steps.clear()
-        have_doppler = v is not None and lv is not None
+                self._break_chain()
+        ev.have_doppler = v is not None and lv is not None
         self._last_v = v
-        d = self._disp
-        raw_consistent = True
-        doppler_fault = False
-        if p.doppler_test and have_doppler:
-            if self._acc_hist:
-                a = self._acc_hist[0]
-                re_, rn = z[0] - a[0] - (d[0] - a[2]), z[1] - a[1] - (d[1] - a[3])
-                if self._drift is not None and v is not None:
-                    # As the drift test does (D1, D3): the Doppler's lag behind the position
-                    # moved out, and its uncertainty over the change of velocity (a headland
-                    # turn at 1 Hz put 1.5 m here on a clean receiver).
-                    dve, dvn = v[0] - a[4], v[1] - a[5]
-                    re_ -= p.drift_lag_s * dve
-                    rn -= p.drift_lag_s * dvn
-                    lag_g = p.doppler_sigmas * p.drift_lag_sd_s * math.hypot(dve, dvn)
-                    t.doppler_gate = math.hypot(t.doppler_gate, lag_g)
-                t.doppler_res = math.hypot(re_, rn)
-                doppler_fault = t.doppler_res > t.doppler_gate
-            if self._raw_hist:
-                q = self._raw_hist[0]
-                raw_res = math.hypot(z[0] - q[0] - (d[0] - q[2]), z[1] - q[1] - (d[1] - q[3]))
-                raw_consistent = raw_res <= t.doppler_gate
-        self._raw_hist.append((z[0], z[1], d[0], d[1]))
-
+        d = ev.d = self._disp
+        if p.doppler_test and ev.have_doppler:
+            self._doppler_residuals(ev)
+        self._raw_hist.append(_new(RawFix, (z[0], z[1], d[0], d[1])))
         # Slow faults (fdi/drift.py, D1-D4) and the hold after a level change (fdi/level.py).
-        drift = self._drift
         b: tuple[float, float] | None = None
-        if drift is not None and have_doppler and v is not None:
+        if self._drift is not None and ev.have_doppler and v is not None:
             lag = p.drift_lag_s
             b = (z[0] - d[0] - lag * v[0], z[1] - d[1] - lag * v[1])
-        prev_b, prev_bt = self._prev_b, self._prev_bt
-        self._prev_b, self._prev_bt = b, fix.t_s
-        if b is not None and prev_b is not None and self._is_step(fix.t_s, b, prev_b, prev_bt):
+        ev.b = b
+        prev_b = ev.prev_b = self._prev_b
+        prev_bt = ev.prev_bt = self._prev_bt
+        self._prev_b, self._prev_bt = b, ev.t_s
+        if b is not None and prev_b is not None and self._is_step(ev.t_s, b, prev_b, prev_bt):
             # The fixes stepped (the hold's "new_level" takes a step to an older level sooner
             # than a drift there).
-            self._last_step = (fix.t_s, math.hypot(b[0] - prev_b[0], b[1] - prev_b[1]))
-        if self._hold is not None:
-            if b is None or v is None:  # the Doppler chain broke: no old track to hold
-                return self._raise_alarm(z, r, self._hold_reason + "+no_doppler", t)
-            self.kf.predict(dt)
-            return self._hold_step(fix, z, r, d, v, b, stale, dt, t)
-        drift_fault = False
-        dres = None
-        if b is not None and drift is not None and v is not None:
-            dres = drift.test(fix.t_s, b, v)
-            t.drift = dres.g
-            drift_fault = dres.g > p.drift_sigmas
+            self._last_step = LastStep(ev.t_s, math.hypot(b[0] - prev_b[0], b[1] - prev_b[1]))
 
+    def _break_chain(self) -> None:
+        """No Doppler: the window's Doppler-free values no longer line up; start again."""
+        self._window_clear()
+        self._disp = [0.0, 0.0, 0.0]
+        self._acc_hist.clear()
+        self._raw_hist.clear()
+        if self._drift is not None:
+            self._drift.reset()
+            self._steps.clear()
+
+    def _doppler_residuals(self, ev: Evidence) -> None:
+        p, z, d, v, t = self.p, ev.z, ev.d, ev.v, ev.stats
+        if self._acc_hist:
+            a = self._acc_hist[0]
+            re_, rn = z[0] - a.e - (d[0] - a.de), z[1] - a.n - (d[1] - a.dn)
+            if self._drift is not None and v is not None:
+                # As the drift test does (D1, D3): the Doppler's lag behind the position
+                # moved out, and its uncertainty over the change of velocity (a headland
+                # turn at 1 Hz put 1.5 m here on a clean receiver).
+                dve, dvn = v[0] - a.ve, v[1] - a.vn
+                re_ -= p.drift_lag_s * dve
+                rn -= p.drift_lag_s * dvn
+                lag_g = p.doppler_sigmas * p.drift_lag_sd_s * math.hypot(dve, dvn)
+                t.doppler_gate = math.hypot(t.doppler_gate, lag_g)
+            t.doppler_res = math.hypot(re_, rn)
+            ev.doppler_fault = t.doppler_res > t.doppler_gate
+        if self._raw_hist:
+            q = self._raw_hist[0]
+            raw_res = math.hypot(z[0] - q.e - (d[0] - q.de), z[1] - q.n - (d[1] - q.dn))
+            ev.raw_consistent = raw_res <= t.doppler_gate
+
+    def _test_evidence(self, ev: Evidence) -> None:
+        """The drift test (D4), the grey residual (eq. 18) and the chi-square test (eq. 1-6)."""
+        p, t, z, d, b, v = self.p, ev.stats, ev.z, ev.d, ev.b, ev.v
+        drift = self._drift
+        if b is not None and drift is not None and v is not None:
+            ev.drift = dres = drift.test(ev.t_s, b, v)
+            t.drift = dres.g
+            ev.drift_fault = dres.g > p.drift_sigmas
         # Section 2: grey prediction and residual ε(k) = x⁰(k) − x̂⁰(k) (eq. 18).
         y_hat = self._predict()
-        grey_fault = False
         if y_hat is not None:
             pred = (y_hat[0] + d[0], y_hat[1] + d[1], y_hat[2] + d[2])
             t.pred = pred
@@ -744,177 +816,107 @@ class RoverIsolator:
                 t.res_h = math.hypot(ee, en)
             else:
                 t.res_h = max(abs(ee), abs(en))
-            grey_fault = t.res_h > gate_h
-            t.res_u = abs(eu) if up_known else None
-            if p.test_up and t.res_u is not None and t.res_u > gate_u:
-                grey_fault = True
-
+            ev.grey_fault = t.res_h > t.gate_h
+            t.res_u = abs(eu) if ev.up_known else None
+            if p.test_up and t.res_u is not None and t.res_u > t.gate_u:
+                ev.grey_fault = True
         # Section 1: Kalman prediction and residual chi-square test (eq. 1-6).
-        self.kf.predict(dt)
-        t.F = self.kf.test(z, r)
-        chi2_fault = p.chi2_enabled and self.T_d < t.F
-
-        if p.strategy != "grey":
-            return self._step_zones(fix, z, r, d, up_known, quality, t)
-
-        if self._coast_since is not None and self._acc_hist and t.pred is not None:
+        self.kf.predict(ev.dt)
+        t.F = self.kf.test(z, ev.r)
+        ev.chi2_fault = p.chi2_enabled and self.T_d < t.F
+        if (p.strategy == "grey" and self._coast_since is not None and self._acc_hist
+                and t.pred is not None):
             # Coasting on the receiver's Doppler from the last accepted fix: the grey window
             # has fed on its own predictions for a while, so it is neither the best prediction
             # nor a fair test; the Doppler test (its gate grows with √epochs) decides.
             a = self._acc_hist[-1]
-            t.pred = (a[0] + d[0] - a[2], a[1] + d[1] - a[3], t.pred[2])
-            grey_fault = False
+            t.pred = (a.e + d[0] - a.de, a.n + d[1] - a.dn, t.pred[2])
+            ev.grey_fault = False
 
-        stale_fault = frozen and b is not None
-        if not (grey_fault or chi2_fault or doppler_fault or quality or drift_fault
-                or stale_fault):
-            # Between the warning and the alarm threshold of the drift test: passed on as it
-            # is but flagged, and neither a reference of the drift test nor learned from.
-            warn = dres is not None and 0.0 < p.drift_warn_sigmas < dres.g
-            # The ramp's own horizon over its level, below the warning: reported (flagged)
-            # and nothing else; the fix stays a reference and is learned from as before (held
-            # out of the references, a 0.1 m/s ramp's hold took the ramp for a new level and
-            # its end for a fault: 2.58 m worse than the receiver, held-out gm 5 Hz).
-            watch = (not warn and dres is not None
-                     and 0.0 < p.ramp_sigmas < dres.g_watch)
-            # Part of a step back being confirmed (below): passed on, and the confirmation
-            # goes on. Not a reference of the drift test yet: one at the level before the step
-            # hid the step from _step_back_to while the longer horizons still saw it, and the
-            # next fault held the stepped level (`multipath` 10 Hz seed 3003: a 0.52 m step's
-            # end held 1.8 s, 0.29 against 0.16 m raw over the 10 s after it).
-            confirming = False
-            if self._rev is not None and b is not None and v is not None:
-                # A step back being confirmed: this fix passes the tests but is compared with
-                # the references of the stepped level; it may end the step.
-                rev = self._step_back_to(fix.t_s, b)
-                if rev is not None and self._step_end(fix.t_s, b, rev):
-                    return self._resume(fix, z, r, d, v, b, t, "step_end")
-                confirming = rev is not None
-            elif self._steps and b is not None:
-                self._passed_reversal(fix.t_s, b, dt)
-            self._accepted(fix, z, t, learn=not warn, step_back=confirming)
-            self._window_append(z, d)
-            self.kf.update(z, r)
-            if warn:
-                return self._accept(z, t, "drift_warn", fault=True)
-            if not confirming and b is not None and drift is not None and v is not None:
-                drift.commit(fix.t_s, b, v)
-                if self._steps:
-                    self._track_at(b)
-            if watch:
-                return self._accept(z, t, "drift_watch", fault=True)
-            return self._accept(z, t, "")
-        reasons = (
-            (["grey"] if grey_fault else [])
-            + (["chi2"] if chi2_fault else [])
-            + (["doppler"] if doppler_fault else [])
-            + (["drift"] if drift_fault else [])
-            + (["frozen"] if stale_fault else [])
-            + quality
+    def _find(self, ev: Evidence) -> None:
+        """What the fault rules ask beyond the tests: which tests failed; a step back to an
+        older level the track had left (R14); the end of a remembered step (R11, R16); and the
+        step that starts this run of faults, remembered (``_note_step``)."""
+        p, b = self.p, ev.b
+        ev.reasons = (
+            (["grey"] if ev.grey_fault else [])
+            + (["chi2"] if ev.chi2_fault else [])
+            + (["doppler"] if ev.doppler_fault else [])
+            + (["drift"] if ev.drift_fault else [])
+            + (["frozen"] if ev.stale_fault else [])
+            + ev.quality
         )
-        # A level change (slow drift, frozen receiver, or fixes that stay off past the
-        # replacement limit): hold the old track and let the Doppler decide (fdi/level.py).
-        # A jump the grey or chi-square test sees is replaced first (below), as the paper does.
-        abrupt = grey_fault or chi2_fault
-        # An abrupt step back to an older level the track had left: the end of a fault that
-        # was missed or accepted, or a jump that happens to land there. Either way the old
-        # track is not shown right: the receiver's fix is passed on (flagged, as replaced),
-        # while the state goes on as for a replacement, so a jump is told apart at the next
-        # epoch and a step that stays goes to the hold, whose "new_level" ends it.
-        # A drift fault that stepped since the previous epoch (not a ramp) counts too.
-        back = False
-        back_level: float | None = None  # the older level it stepped back to
-        if (b is not None and drift is not None
-                and (abrupt or (drift_fault and self._is_step(fix.t_s, b, prev_b, prev_bt)))
-                and not quality and not stale_fault):
-            back = self._stepped_back and raw_consistent
-            if not back:
-                back_level = self._back_at_old_level(fix.t_s, b)
-                back = back_level is not None
+        if b is None or self._drift is None or ev.quality or ev.stale_fault:
+            return
+        # An abrupt step back to an older level the track had left (or a drift fault that
+        # stepped since the previous epoch: not a ramp): the end of a fault that was missed
+        # or accepted, or a jump that happens to land there. The old track is not shown right
+        # either way: the receiver's fix is passed on (flagged), the state goes on as for a
+        # replacement, so a jump is told apart at the next epoch and a step that stays goes to
+        # the hold, whose "new_level" ends it.
+        if ev.abrupt or (ev.drift_fault and self._is_step(ev.t_s, b, ev.prev_b, ev.prev_bt)):
+            ev.back = self._stepped_back and ev.raw_consistent
+            if not ev.back:
+                ev.back_level = self._back_at_old_level(ev.t_s, b)
+                ev.back = ev.back_level is not None
+        if ev.v is None or p.step_pair_s <= 0.0:
+            return
         # The end of a remembered step (a multipath step the track went on to accept): the
-        # fixes step back to the level before it. Passed on at once (flagged, as a step back);
-        # once they stay there (_step_end) the receiver is right again.
-        rev = None
-        if (b is not None and v is not None and drift is not None and not quality
-                and not stale_fault and p.step_pair_s > 0.0):
-            rev = self._step_back_to(fix.t_s, b)
-            if rev is not None:
-                if self._step_end(fix.t_s, b, rev):
-                    return self._resume(fix, z, r, d, v, b, t, "step_end")
-                back = True
-            elif self._consec == 0 and (abrupt or drift_fault or doppler_fault):
-                self._note_step(fix.t_s, b, gate_h)
-        if (b is not None and v is not None and drift is not None and not quality
-                and rev is None and (stale_fault or (drift_fault and not abrupt and not back)
-                     or self._consec >= p.max_consecutive)
-                and self._enter_hold(
-                    fix.t_s, dres if drift_fault else None, "+".join(reasons),
-                    slow=stale_fault or (
-                        drift_fault and not abrupt and dres is not None
-                        and dres.horizon_s > 1.0
-                        and not self._is_step(fix.t_s, b, prev_b, prev_bt, SLOW_MAX_MPS)))):
-            return self._hold_step(fix, z, r, d, v, b, stale, dt, t)
-        # Isolation: replace the faulty fix by its prediction before the filter update (with
-        # R inflated by replaced_r_factor: a prediction is not a measurement).
-        if t.pred is not None and self._consec < p.max_consecutive:
-            self._window_append(t.pred, d, fed=True)
-            f = p.replaced_r_factor
-            self.kf.update(t.pred, (r[0] * f, r[1] * f, r[2] * f))
-            # (self._fed counts this epoch's prediction, just appended: 3 = two before it.)
-            if (not back and p.grey_fed_sigmas > 0.0 and self._fed >= 3
-                    and reasons == ["grey"]
-                    and dres is not None and dres.g <= p.grey_fed_sigmas):
-                # Only the grey test, whose window has fed on two or more of its own
-                # predictions: from the second on each extrapolated the one before, so the
-                # prediction runs on past the receiver's level (0.3-0.5 m in 3-4 epochs at
-                # 1 Hz after a burst) and is no fair test. The fix, which every other test
-                # passes (chi-square, Doppler, drift, frozen, quality), is passed on (flagged,
-                # as a step back is); the state goes on as for a replacement, so a fault that
-                # happens to pass those tests costs this epoch the raw fix, never more (`dgps`
-                # 1 Hz seed 9005: the first clean fix after a 4-epoch burst was replaced
-                # 0.93 m off against 0.25 m raw).
-                return self._replace(z, t, "grey+grey_fed")
-            if back:
-                if not self._stepped_back:  # the run's first step back: a hold after it
-                    self._back_t = back_level  # forgets the references since that level
-                self._stepped_back = True
-                return self._replace(z, t, "+".join(reasons) + "+step_back")
-            return self._replace(t.pred, t, "+".join(reasons))
-        # Too many in a row (or nothing to replace with): alarm, stop automatic navigation.
-        # Restart on the receiver's data when its own fixes are consistent with its Doppler
-        # (no lock-in); while they are not (a frozen or wandering position), coast on the
-        # Doppler-propagated prediction, up to max_coast_s.
-        if (
-            t.pred is not None
-            and not raw_consistent
-            and (self._coast_since is None or fix.t_s - self._coast_since < p.max_coast_s)
-        ):
-            if self._coast_since is None:
-                self._coast_since = fix.t_s
-            self._window_append(t.pred, d, fed=True)
-            self.kf.update(t.pred, r)
-            return self._coast(t.pred, t, "+".join(reasons) + "+coast")
-        # A run of steps back (the receiver's fixes passed on) that the replacements ran out
-        # on: the Doppler chain is intact, so the drift test's levels are kept (rebased) and a
-        # later return to them is still known as one (at 10 Hz the 5 replacements are 0.5 s,
-        # under the hold_exit_s + STEP_END_EPOCHS a step's end needs). At the end of a
-        # remembered step (rev) the restart is the same, but the fix every step back passed
-        # on is not withheld by an alarm (it stopped the output for 0.5 s at 10 Hz).
-        if rev is not None and have_doppler:
-            self._restart(z, r, keep_levels=True)
-            return self._replace(z, t, "+".join(reasons) + "+step_back")
-        return self._raise_alarm(z, r, "+".join(reasons), t, keep_levels=back and have_doppler)
+        # fixes step back to the level before it; passed on at once (flagged, as a step back).
+        ev.rev = self._step_back_to(ev.t_s, b)
+        if ev.rev is not None:
+            ev.back = True
+        elif self._consec == 0 and (ev.abrupt or ev.drift_fault or ev.doppler_fault):
+            self._note_step(ev.t_s, b, ev.stats.gate_h)
 
-    def _step_zones(
-        self,
-        fix: FixInput,
-        z: tuple[float, float, float],
-        r: tuple[float, float, float],
-        d: list[float],
-        up_known: bool,
-        quality: list[str],
-        t: _Tests,
-    ) -> Decision:
+    def _pass_clean(self, ev: Evidence) -> Decision:
+        """No test fails: R11 (a step back being confirmed ends), else the fix is passed on
+        (R9 flagged by the drift warning, R10 by the ramp's horizon, R6)."""
+        p, b, v, dres = self.p, ev.b, ev.v, ev.drift
+        # Between the warning and the alarm threshold of the drift test: passed on as it is
+        # but flagged, and neither a reference of the drift test nor learned from.
+        ev.warn = dres is not None and 0.0 < p.drift_warn_sigmas < dres.g
+        # The ramp's own horizon over its level, below the warning: reported (flagged) and
+        # nothing else; the fix stays a reference and is learned from as before.
+        ev.watch = not ev.warn and dres is not None and 0.0 < p.ramp_sigmas < dres.g_watch
+        # Part of a step back being confirmed: passed on, and the confirmation goes on; not a
+        # reference of the drift test yet (one at the level before the step would hide the
+        # step from _step_back_to while the longer horizons still saw it).
+        if self._end_watch is not None and b is not None and v is not None:
+            dec = r_step_end_passing(self, ev)
+            if dec is not None:
+                return dec
+        elif self._steps and b is not None:
+            self._passed_reversal(ev.t_s, b, ev.dt)
+        confirming = ev.rev is not None
+        self._accepted(ev.z, ev.stats, learn=not ev.warn, step_back=confirming)
+        self._window_append(ev.z, ev.d)
+        self.kf.update(ev.z, ev.r)
+        dec = r_drift_warn(self, ev)
+        if dec is not None:
+            return dec
+        drift = self._drift
+        if not confirming and b is not None and drift is not None and v is not None:
+            drift.commit(ev.t_s, b, v)
+            if self._steps:
+                self._track_at(b)
+        return r_drift_watch(self, ev) or r_accept(self, ev)
+
+    def _feed_prediction(self, ev: Evidence) -> None:
+        """Isolation: the prediction replaces the faulty fix in the window and, with R
+        inflated by ``replaced_r_factor`` (a prediction is not a measurement), in the filter
+        before its update; once an epoch."""
+        if ev.fed:
+            return
+        ev.fed = True
+        pred = ev.stats.pred
+        assert pred is not None
+        self._window_append(pred, ev.d, fed=True)
+        f = self.p.replaced_r_factor
+        r = ev.r
+        self.kf.update(pred, (r[0] * f, r[1] * f, r[2] * f))
+
+    def _step_zones(self, ev: Evidence) -> Decision:
         """Cai & Shao's three zones per axis, eq. (7)-(8), on the Kalman innovation.
 
         DM(i) = D_i² / S_ii: below T1 accept; T1..T2 (deviation) use it with R_ii inflated;
@@ -922,14 +924,14 @@ class RoverIsolator:
         epochs (``three_zone``) or by the grey prediction (``combined``). A fix is judged
         faulty when an axis is over the limit (or a quality screen fails).
         """
-        p = self.p
+        p, z, r, t, quality = self.p, ev.z, ev.r, ev.stats, ev.quality
         pred = t.pred
         values = list(z)
         variances = list(r)
         zones: list[int] = []
         replaced = rejected = False
         kfD, kfS = self.kf.D, self.kf.S
-        for i in range(3 if up_known else 2):
+        for i in range(3 if ev.up_known else 2):
             ext = None
             if p.strategy == "combined" and pred is not None:
                 ext = (pred[i], self._var_h if i < 2 else self._var_u)
@@ -949,14 +951,15 @@ class RoverIsolator:
                 values, variances, replaced = list(pred), list(r), True
         reason = "+".join(reasons) or ("deviation" if Zone.DEVIATION in zones else "")
         if rejected or (replaced and self._consec >= p.max_consecutive):
-            return self._raise_alarm(z, r, reason or "over_limit", t)
+            return self._raise_alarm(z, r, reason or "over_limit", t, rule="R24")
         out = (values[0], values[1], values[2])
-        self._window_append(out, d)
+        self._window_append(out, ev.d)
         self.kf.update(out, (variances[0], variances[1], variances[2]))
         if replaced:
-            return self._replace(out, t, reason, tuple(zones))
-        self._accepted(fix, z, t)
-        return self._accept(z, t, reason, tuple(zones), fault=over or bool(quality))
+            return self._replace(out, t, reason, tuple(zones), rule="R24",
+                                 source=Source.PREDICTION)
+        self._accepted(z, t)
+        return self._accept(z, t, reason, tuple(zones), fault=over or bool(quality), rule="R24")
 
     # -------------------------------------------------------------- the hold
 
@@ -965,9 +968,9 @@ class RoverIsolator:
         it moved stale_move_m, or its whole fix (position, speed, course) repeated for stale_s
         or more often in a row than this receiver's own repeat rate makes likely (stale_p)."""
         enu = fix.enu
-        sig = (enu, fix.speed_mps, fix.course_deg)
+        sig = _new(FixSignature, (enu, fix.speed_mps, fix.course_deg))
         prev = self._prev_sig
-        same_pos = prev is not None and enu == prev[0]
+        same_pos = prev is not None and enu == prev.enu
         if prev is not None:  # every pair of fixes, frozen or not
             self._pairs += 1
         if same_pos and sig == prev:
@@ -1030,7 +1033,7 @@ class RoverIsolator:
             anchor = anchor_or_none
         a_t, a_b, a_v = anchor
         drift.forget_after(a_t)  # a fault may have been building since
-        old = drift.levels_between(a_t - LEVEL_KEEP_S, a_t - 20.0)
+        old = drift.levels_between(a_t - LEVEL_KEEP_S, a_t - OLD_LEVEL_MIN_AGE_S)
         stale_m = 0.0
         if self._stale_run > 0:  # the Doppler is void since the whole fix repeats
             stale_m = math.hypot(*a_v) * (t_s - self._whole_since)
@@ -1042,89 +1045,56 @@ class RoverIsolator:
         self._hold_up = self.kf.position[2] if self.kf.initialised else self._last_up
         return True
 
-    def _hold_step(
-        self,
-        fix: FixInput,
-        z: tuple[float, float, float],
-        r: tuple[float, float, float],
-        d: list[float],
-        v: tuple[float, float],
-        b: tuple[float, float],
-        stale: bool,
-        dt: float,
-        t: _Tests,
-    ) -> Decision:
+    def _hold_step(self, ev: Evidence) -> Decision:
+        """One epoch of the hold (fdi/level.py), then R18-R23 on its answer."""
         hold = self._hold
-        drift = self._drift
-        assert hold is not None and drift is not None
-        hs = hold.step(fix.t_s, b, v, (d[0], d[1]), stale, dt, self._stale_run == 0,
+        assert hold is not None and ev.b is not None and ev.v is not None
+        d = ev.d
+        hs = hold.step(ev.t_s, ev.b, ev.v, (d[0], d[1]), ev.stale, ev.dt, self._stale_run == 0,
                        self._last_step)
-        t.drift = hs.g
-        reason = self._hold_reason
-        if hs.action in ("exit", "ended", "new_level", "consistent"):
-            # The new fixes agree with the old track (the receiver is right again), or sit at
-            # the older references' level while the old track does not (the old track was
-            # the faulty side: its references go).
-            self._hold = None
-            if hold.frozen:
-                # The Doppler was void while the receiver was frozen: the Doppler-free values
-                # before and after no longer line up.
-                drift.reset()
-            elif hs.action == "new_level":
-                # The old track was the faulty side: its references go, the older levels stay.
-                drift.forget_after(hold.matched_t)
-            elif hs.action == "exit" and hold.prefer_raw and self._back_t is not None:
-                # The hold began after the fixes stepped back to an older level, and they
-                # agree with the old track again: the references since that level may carry a
-                # slow fault whose end the step was (a 0.03 m/s ramp of 56 s, under what the
-                # test finds; kept, they held the next 7 clean epochs: dgps 1 Hz seed 8004).
-                # (No step back is taken during a hold: _back_t is still the one it began
-                # after.)
-                drift.forget_after(self._back_t)
-            elif hs.action in ("ended", "consistent"):
-                # A slow fault ended: the references near its start may carry part of it.
-                drift.reset_short()
-            return self._resume(fix, z, r, d, v, b, t, "hold_" + hs.action)
-        if hs.action == "give_up":
-            if not hold.slow and hold.was_raw:
-                # An abrupt step neither side was shown wrong about, whose fixes the hold has
-                # been passing on (consistent with their own Doppler): the receiver's level
-                # is kept without an alarm (that would only withhold right fixes).
-                drift.reset_short()
-                return self._resume(fix, z, r, d, v, b, t, "hold_kept")
-            return self._raise_alarm(z, r, reason + "+hold_timeout", t, keep_levels=True)
-        out = (hs.track[0], hs.track[1], self._hold_up)
-        t.pred = out
-        self._window_append(out, d, fed=True)  # the filter is not fed: it only predicts
-        if hs.action == "raw":
-            # Not decided yet, but the evidence points to the receiver (fdi/level.py): its
-            # fix is passed on, flagged as not verified, the hold goes on.
-            return self._replace(z, t, reason + "+hold_raw")
-        if hs.action == "track":
-            return self._replace(out, t, reason + "+hold")
-        return self._coast(out, t, reason + "+hold")
+        ev.stats.drift = hs.g
+        for rule in HOLD_RULES:
+            dec = rule(self, ev, hold, hs)
+            if dec is not None:
+                return dec
+        raise AssertionError("R23 answers every epoch")  # pragma: no cover
 
-    def _resume(self, fix: FixInput, z: tuple[float, float, float],
-                r: tuple[float, float, float], d: list[float], v: tuple[float, float],
-                b: tuple[float, float], t: _Tests, reason: str) -> Decision:
+    def _slow(self, ev: Evidence) -> bool:
+        """Is the hold R12 enters a slow one (a frozen receiver, or a drift fault not seen by
+        the grey or chi-square test, over a horizon beyond 1 s, that did not step)?"""
+        dres, b = ev.drift, ev.b
+        return ev.stale_fault or (
+            ev.drift_fault and not ev.abrupt and dres is not None and dres.horizon_s > 1.0
+            and b is not None
+            and not self._is_step(ev.t_s, b, ev.prev_b, ev.prev_bt, SLOW_MAX_MPS))
+
+    def _carry_track(self, ev: Evidence, hs: HoldStep) -> tuple[float, float, float]:
+        """The old track (L1) at this epoch, fed to the window (the filter only predicts)."""
+        out = (hs.track[0], hs.track[1], self._hold_up)
+        ev.stats.pred = out
+        self._window_append(out, ev.d, fed=True)
+        return out
+
+    def _resume(self, ev: Evidence, reason: str, rule: str) -> Decision:
         """The receiver is right again: restart the window, the filter and the Doppler
-        history on ``z`` (the drift test's references are the caller's to prune)."""
+        history on the fix (the drift test's references are the caller's to prune)."""
         drift = self._drift
-        assert drift is not None
+        z, d, v, b = ev.z, ev.d, ev.v, ev.b
+        assert drift is not None and v is not None and b is not None
         self._hold = None
         self._window_clear()
         self._win.append((z[0] - d[0], z[1] - d[1], z[2] - d[2]))
         self._acc_hist.clear()
-        self._acc_hist.append((z[0], z[1], d[0], d[1], v[0], v[1]))
+        self._acc_hist.append(Accepted(z[0], z[1], d[0], d[1], v[0], v[1]))
         self._raw_hist.clear()
-        self.kf.reset(z, r)
+        self.kf.reset(z, ev.r)
         self._consec = 0
         self._stepped_back = False
         self._coast_since = None
-        drift.commit(fix.t_s, b, v)
+        drift.commit(ev.t_s, b, v)
         if self._steps:
             self._track_at(b)
-        return self._accept(z, t, reason)
+        return self._accept(z, ev.stats, reason, rule=rule)
 
     def _note_step(self, t_s: float, b: tuple[float, float], gate_h: float) -> None:
         """Remember the step that starts this run of faults, if it is one: the fix against
@@ -1142,34 +1112,30 @@ class RoverIsolator:
                 t_s - r_t, drift.horizons, drift.sigmas)):
             return
         steps = [st for st in self._steps if t_s - st.t0 <= p.step_pair_s]
-        steps.append(_Step(r_t, re_, rn, se, sn))
+        steps.append(Step(r_t, re_, rn, se, sn))
         self._steps = steps[-4:]
 
     def _passed_reversal(self, t_s: float, b: tuple[float, float], dt: float) -> None:
         """A remembered step that ended with no fault to show it: fixes that pass the tests
-        reverse it (this epoch's step from the track within 0.4 x its size: not the noise
-        floor :meth:`_step_back_to` adds, with which passing fixes forgot the 0.55 m step of
-        ``multipath`` 1 Hz seed 9001 before its end) and stay there, passing, for
-        ``hold_exit_s`` (within ``hold_exit_sigmas`` of the drift σ of where they began). The
-        step is then forgotten. Kept, a later step that happened to be its reverse was taken
-        for its end (``multipath`` 1 Hz seed 2001, offline-calibrated: a 0.79 m multipath step
-        passed on as a step back, and its own end held 7 s as a new fault, 0.73 m against
-        0.22 m raw).
-        Forgotten at the first passing epoch, a step whose end then became a fault was no
-        longer matched (the same seed at 10 Hz: 0.31 against 0.29 m raw)."""
+        reverse it (this epoch's step from the track within REVERSAL_FRAC x its size: not the
+        noise floor :meth:`_step_back_to` adds, with which passing fixes forgot a small step
+        before its end) and stay there, passing, for ``hold_exit_s`` (within
+        ``hold_exit_sigmas`` of the drift σ of where they began). The step is then forgotten:
+        kept, a later step that happened to be its reverse was taken for its end (a multipath
+        step passed on as a step back, and its own end held as a new fault). Forgotten at the
+        first passing epoch, a step whose end then became a fault was no longer matched."""
         drift, p = self._drift, self.p
         assert drift is not None
-        pr = self._passed_rev
+        pr = self._passed
         if pr is not None:
-            t0, b_r, t_r, last = pr
-            if t_s - last <= 1.5 * dt + 1e-9 and self._near(b, b_r, t_s - t_r):
-                if t_s - t_r >= p.hold_exit_s - 1e-9:
-                    self._steps = [st for st in self._steps if st.t0 != t0]
-                    self._passed_rev = None
+            if t_s - pr.last <= 1.5 * dt + 1e-9 and self._near(b, pr.b, t_s - pr.t):
+                if t_s - pr.t >= p.hold_exit_s - 1e-9:
+                    self._steps = [st for st in self._steps if st.t0 != pr.t0]
+                    self._passed = None
                 else:
-                    self._passed_rev = (t0, b_r, t_r, t_s)
+                    pr.last = t_s
                 return
-            self._passed_rev = None
+            self._passed = None
         ref = drift.at_or_before(t_s)
         if ref is None:
             return
@@ -1177,7 +1143,7 @@ class RoverIsolator:
         je, jn = b[0] - ce, b[1] - cn  # this epoch's step from the track
         for st in self._steps:
             if st.accepted and st.reversed_by(je, jn):
-                self._passed_rev = (st.t0, b, t_s, t_s)
+                self._passed = PassedReversal(st.t0, b, t_s, t_s)
                 return
 
     def _track_at(self, b: tuple[float, float]) -> None:
@@ -1196,16 +1162,16 @@ class RoverIsolator:
         go and True (the caller restarts on the receiver)."""
         drift, p = self._drift, self.p
         assert drift is not None
-        prev = self._rev
-        if prev is not None and prev[0] == rev and self._near(b, prev[1], t_s - prev[2]):
-            if t_s - prev[2] >= p.hold_exit_s - 1e-9 and prev[3] + 1 >= STEP_END_EPOCHS:
+        w = self._end_watch
+        if w is not None and w.rev == rev and self._near(b, w.b, t_s - w.t):
+            if t_s - w.t >= p.hold_exit_s - 1e-9 and w.epochs + 1 >= STEP_END_EPOCHS:
                 self._steps = [st for st in self._steps if st.t0 < rev]
                 drift.forget_after(rev)
-                self._rev = None
+                self._end_watch = None
                 return True
-            self._rev = (prev[0], prev[1], prev[2], prev[3] + 1)
+            w.epochs += 1
             return False
-        self._rev = (rev, b, t_s, 1)  # not where the step back began: start again
+        self._end_watch = StepEndWatch(rev, b, t_s, 1)  # not where it began: start again
         return False
 
     def _learn_quantum(self, de: float, dn: float) -> None:
@@ -1247,7 +1213,7 @@ class RoverIsolator:
             max(age, 1e-3), drift.horizons, drift.sigmas)
 
     def _reversal_floor(self) -> float:
-        """The noise floor of :meth:`_Step.reversed_by` (m): none until the drift test has
+        """The noise floor of :meth:`Step.reversed_by` (m): none until the drift test has
         calibrated (its configured σ are wide starting values)."""
         drift = self._drift
         assert drift is not None
@@ -1261,8 +1227,8 @@ class RoverIsolator:
 
         The track was seen at the stepped level after it (:meth:`_track_at`: the step was
         accepted, not replaced). Then either this epoch's step from the track is the
-        remembered step reversed, within 0.4 x its size or the epoch's noise
-        (:meth:`_reversal_floor`, up to 0.6 x its size; both steps are measured over an
+        remembered step reversed, within REVERSAL_FRAC x its size or the epoch's noise
+        (:meth:`_reversal_floor`, up to REVERSAL_MAX_FRAC x its size; both are measured over an
         epoch, so the slow DGPS error between them cancels out); or the track is within half
         the step of the stepped level and the fix is at least 0.6 x the step away from it and
         twice as close to the level before. A jump that happens to land there costs that
@@ -1283,11 +1249,11 @@ class RoverIsolator:
             if st.reversed_by(je, jn, floor):
                 return t0  # the reverse of the remembered step (slow drift cancels out)
             size = math.hypot(se, sn)
-            if math.hypot(ce - b0e - se, cn - b0n - sn) > 0.5 * size:
+            if math.hypot(ce - b0e - se, cn - b0n - sn) > STEPPED_LEVEL_FRAC * size:
                 continue  # the track is not at the stepped level
             e_track = math.hypot(je, jn)
             e_old = math.hypot(b[0] - b0e, b[1] - b0n)
-            if e_track >= 0.6 * size and e_old <= 0.5 * e_track:
+            if e_track >= STEP_AWAY_FRAC * size and e_old <= BACK_NEARER_FRAC * e_track:
                 return t0
         return None
 
@@ -1305,12 +1271,10 @@ class RoverIsolator:
         ``hold_exit_sigmas`` of the drift σ at the level's age. The σ are the drift test's
         :attr:`~fdi.drift.DriftTest.working_sigmas`: while it calibrates, from its provisional
         σ on (D7), those instead of the wide configured ones, whose σ(30 s) of 0.9 m asked a
-        missed ramp for 1.8 m before its end was seen as a return (`dgps` 1 Hz seed 9001: a
-        0.039 m/s ramp's 1.4 m step back at 134 s held, 1.86 against 0.21 m raw; 1.5 x instead
-        of 2 x passed ramps' first fixes on at their start: docs/evaluation.md, fifteenth
-        pass). It only chooses what is passed on (the caller's state goes on as for a
-        replacement), so a jump that happens to land there costs that epoch the raw fix,
-        never more."""
+        missed ramp for 1.8 m before its end was seen as a return (a slow ramp's 1.4 m step
+        back held; docs/evaluation.md). It only chooses what is passed on (the caller's state
+        goes on as for a replacement), so a jump that happens to land there costs that epoch
+        the raw fix, never more."""
         drift, hp = self._drift, self._hold_p
         assert drift is not None and hp is not None
         ref = drift.at_or_before(t_s)
@@ -1318,8 +1282,9 @@ class RoverIsolator:
             return None
         r_t, (re_, rn), _ = ref
         sig = drift.working_sigmas
-        s_side = hp.side_sigmas * sigma_at(30.0, hp.horizons_s, sig)
-        for t_o, (oe, on) in drift.levels_between(r_t - LEVEL_KEEP_S, r_t - 20.0):
+        s_side = hp.side_sigmas * sigma_at(SIDE_HORIZON_S, hp.horizons_s, sig)
+        for t_o, (oe, on) in drift.levels_between(r_t - LEVEL_KEEP_S,
+                                                  r_t - OLD_LEVEL_MIN_AGE_S):
             e_track = math.hypot(re_ - oe, rn - on)
             s_age = sigma_at(t_s - t_o, hp.horizons_s, sig)
             if e_track < s_side:
@@ -1337,14 +1302,16 @@ class RoverIsolator:
         fault: bool,
         reason: str,
         out: tuple[float, float, float] | None,
-        t: _Tests,
+        t: Stats,
         *,
         alarm_raised: bool = False,
         zones: tuple[int, ...] | None = None,
+        rule: str,
+        source: Source = Source.NONE,
     ) -> Decision:
         kf = self.kf
         # The tuple of Decision's fields, in order (this runs once an epoch: the NamedTuple's
-        # own __new__ would bind 19 arguments in Python first).
+        # own __new__ would bind 21 arguments in Python first).
         return _new(Decision, (
             action,
             fault,
@@ -1365,9 +1332,11 @@ class RoverIsolator:
             kf.position if kf.initialised else None,  # kf_enu
             zones,
             t.drift,
+            rule,
+            source,
         ))
 
-    def _accepted(self, fix: FixInput, z: tuple[float, float, float], t: _Tests,
+    def _accepted(self, z: tuple[float, float, float], t: Stats,
                   learn: bool = True, step_back: bool = False) -> None:
         """Bookkeeping for a fix passed on as it is: the run of replacements ends; ``learn``:
         the gates learn from it (not while the drift test warns); ``step_back``: the fix is
@@ -1375,7 +1344,7 @@ class RoverIsolator:
         self._consec = 0
         self._stepped_back = False
         if not step_back:
-            self._rev = None
+            self._end_watch = None
         self._coast_since = None
         if learn and t.doppler_res is not None and len(self._acc_hist) == self.p.window:
             self._n_inc += 1
@@ -1383,61 +1352,75 @@ class RoverIsolator:
             self._var_inc = _learn(self._var_inc, t.doppler_res**2 / 2.0, w)
         d = self._disp
         lv = self._last_v or (0.0, 0.0)
-        self._acc_hist.append((z[0], z[1], d[0], d[1], lv[0], lv[1]))
+        self._acc_hist.append(_new(Accepted, (z[0], z[1], d[0], d[1], lv[0], lv[1])))
         if learn and t.pred is not None:
             self._learn_spread(z, t.pred, t.res_u is not None)
 
     def _accept(
         self,
         z: tuple[float, float, float],
-        t: _Tests,
+        t: Stats,
         reason: str,
         zones: tuple[int, ...] | None = None,
         fault: bool = False,
+        *,
+        rule: str,
     ) -> Decision:
+        """The receiver's fix is passed on (withheld while the alarm is latched; the alarm
+        ends after ``recover_epochs`` of them in a row)."""
         if self._alarm:
             self._good_run += 1
             if self._good_run >= self.p.recover_epochs:
                 self._alarm = False
                 reason = reason or "recovered"
         action: Action = "alarm" if self._alarm else "accept"
-        return self._decision(action, fault, reason, None if self._alarm else z, t, zones=zones)
+        return self._decision(action, fault, reason, None if self._alarm else z, t, zones=zones,
+                              rule=rule, source=Source.RAW)
 
     def _replace(
         self,
         out: tuple[float, float, float],
-        t: _Tests,
+        t: Stats,
         reason: str,
         zones: tuple[int, ...] | None = None,
+        *,
+        rule: str,
+        source: Source,
     ) -> Decision:
+        """``out`` (from ``source``) is passed on for a fix judged faulty: a run goes on."""
         if self._consec == 0:
             self._run_t0 = self._last_t if self._last_t is not None else 0.0
         self._consec += 1
         self._good_run = 0
         action: Action = "alarm" if self._alarm else "replace"
-        return self._decision(action, True, reason, None if self._alarm else out, t, zones=zones)
+        return self._decision(action, True, reason, None if self._alarm else out, t, zones=zones,
+                              rule=rule, source=source)
 
-    def _coast(self, out: tuple[float, float, float], t: _Tests, reason: str) -> Decision:
-        """Alarm up; the receiver is not consistent with itself: carry on the prediction."""
+    def _coast(self, t: Stats, reason: str, *, rule: str, source: Source) -> Decision:
+        """Alarm up; the receiver is not consistent with itself: carry on ``source``."""
         raised = not self._alarm
         self._alarm = True
         self._good_run = 0
-        return self._decision("alarm", True, reason, None, t, alarm_raised=raised)
+        return self._decision("alarm", True, reason, None, t, alarm_raised=raised, rule=rule,
+                              source=source)
 
     def _raise_alarm(
         self,
         z: tuple[float, float, float],
         r: tuple[float, float, float],
         reason: str,
-        t: _Tests,
+        t: Stats,
         keep_levels: bool = False,
+        *,
+        rule: str,
     ) -> Decision:
+        """The alarm; the window, the filter and the tests restart on the fix."""
         raised = not self._alarm
         self._alarm = True
         self._good_run = 0
         consecutive = self._consec
         self._restart(z, r, keep_levels)
-        dec = self._decision("alarm", True, reason, None, t, alarm_raised=raised)
+        dec = self._decision("alarm", True, reason, None, t, alarm_raised=raised, rule=rule)
         return dec._replace(consecutive=consecutive) if consecutive else dec
 
     # -------------------------------------------------------------- pieces
@@ -1455,8 +1438,8 @@ class RoverIsolator:
         replaces them by the values between the fixes on either side (linear in the epoch):
         from the second on, each was GM(1,1) extrapolating its own predictions, which is not
         the receiver's level, and left in the window they biased the next predictions enough
-        to replace a clean fix (`coarse` 1 Hz seed 3001, after a 4-epoch burst: 1.07 m off
-        against 0.19 m raw). A single prediction was made from fixes and stays. The paper's
+        to replace a clean fix (after a 4-epoch burst at 1 Hz: 1.07 m off against 0.19 m
+        raw). A single prediction was made from fixes and stays. The paper's
         raw predictor keeps its self-fed window (section 2)."""
         y = (value[0] - d[0], value[1] - d[1], value[2] - d[2])
         w = self._win
@@ -1498,42 +1481,6 @@ class RoverIsolator:
         if self._drift is not None and max(self._quant) < math.inf:
             self._drift.set_quantum(max(self._quant))
         self._hold = None
-
-
-@dataclass(slots=True)
-class _Step:
-    """An abrupt step remembered by :meth:`RoverIsolator._note_step`."""
-
-    t0: float  # time of the trusted reference before it
-    b0e: float  # that reference's Doppler-free value (east, north)
-    b0n: float
-    se: float  # the step (east, north)
-    sn: float
-    accepted: bool = False  # the track was seen nearer the stepped level (_track_at)
-
-    def reversed_by(self, je: float, jn: float, floor: float = 0.0) -> bool:
-        """A step from the track of (``je``, ``jn``) is this step reversed, within 0.4 x its
-        size or ``floor`` (both are measured over an epoch, so the slow DGPS error between
-        them cancels; the epoch's own noise does not), but never 0.6 x its size: a reversal
-        moves at least 0.4 x the step back."""
-        size = math.hypot(self.se, self.sn)
-        return math.hypot(je + self.se, jn + self.sn) <= max(0.4 * size,
-                                                            min(floor, 0.6 * size))
-
-
-@dataclass(slots=True)
-class _Tests:
-    """One epoch's test statistics, carried into its :class:`Decision`."""
-
-    gate_h: float
-    gate_u: float
-    doppler_gate: float
-    pred: tuple[float, float, float] | None = None
-    doppler_res: float | None = None
-    res_h: float | None = None
-    res_u: float | None = None
-    F: float | None = None
-    drift: float | None = None
 
 
 def _learn(var: float, sample: float, w: float) -> float:
