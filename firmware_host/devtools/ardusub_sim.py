@@ -79,13 +79,14 @@ class SubYawModel:
     ``D(t)`` is the disturbance a current puts on the yaw (deg/s^2; none in the SITL).
     """
 
-    u0_pos: float = 130.0
-    u0_neg: float = 128.0
-    k: float = 179570.9  # deg/s^2 at |u| = 1000
-    p: float = 3.414
-    c: float = 0.17694  # (deg/s)^(1 - q) / s
-    q: float = 3.1753
-    d: float = 0.003026  # 1/s
+    # fitted on the att capture (fdi-bridge sim ardusub-calib --fit att), checked on raw
+    u0_pos: float = 129.89
+    u0_neg: float = 122.32
+    k: float = 148779.8  # deg/s^2 at |u| = 1000
+    p: float = 3.1882
+    c: float = 0.21039  # (deg/s)^(1 - q) / s
+    q: float = 3.0917
+    d: float = 0.02707  # 1/s
 
     def thrust(self, u: float) -> float:
         """(1): the yaw acceleration of the command ``u`` (deg/s^2)."""
