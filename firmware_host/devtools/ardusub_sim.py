@@ -422,11 +422,17 @@ class ArduSubSim:
         if tel is None:
             self._compass_hist.clear()
             return None
-        self._compass_hist.append((self.t, tel.heading_deg))
-        while len(self._compass_hist) > 1 and self._compass_hist[1][0] <= (
-                self.t - self.compass_lag_s + 1e-9):
-            self._compass_hist.popleft()
-        return self._compass_hist[0][1]
+        hist = self._compass_hist
+        hist.append((self.t, tel.heading_deg))
+        target = self.t - self.compass_lag_s
+        while len(hist) > 1 and hist[1][0] <= target + 1e-9:
+            hist.popleft()
+        (t0, h0) = hist[0]
+        if len(hist) == 1 or t0 >= target:
+            return h0
+        t1, h1 = hist[1]  # between two steps: interpolated, across 0/360
+        dh = (h1 - h0 + 180.0) % 360.0 - 180.0
+        return (h0 + dh * (target - t0) / (t1 - t0)) % 360.0
 
     def _step_sub(self, tel: Telemetry | None, dt: float) -> None:
         """The rest of :meth:`step` with the ``ardusub`` plant (module docstring)."""
@@ -453,7 +459,7 @@ class ArduSubSim:
             if yaw is not None and not self.unplugged:
                 rate = 0.0 if self.ekf_aligning() else sub.rate_dps  # bias-corrected
                 rates = self._body_rates(rate, roll, pitch, droll, dpitch)
-                self.link.send_attitude(int(self.t * 1000), roll, pitch,
+                self.link.send_attitude(round(self.t * 1000), roll, pitch,
                                         math.radians((yaw + 180.0) % 360.0 - 180.0), rates)
                 self.counters.attitude_sent += 1
         if self.compass is not None and self.t + 1e-9 >= self._next_imu:
@@ -470,10 +476,10 @@ class ArduSubSim:
         g = (round(p * 1000), round(q * 1000), round(r * 1000))
         acc = (0, 0, -1000)
         if self.compass == "RAW_IMU":
-            self.link.send_raw_imu(int(self.t * 1e6), acc, g, mag=m)
+            self.link.send_raw_imu(round(self.t * 1e6), acc, g, mag=m)
         else:
             inst = {"SCALED_IMU": 0, "SCALED_IMU2": 1, "SCALED_IMU3": 2}
-            self.link.send_scaled_imu(inst[self.compass], int(self.t * 1000), acc, g, m)
+            self.link.send_scaled_imu(inst[self.compass], round(self.t * 1000), acc, g, m)
         self.counters.imu_sent += 1
 
     @staticmethod
