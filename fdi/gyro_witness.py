@@ -415,6 +415,11 @@ class GyroWitness:
             self._nu_prev = None
             return WitnessStep(self.psi, nu, 0.0, self.var.sigma, self.suspect, False, False,
                                False, False)
+        if self._man_bound > 0.0 and not self.fault and self.suspect:
+            # the manoeuvre's end while a fault is suspected: the innovation holds the
+            # suspected fault, which the correction below would take into the headings (a
+            # limit cycle's manoeuvres every few seconds absorbed a 30 deg step in 5 s)
+            self._man_bound = 0.0
         if self._man_bound > 0.0 and not self.fault:
             # the manoeuvre's end: its sampling error (within the bound) into both headings
             d = max(-self._man_bound, min(self._man_bound, nu - self.nu_ref))

@@ -87,13 +87,40 @@ def _err(h: float, setpoint: float) -> float:
     return (h - setpoint + 180.0) % 360.0 - 180.0
 
 
-def base_config(heading: str) -> RovConfig:
-    """The example ArduSub configuration with ``heading`` and its gyro."""
+MANUAL_PID = {"kp": 5.0, "kd": 1.0}
+"""The heading hold's gains for ArduSub's MANUAL on the calibrated plant (``--pid manual``):
+the defaults (kp 3, kd 2) limit-cycle +-3.9 deg around the setpoint there (the dead band's
+~9 deg/s kicks and the slow coasting after them); kp 5, kd 1 step over the dead band at a
+smaller error and brake less."""
+
+
+def parse_pid(text: str) -> dict[str, float]:
+    """``config`` (the file's gains), ``manual`` (:data:`MANUAL_PID`) or ``kp=5,kd=1``."""
+    if text == "config":
+        return {}
+    if text == "manual":
+        return dict(MANUAL_PID)
+    out: dict[str, float] = {}
+    for part in text.split(","):
+        key, _, value = part.partition("=")
+        if key not in ("kp", "ki", "kd"):
+            raise argparse.ArgumentTypeError(f"--pid: config, manual or kp=..,ki=..,kd=.., "
+                                             f"found {part!r}")
+        try:
+            out[key] = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"--pid: {key} needs a number, found {value!r}"
+                                             ) from None
+    return out
+
+
+def base_config(heading: str, pid: dict[str, float] | None = None) -> RovConfig:
+    """The example ArduSub configuration with ``heading``, its gyro, and ``pid``'s gains."""
     cfg, _ = load_rov_config(project_root() / "config" / "rov-ardusub-example.toml")
     sim = replace(cfg.sim, current_max_pct=CURRENT_DPS, current_amp_pct=CURRENT_AMP_DPS,
                   current_period_s=CURRENT_PERIOD_S, initial_heading_deg=110.0)
-    return replace(cfg, sim=sim, ardusub=replace(cfg.ardusub, heading=heading,  # type: ignore[arg-type]
-                                                  gyro=GYRO[heading]))  # type: ignore[arg-type]
+    ardusub = replace(cfg.ardusub, heading=heading, gyro=GYRO[heading])  # type: ignore[arg-type]
+    return replace(cfg, sim=sim, ardusub=ardusub, pid=replace(cfg.pid, **(pid or {})))
 
 
 class ClosedLoop:
@@ -101,12 +128,12 @@ class ClosedLoop:
     stepped together (module docstring)."""
 
     def __init__(self, cfg: RovConfig, faults: Sequence[str] = (), *, seed: int = 1,
-                 sim: dict[str, Any] | None = None) -> None:
+                 sim: dict[str, Any] | None = None, ft: bool = True) -> None:
         mav = MavlinkConfig(autopilot=EndpointConfig("udpin:127.0.0.1:0"),
                             gcs=(EndpointConfig("udpin:127.0.0.1:0"),),
                             pilot_system_id=255, statustext_per_s=50.0)
         self.records: list[dict[str, Any]] = []
-        self.vehicle = ArduSubRovVehicle(cfg, on_epoch=self.records.append)
+        self.vehicle = ArduSubRovVehicle(cfg, ft=ft, on_epoch=self.records.append)
         self.runner = Runner(self.vehicle, mavlink=mav, handle_signals=False)
         self.runner.start()
         router = self.runner.router
@@ -152,8 +179,11 @@ class ClosedLoop:
         got = sim.counters.accepted + sim.counters.refused
         self.runner.step()
         if loop.sent > sent:
-            _wait(lambda: (sim.pump(), sim.counters.accepted + sim.counters.refused > got)[1],
-                  "the bridge's MANUAL_CONTROL")
+            def arrived() -> bool:
+                sim.pump()
+                return sim.counters.accepted + sim.counters.refused > got
+
+            _wait(arrived, "the bridge's MANUAL_CONTROL")
         msg = self.gcs.recv(0.0)
         while msg is not None:
             if msg.get_type() == "STATUSTEXT":
@@ -196,10 +226,11 @@ def settled(t: float) -> bool:
 
 
 def run_one(heading: str, scenario: str, seed: int, duration_s: float = 300.0,
-            cfg: RovConfig | None = None) -> RunResult:
-    """One closed-loop run (module docstring)."""
+            cfg: RovConfig | None = None, *, ft: bool = True) -> RunResult:
+    """One closed-loop run (module docstring); ``ft = False``: the same without fault
+    tolerance (the hold on whatever the heading says)."""
     cfg = cfg or base_config(heading)
-    loop = ClosedLoop(cfg, SCENARIOS[scenario], seed=seed)
+    loop = ClosedLoop(cfg, SCENARIOS[scenario], seed=seed, ft=ft)
     recs: list[dict[str, Any]] = []
     try:
         for k in range(round(duration_s / PERIOD_S)):
@@ -252,6 +283,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         default=",".join(HEADINGS), help="heading sources, comma separated")
     parser.add_argument("--scenarios", type=choice_list(tuple(SCENARIOS), "scenarios"),
                         default=",".join(SCENARIOS), help="scenarios, comma separated")
+    parser.add_argument("--pid", type=parse_pid, default="config",
+                        help="the hold's gains: config (the example file's), manual "
+                             "(kp 5, kd 1: tuned for MANUAL on this plant) or kp=..,ki=..,kd=..")
+    parser.add_argument("--no-ft", action="store_true",
+                        help="without fault tolerance (the hold on the judged heading)")
     parser.add_argument("--json", default=None, type=output_file_arg,
                         help="also write every run's numbers to this JSON file")
 
@@ -263,7 +299,9 @@ def run(args: argparse.Namespace) -> int:
           "worst err deg (seed)  before onset  handbacks")
     for heading in args.headings:
         for scenario in args.scenarios:
-            rs = [run_one(heading, scenario, s, args.duration) for s in args.seeds]
+            cfg = base_config(heading, args.pid)
+            rs = [run_one(heading, scenario, s, args.duration, cfg, ft=not args.no_ft)
+                  for s in args.seeds]
             runs += rs
             w = worst(rs)
             delay = ("-" if w["worst_delay_s"] is None

@@ -1,7 +1,19 @@
 """A simulated ArduSub autopilot on a MAVLink link, for the ArduSub ROV's tests and demos.
 
-The vehicle is the ROV plant of :mod:`firmware_host.devtools.rov_sim` (seeded, its compass
-faults applied to the reported heading). :class:`ArduSubSim` speaks to the bridge's router over
+Two vehicles. ``plant = "outland"`` (the default): the ROV plant of
+:mod:`firmware_host.devtools.rov_sim` (seeded, its compass faults applied to the reported
+heading), the model of the tests written before a real ArduSub was met. ``plant = "ardusub"``:
+the ArduSub SITL's own behaviour, calibrated on ``../shared/corpus/ardusub-sitl``
+(:mod:`firmware_host.devtools.ardusub_calib`): :class:`SubYawModel`'s yaw in MANUAL (a dead band
+of ~13 % of ``r``, a ~9 deg/s kick just above it, 77 deg/s at full stick within 100 ms, slow
+coasting), ATTITUDE's yaw as the EKF's (0 until it aligns at 2.0 s, again from 3.8 to 5.4 s;
+then the true heading with a slow wander of ``ekf_wander_deg`` and ``ekf_offset_deg``; its
+rate the true one, bias-corrected), RAW_IMU's compass ``compass_lag_s`` (0.14 s) behind the
+vehicle and its gyro with the plant's bias and noise, each at 10 Hz with one time stamp, and
+HEARTBEAT at 1 Hz: the message set and rates of the captures (plus what the bridge's own
+``[rov.ardusub]`` asks for).
+
+:class:`ArduSubSim` speaks to the bridge's router over
 a real pymavlink endpoint (``udpout:127.0.0.1:PORT``, :mod:`drivers.mavlink.io`):
 
 * ATTITUDE at ``attitude_hz`` (10 Hz; ``yaw`` = the compass heading, faults included; none
@@ -477,7 +489,7 @@ class ArduSubSim:
         acc = (0, 0, -1000)
         if self.compass == "RAW_IMU":
             self.link.send_raw_imu(round(self.t * 1e6), acc, g, mag=m)
-        else:
+        elif self.compass is not None:
             inst = {"SCALED_IMU": 0, "SCALED_IMU2": 1, "SCALED_IMU3": 2}
             self.link.send_scaled_imu(inst[self.compass], round(self.t * 1000), acc, g, m)
         self.counters.imu_sent += 1
