@@ -208,8 +208,9 @@ class RunResult:
     seed: int
     confirmations: int
     first_confirm_s: float | None  # after the fault's onset
-    err_settled_deg: float  # the worst true error on settled turns (clean: from START_S on;
-    #                          a fault: from the confirmation on, or from the onset if none)
+    err_settled_deg: float  # the worst true error on settled turns while the bridge steers
+    #                          (clean: from START_S on; a fault: from the confirmation on, or
+    #                          from the onset if none; not after a hand-back to the pilot)
     err_before_deg: float  # the same before the fault's onset (clean: = err_settled_deg)
     handbacks: int
     steps: int
@@ -243,7 +244,7 @@ def run_one(heading: str, scenario: str, seed: int, duration_s: float = 300.0,
     onset = FAULT_AT_S if SCENARIOS[scenario] else None
     first = next((t for t in confirms if onset is None or t >= onset), None)
     errs = [(t, abs(_err(h, r["setpoint"]))) for t, h, r in zip(ts, loop.true, recs, strict=True)
-            if settled(t)]
+            if settled(t) and r["ardusub"] == "steer"]  # after a hand-back the pilot steers
     if onset is None:
         after = [e for _, e in errs]
         before = after
