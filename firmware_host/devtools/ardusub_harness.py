@@ -294,6 +294,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    faulty = [s for s in args.scenarios if SCENARIOS[s]]
+    if faulty and args.duration < FAULT_AT_S + 60.0:
+        print(f"ardusub-harness: --duration {args.duration:g}: the faults ({','.join(faulty)}) "
+              f"begin at {FAULT_AT_S:g} s; give at least {FAULT_AT_S + 60.0:g} s")
+        return 2
     t0 = time.perf_counter()
     runs: list[RunResult] = []
     print("heading      scenario  confirmed  max conf (seed)  worst delay s (seed)  "
