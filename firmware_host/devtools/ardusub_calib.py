@@ -43,8 +43,10 @@ from pathlib import Path
 
 from drivers.capture import CaptureReader
 from drivers.mavlink import io as mio
+from firmware_host.commands.checks import positive_int
 from firmware_host.devtools.ardusub_sim import SUB_YAW, SubYawModel
 from firmware_host.rov.ardusub import RX, TICK, TX
+from firmware_host.rov.config import project_root
 from firmware_host.rov.replay import recorded_steps
 
 CAPTURES = ("att", "raw")
@@ -268,12 +270,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the corpus folder (default: ../shared/corpus beside the project)")
     parser.add_argument("--fit", choices=CAPTURES, default=None,
                         help="fit the model on this capture, then check it on both")
-    parser.add_argument("--iters", type=int, default=150, help="Nelder-Mead iterations")
+    parser.add_argument("--iters", type=positive_int, default=150,
+                        help="Nelder-Mead iterations")
 
 
 def run(args: argparse.Namespace) -> int:
-    from firmware_host.rov.config import project_root
-
     corpus = args.corpus or project_root().parent / "shared" / "corpus"
     if not (corpus / "ardusub-sitl").is_dir():
         print(f"ardusub-calib: no ardusub-sitl captures under {corpus}")
