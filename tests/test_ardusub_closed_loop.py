@@ -5,7 +5,7 @@ simulated ArduSub whose yaw, EKF and compass were fitted to the real SITL captur
 (:mod:`firmware_host.devtools.ardusub_harness`), over UDP on 127.0.0.1, in simulated time
 (a 300 s run takes seconds): armed at 10 s, the first turn 110 -> 150 deg, a 30 deg turn every
 60 s, a yaw current; faults at 100 s. The hold's gains are ``MANUAL_PID`` (kp 5, kd 1: the
-example file's kp 3, kd 2 limit-cycle +-3.9 deg on this plant).
+example file's kp 3, kd 2 limit-cycle up to 4.47 deg off on this plant).
 
 By default seed 1 of each case (the suite's time); ``FDI_ARDUSUB_SEEDS=1-10`` runs the issue's
 ten where a test takes seeds (``fdi-bridge sim ardusub-harness --seeds 1-10 --pid manual``

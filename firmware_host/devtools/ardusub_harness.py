@@ -89,9 +89,9 @@ def _err(h: float, setpoint: float) -> float:
 
 MANUAL_PID = {"kp": 5.0, "kd": 1.0}
 """The heading hold's gains for ArduSub's MANUAL on the calibrated plant (``--pid manual``):
-the defaults (kp 3, kd 2) limit-cycle +-3.9 deg around the setpoint there (the dead band's
-~9 deg/s kicks and the slow coasting after them); kp 5, kd 1 step over the dead band at a
-smaller error and brake less."""
+the defaults (kp 3, kd 2) limit-cycle up to 4.47 deg off the setpoint there (seeds 1-10: the
+dead band's ~9 deg/s kicks and the slow coasting after them); kp 5, kd 1 step over the dead
+band at a smaller error and brake less (3.07 deg)."""
 
 
 def parse_pid(text: str) -> dict[str, float]:
