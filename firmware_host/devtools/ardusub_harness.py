@@ -207,6 +207,7 @@ class RunResult:
     scenario: str
     seed: int
     confirmations: int
+    false_confirmations: int  # without a fault, or before the fault's onset
     first_confirm_s: float | None  # after the fault's onset
     err_settled_deg: float  # the worst true error on settled turns while the bridge steers
     #                          (clean: from START_S on; a fault: from the confirmation on, or
@@ -252,7 +253,8 @@ def run_one(heading: str, scenario: str, seed: int, duration_s: float = 300.0,
         since = first if first is not None else onset
         after = [e for t, e in errs if t >= since]
         before = [e for t, e in errs if t < onset]
-    return RunResult(heading, scenario, seed, len(confirms),
+    false = sum(1 for t in confirms if onset is None or t < onset)
+    return RunResult(heading, scenario, seed, len(confirms), false,
                      None if first is None or onset is None else round(first - onset, 2),
                      round(max(after, default=0.0), 3), round(max(before, default=0.0), 3),
                      int(summary.get("handbacks", 0)), len(recs))
@@ -266,7 +268,8 @@ def worst(results: Sequence[RunResult]) -> dict[str, Any]:
     w_delay = max(delays, key=lambda r: r.first_confirm_s or 0.0) if delays else None
     return {
         "runs": len(results),
-        "confirmed_runs": sum(r.confirmations > 0 for r in results),
+        "confirmed_runs": sum(r.first_confirm_s is not None for r in results),
+        "false_runs": sum(r.false_confirmations > 0 for r in results),
         "max_confirmations": w_conf.confirmations, "max_confirmations_seed": w_conf.seed,
         "worst_delay_s": None if w_delay is None else w_delay.first_confirm_s,
         "worst_delay_seed": None if w_delay is None else w_delay.seed,
@@ -301,7 +304,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     t0 = time.perf_counter()
     runs: list[RunResult] = []
-    print("heading      scenario  confirmed  max conf (seed)  worst delay s (seed)  "
+    print("heading      scenario  confirmed  false  max conf (seed)  worst delay s (seed)  "
           "worst err deg (seed)  before onset  handbacks")
     for heading in args.headings:
         for scenario in args.scenarios:
@@ -313,6 +316,7 @@ def run(args: argparse.Namespace) -> int:
             delay = ("-" if w["worst_delay_s"] is None
                      else f"{w['worst_delay_s']:.1f} ({w['worst_delay_seed']})")
             print(f"{heading:12} {scenario:9} {w['confirmed_runs']:3d}/{w['runs']:<5d} "
+                  f"{w['false_runs']:3d}/{w['runs']:<3d}"
                   f"{w['max_confirmations']:6d} ({w['max_confirmations_seed']})      "
                   f"{delay:20} {w['worst_err_deg']:8.2f} ({w['worst_err_seed']})        "
                   f"{w['worst_err_before_deg']:6.2f}  {w['handbacks']:6d}", flush=True)
