@@ -74,7 +74,9 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   loops (the gyro carries the headings through); at its end the innovation's change is taken
   into both headings up to the integration bound accumulated over it (sum of ``dt`` x
   |r(k) - r(k-1)|), so that a turn's sampling error is not a fault, and whatever is beyond
-  the bound is left for the test.
+  the bound is left for the test. Not while a fault is suspected: the innovation then holds
+  the suspected fault (on ArduSub's MANUAL dead band the hold kicks every ~2 s, each kick a
+  manoeuvre, and their ends took a 30 deg step into the headings before it was confirmed).
 * Offset compensation (``comp_samples`` > 0) after a step confirmed by the fast CUSUM: the
   compass minus its offset, once the offset is known to be a level, steers ``psi`` again
   (:meth:`GyroWitness._compensate`), so that the dead reckoning's drift stays bounded.
@@ -415,6 +417,11 @@ class GyroWitness:
             self._nu_prev = None
             return WitnessStep(self.psi, nu, 0.0, self.var.sigma, self.suspect, False, False,
                                False, False)
+        if self._man_bound > 0.0 and not self.fault and self.suspect:
+            # the manoeuvre's end while a fault is suspected: the innovation holds the
+            # suspected fault, which the correction below would take into the headings (a
+            # limit cycle's manoeuvres every few seconds absorbed a 30 deg step in 5 s)
+            self._man_bound = 0.0
         if self._man_bound > 0.0 and not self.fault:
             # the manoeuvre's end: its sampling error (within the bound) into both headings
             d = max(-self._man_bound, min(self._man_bound, nu - self.nu_ref))

@@ -127,6 +127,14 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
         "firmware_host.devtools.rov_harness",
         "ROV done-means: both plants x seeds, with and without the gyro (issue 14)",
     ),
+    "ardusub-harness": (
+        "firmware_host.devtools.ardusub_harness",
+        "ArduSub ROV in closed loop on the calibrated simulator, over seeds (issue 41)",
+    ),
+    "ardusub-calib": (
+        "firmware_host.devtools.ardusub_calib",
+        "the simulated ArduSub's yaw against the real SITL captures (fit and check)",
+    ),
     "insgnss": (
         "firmware_host.devtools.insgnss_sim",
         "INS/GNSS three-zone robust filter: paper scenarios",
@@ -179,6 +187,8 @@ EXAMPLES: dict[str, str] = {
     "sim ramp-oracle": "fdi-bridge sim ramp-oracle --seeds 1-3 --models gm,coarse",
     "sim rov": "fdi-bridge sim rov --fault drift:30@70 --out rov-run",
     "sim rov-harness": "fdi-bridge sim rov-harness --seeds 1-3 --scenarios step,burst",
+    "sim ardusub-harness": "fdi-bridge sim ardusub-harness --seeds 1-3 --scenarios clean",
+    "sim ardusub-calib": "fdi-bridge sim ardusub-calib --fit att",
     "sim insgnss": "fdi-bridge sim insgnss --scenario paper-single --out ins-run",
     "sim insgnss-report": "fdi-bridge sim insgnss-report --seeds 1-2 --out insgnss.md",
 }

@@ -1,0 +1,105 @@
+"""The ArduSub ROV in closed loop on the calibrated simulator (issue 41's "done means").
+
+The bridge as ``fdi-bridge run`` builds it (Runner, router, ``ArduSubRovVehicle``) steers the
+simulated ArduSub whose yaw, EKF and compass were fitted to the real SITL captures
+(:mod:`firmware_host.devtools.ardusub_harness`), over UDP on 127.0.0.1, in simulated time
+(a 300 s run takes seconds): armed at 10 s, the first turn 110 -> 150 deg, a 30 deg turn every
+60 s, a yaw current; faults at 100 s. The hold's gains are ``MANUAL_PID`` (kp 5, kd 1: the
+example file's kp 3, kd 2 limit-cycle up to 4.47 deg off on this plant).
+
+By default seed 1 of each case (the suite's time); ``FDI_ARDUSUB_SEEDS=1-10`` runs the issue's
+ten where a test takes seeds (``fdi-bridge sim ardusub-harness --seeds 1-10 --pid manual``
+prints every case's worst seed). The issue's bounds that seed 1 does not meet are strict
+``xfail``s naming the measurement: they fail the suite the day they pass, so the mark is
+removed with the fix.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+
+import pytest
+
+from firmware_host.commands.checks import seed_list
+from firmware_host.devtools.ardusub_harness import (
+    BOUND_DEG,
+    MANUAL_PID,
+    RunResult,
+    base_config,
+    run_one,
+)
+
+SEEDS = seed_list(os.environ.get("FDI_ARDUSUB_SEEDS", "1"))
+DURATION_S = 300.0
+HEADINGS = ("attitude", "raw_compass")
+
+
+@functools.cache
+def _run(heading: str, scenario: str, seed: int) -> RunResult:
+    return run_one(heading, scenario, seed, DURATION_S, base_config(heading, MANUAL_PID))
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("heading", HEADINGS)
+def test_no_fault_nothing_confirmed(heading: str, seed: int) -> None:
+    """Measured over seeds 1-10: attitude 0/10; raw_compass 4/10 runs confirm a fault (seeds
+    3, 4, 7, 10: a manoeuvre's end takes one noisy compass sample into the dead reckoning)."""
+    r = _run(heading, "clean", seed)
+    assert r.steps == 1500
+    assert r.confirmations == 0, r
+    assert r.handbacks == 0, r
+
+
+@pytest.mark.parametrize("heading", [
+    "attitude",
+    pytest.param("raw_compass", marks=pytest.mark.xfail(
+        strict=True, reason="seed 1: 3.22 deg (the limit cycle plus the compass's noise)")),
+])
+def test_no_fault_heading_held_within_3_deg(heading: str) -> None:
+    r = _run(heading, "clean", SEEDS[0])
+    assert r.err_settled_deg < BOUND_DEG, r
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("heading", HEADINGS)
+def test_a_30_deg_drift_is_confirmed_within_5_s(heading: str, seed: int) -> None:
+    """In ATTITUDE's yaw when the FDI judges it, in the magnetometer when it judges the raw
+    compass (seeds 1-10: attitude 10/10, raw_compass 9/10, within 3.6 s; raw seed 4 is
+    already in a false fault at the onset)."""
+    r = _run(heading, "drift", seed)
+    assert r.first_confirm_s is not None and r.first_confirm_s < 5.0, r
+    assert r.err_before_deg < BOUND_DEG + 1.0, r  # the hold before the fault (raw: <= 3.97)
+
+
+@pytest.mark.parametrize("heading", [
+    pytest.param("attitude", marks=pytest.mark.xfail(
+        strict=True, reason="seed 1: 6.56 deg (the step reached the dead reckoning at a "
+                            "manoeuvre's end before it was suspected)")),
+    "raw_compass",
+])
+def test_after_a_drift_s_confirmation_the_heading_within_3_deg(heading: str) -> None:
+    r = _run(heading, "drift", SEEDS[0])
+    assert r.err_settled_deg < BOUND_DEG, r
+
+
+@pytest.mark.parametrize("heading", [
+    pytest.param("attitude", marks=pytest.mark.xfail(
+        strict=True, reason="seed 1: never confirmed (2/10 seeds), 61 deg off: the limit "
+                            "cycle's manoeuvres every ~2 s each take the ramp's increment "
+                            "into the dead reckoning")),
+    pytest.param("raw_compass", marks=pytest.mark.xfail(
+        strict=True, reason="seed 1: confirmed after 132 s, 39.5 deg off")),
+])
+def test_a_0_3_deg_s_ramp_is_confirmed_and_the_heading_held(heading: str) -> None:
+    r = _run(heading, "ramp", SEEDS[0])
+    assert r.first_confirm_s is not None and r.first_confirm_s < 15.0, r
+    assert r.err_settled_deg < BOUND_DEG, r
+
+
+def test_without_fault_tolerance_the_drift_is_followed() -> None:
+    """The drift bound is not met by doing nothing: the same drift, fault tolerance off."""
+    r = run_one("attitude", "drift", SEEDS[0], 200.0, base_config("attitude", MANUAL_PID),
+                ft=False)
+    assert r.first_confirm_s is None
+    assert r.err_settled_deg > 25.0, r
