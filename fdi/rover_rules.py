@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from fdi.rover_evidence import TIME_RESET_EPOCHS, Evidence, Mode, Source, Stats
 
@@ -455,13 +455,15 @@ HOLD_RULES: tuple[HoldRule, ...] = (r_hold_resume, r_hold_kept, r_hold_timeout, 
 # ----------------------------------------------------------------------- the reference page
 
 
-def markdown() -> str:
-    """The decision table as the reference page ``docs/reference/rover-decisions.md``."""
+def markdown(defaults: Any) -> str:
+    """The decision table as the reference page ``docs/reference/rover-decisions.md``
+    (``defaults``: the default preset's ``RoverDetectorParams()``, the values shown)."""
     lines = [
         "# The rover isolator's decision table",
         "",
-        "Generated from `fdi/rover_rules.py` (`python -c 'import fdi.rover_rules as r; "
-        "print(r.markdown(), end=\"\")' > docs/reference/rover-decisions.md`);",
+        "Generated from `fdi/rover_rules.py` (`python -c 'import fdi.rover as v, "
+        "fdi.rover_rules as r; print(r.markdown(v.RoverDetectorParams()), end=\"\")' "
+        "> docs/reference/rover-decisions.md`);",
         "`tests/test_rover_rules.py` checks that this page is current.",
         "",
         "Each epoch's evidence is computed once (`fdi/rover_evidence.py`: F(k) against T_d,",
@@ -489,9 +491,6 @@ def markdown() -> str:
               "The default preset's values (`RoverDetectorParams`, the `[rover.detector]` table);",
               "their units and ranges are in `fdi/rover.py`.", "",
               "| parameter | default | rules |", "| --- | --- | --- |"]
-    from fdi.rover import RoverDetectorParams
-
-    defaults = RoverDetectorParams()
     for name in sorted({p for r in RULES for p in r.params}):
         users = ", ".join(r.id for r in RULES if name in r.params)
         value = getattr(defaults, name)

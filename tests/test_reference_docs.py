@@ -13,7 +13,7 @@ from typing import Literal, get_type_hints
 
 import pytest
 
-from firmware_host.cli import main
+from firmware_host.cli import main, parser_tree
 from firmware_host.commands.docgen import COMMON, commands
 from firmware_host.commands.reference import REGENERATE, lacks, missing, pages, tables
 
@@ -68,12 +68,12 @@ def test_a_key_without_metadata_is_reported() -> None:
 def test_committed_reference_is_current(name: str) -> None:
     committed = DOCS / "reference" / name
     assert committed.is_file(), f"{committed} missing: {REGENERATE}"
-    assert committed.read_text(encoding="utf-8") == pages()[name], (
+    assert committed.read_text(encoding="utf-8") == pages(parser_tree())[name], (
         f"docs/reference/{name} is stale: {REGENERATE}")
 
 
 def test_config_reference_lists_every_key_with_its_default() -> None:
-    text = pages()["config.md"]
+    text = pages(parser_tree())["config.md"]
     assert "| `alpha` | float | `0.05` | - | [1e-15, 0.5] |" in text
     assert "| `gate_sigmas` | float | `6.0` | σ | 0 or [1, 100] |" in text  # its documented off
     assert '| `strategy` | string | `"grey"` |  | "grey", "three_zone", "combined" |' in text
@@ -83,8 +83,8 @@ def test_config_reference_lists_every_key_with_its_default() -> None:
 
 
 def test_cli_reference_has_every_command_and_option() -> None:
-    text = pages()["cli.md"]
-    for d in commands()[1:]:
+    text = pages(parser_tree())["cli.md"]
+    for d in commands(parser_tree())[1:]:
         assert f"\n## fdi-bridge {d.path}\n" in text, d.path
         for o in d.positionals + d.options:
             if o.flags and not set(o.flags) & COMMON:

@@ -302,9 +302,9 @@ def test_every_rule_of_the_table_has_its_function_and_no_other() -> None:
 
 def test_the_reference_page_is_current() -> None:
     page = ROOT / "docs" / "reference" / "rover-decisions.md"
-    assert page.read_text(encoding="utf-8") == rover_rules.markdown(), (
-        "regenerate it: python -c 'import fdi.rover_rules as r; print(r.markdown(), end=\"\")'"
-        " > docs/reference/rover-decisions.md")
+    assert page.read_text(encoding="utf-8") == rover_rules.markdown(RoverDetectorParams()), (
+        "regenerate it: python -c 'import fdi.rover as v, fdi.rover_rules as r; "
+        "print(r.markdown(v.RoverDetectorParams()), end=\"\")' > docs/reference/rover-decisions.md")
 
 
 def test_the_paper_preset_reaches_rules_r1_to_r8_only() -> None:

@@ -256,10 +256,10 @@ def _md(text: str) -> str:
     return " ".join(text.split()).replace("|", "\\|").replace(_OUTSIDE, "../")
 
 
-def cli_reference() -> str:
+def cli_reference(tree: ParserTree) -> str:
     """``docs/reference/cli.md``: every command with its usage, arguments (defaults as
     ``--help`` shows them) and example, from the parser (``fdi-bridge docs``)."""
-    docs = commands()
+    docs = commands(tree)
     top, rest = docs[0], docs[1:]
     out = [
         "# Command-line reference",

@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
 from drivers.configload import MAX_MAGNITUDE, toml_fields
+from firmware_host.commands.docgen import ParserTree, cli_reference
+from firmware_host.runtime import config
 
 REGENERATE = "fdi-bridge docs --out docs/reference"
 
@@ -156,15 +158,13 @@ def _range(tp: Any, meta: typing.Mapping[str, Any]) -> str:
     if "choices" in meta:
         return ", ".join(_toml(c) for c in meta["choices"])
     if "url" in meta:
-        from firmware_host.runtime.config import URL_KINDS
-        return URL_KINDS[str(meta["url"])]
+        return config.URL_KINDS[str(meta["url"])]
     return str(meta.get("range", ""))
 
 
 def _meta(cls: type[Any], f: dataclasses.Field[Any]) -> typing.Mapping[str, Any]:
     """A field's metadata; the drivers' SerialSettings.url is a URL of kind "serial" (the
     config loader's own table of such fields)."""
-    from firmware_host.runtime import config
     kind = config._URL_FIELDS_ELSEWHERE.get((cls, f.name))
     return {**f.metadata, "url": kind} if kind else f.metadata
 
@@ -192,7 +192,6 @@ def _default_of(cls: type[Any]) -> Any:
 
 def tables() -> list[Table]:
     """Every table of a configuration file, in file order (sections, then their sub-tables)."""
-    from firmware_host.runtime.config import BridgeFile
     out: list[Table] = []
 
     def walk(cls: type[Any], obj: Any, path: str, array: bool) -> None:
@@ -221,7 +220,7 @@ def tables() -> list[Table]:
         for sub_cls, sub_obj, sub_path, sub_array in subs:
             walk(sub_cls, sub_obj, sub_path, sub_array)
 
-    walk(BridgeFile, BridgeFile(), "", False)
+    walk(config.BridgeFile, config.BridgeFile(), "", False)
     return out
 
 
@@ -298,10 +297,10 @@ def _anchor(path: str) -> str:
     return re.sub(r"[^a-z0-9 -]", "", f"[{path}]".lower()).replace(" ", "-")
 
 
-def pages() -> dict[str, str]:
-    """The reference pages: file name -> text."""
-    from firmware_host.commands.docgen import cli_reference
-    return {"config.md": config_reference(), "cli.md": cli_reference()}
+def pages(tree: ParserTree) -> dict[str, str]:
+    """The reference pages: file name -> text (``tree``: the whole parser,
+    :func:`firmware_host.cli.parser_tree`, which the cli hands to its commands)."""
+    return {"config.md": config_reference(), "cli.md": cli_reference(tree)}
 
 
 # --------------------------------------------------------------------------- the command
@@ -317,7 +316,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    texts = pages()
+    texts = pages(args.parser_tree())
     if args.check:
         problems = [f"config key {m}" for m in missing()]
         if args.out is not None:

@@ -46,7 +46,7 @@ from drivers.mavlink import io as mio
 from firmware_host.commands.checks import choice_list, output_file_arg, positive_float, seed_list
 from firmware_host.devtools.ardusub_sim import ArduSubSim
 from firmware_host.devtools.rov_sim import parse_fault
-from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig
+from firmware_host.mavlink.router import EndpointConfig, MavlinkConfig, Router, open_router
 from firmware_host.rov.ardusub import ArduSubRovVehicle
 from firmware_host.rov.config import RovConfig, load_rov_config, project_root
 from firmware_host.runtime.runner import Runner
@@ -134,10 +134,11 @@ class ClosedLoop:
                             pilot_system_id=255, statustext_per_s=50.0)
         self.records: list[dict[str, Any]] = []
         self.vehicle = ArduSubRovVehicle(cfg, ft=ft, on_epoch=self.records.append)
-        self.runner = Runner(self.vehicle, mavlink=mav, handle_signals=False)
+        self.runner = Runner(self.vehicle, mavlink=mav, open_router=open_router,
+                             handle_signals=False)
         self.runner.start()
         router = self.runner.router
-        assert router is not None
+        assert isinstance(router, Router)
         ap_port = router.endpoints[0].link.local_address[1]  # type: ignore[index]
         gcs_port = router.endpoints[1].link.local_address[1]  # type: ignore[index]
         kw: dict[str, Any] = {"plant": "ardusub", "mode": "MANUAL", "armed": False}
