@@ -191,3 +191,21 @@ def test_calibrate_bounds_what_a_test_could_find_of_a_slow_drift(
     short = _slow_drift_line(capsys, _drive(tmp_path, "short", seed=100_903, receiver=903,
                                             duration_s=250.0))
     assert short.startswith("slow drifts: no bound") and "no Doppler chain longer" in short
+
+
+def test_calibrate_says_what_the_receiver_sends_against_its_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue E: the receiver's actual rate and sentence set, and whether they fit the line: the
+    capture's own baud rate for a capture; for a plain log, ``[rover.port] baudrate`` (9600 by
+    default, where 5 Hz of GGA+RMC+VTG does not fit)."""
+    cap = _drive(tmp_path, "clean", seed=100_904, receiver=904, duration_s=600.0)
+    assert cli.main(["calibrate", str(cap)]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith(str(cap)))
+    assert "the receiver sends 5 Hz of GGA+RMC+VTG" in line, line
+    assert "; fits the capture's 19200 baud" in line, line
+    nmea = cap.with_suffix(".nmea")
+    assert nmea.is_file()
+    assert cli.main(["calibrate", str(nmea)]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith(str(nmea)))
+    assert "the receiver sends 5 Hz of GGA+RMC+VTG" in line, line
+    assert "; does not fit [rover.port] 9600 baud" in line and "at most 4 Hz fits" in line, line

@@ -29,6 +29,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
+from drivers.gps.link import LinkFit
 from fdi.errors import FdiBridgeError, UsageError
 from fdi.rover import RoverDetectorParams
 from firmware_host.commands.checks import input_file_arg, output_file_arg
@@ -81,6 +82,24 @@ def ramp_bound_line(runs: list[list[dict[str, Any]]], lag_s: float) -> str:
             "time at 0.1 % false alarms (fdi-bridge sim ramp-oracle): " + "; ".join(parts))
 
 
+def receiver_line(path: str | Path, link: dict[str, Any] | None, capture: bool) -> str:
+    """What the receiver of a recording really sends: its rate and sentence set, and whether
+    they fit the line's baud rate (the capture's, else ``[rover.port] baudrate``): the preset
+    should be calibrated at the rate and sentences the vehicle will run (issue E)."""
+    if link is None:
+        return f"{path}: too few epochs to tell the receiver's rate and sentences"
+    fit = LinkFit(int(link["baudrate"]), float(link["bytes_per_epoch"]),
+                  float(link["rate_hz"]), tuple(link["sentences"]))
+    where = "the capture's" if capture else "[rover.port]"
+    head = (f"{path}: the receiver sends {fit.rate_hz:.3g} Hz of "
+            f"{'+'.join(fit.sentences) or 'NMEA'} ({fit.bytes_per_epoch:.0f} B an epoch, "
+            f"{fit.need_bytes_s:.0f} B/s)")
+    if fit.fits:
+        return f"{head}; fits {where} {fit.baudrate} baud ({fit.load:.0%} of the line)"
+    tail = fit.message().split(" does not fit ", 1)[1]  # "9600 baud (960 B/s): at most ..."
+    return f"{head}; does not fit {where} {tail}"
+
+
 def run(args: argparse.Namespace) -> int:
     bf = load_bridge_file(args.config)  # ConfigError: printed by the CLI, exit 2
     cfg = bridge_config(bf)
@@ -89,8 +108,14 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.config}: the drift test does not run in this configuration "
                          f"(drift_test = {str(d.drift_test).lower()}, predictor = "
                          f"{d.predictor!r}, strategy = {d.strategy!r}): nothing to calibrate")
-    runs = [run_on_bytes(cfg.rover, b"".join(c for _, c in load_input(p).chunks))[0]
-            for p in args.logs]
+    runs = []
+    for p in args.logs:
+        inp = load_input(p)
+        records, summary = run_on_bytes(
+            cfg.rover, b"".join(c for _, c in inp.chunks),
+            baudrate=inp.baudrate if inp.kind == "capture" else None)
+        runs.append(records)
+        print(receiver_line(p, summary.get("link"), inp.kind == "capture"))
     for p, records in zip(args.logs, runs, strict=True):
         if not any(r.get("e") is not None for r in records):
             raise FdiBridgeError(f"{p}: no position fixes in it (a capture or NMEA log of the "

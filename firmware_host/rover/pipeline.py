@@ -397,12 +397,14 @@ class RoverPipeline:
         }
 
 
-def run_on_bytes(rover: RoverConfig, data: bytes) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+def run_on_bytes(rover: RoverConfig, data: bytes, baudrate: int | None = None,
+                 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """The pipeline on ``data`` (NMEA bytes), in-process (no pty, no output): its records as
-    ``epochs.jsonl`` has them, and its summary. ``calibrate`` and the evaluation read drives
+    ``epochs.jsonl`` has them, and its summary (``link``: the receiver's rate and sentences
+    against ``baudrate``, default the port's). ``calibrate`` and the evaluation read drives
     with it."""
     buf = io.StringIO()
-    pipe = RoverPipeline(rover, jsonl=buf)
+    pipe = RoverPipeline(rover, jsonl=buf, baudrate=baudrate)
     pipe.feed(data)
     pipe.finish()
     return [json.loads(line) for line in buf.getvalue().splitlines()], pipe.summary()
