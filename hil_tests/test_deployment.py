@@ -224,19 +224,32 @@ def test_rov_with_operator_link(tmp_path: Path) -> None:
     halt = threading.Event()
     with PtyPair(link=link, baudrate=115200) as pty:
         th = threading.Thread(target=serve_pty, args=(pty, srv, halt), daemon=True)
-        th.start()
         proc = bridge(cfg, run_dir, "--out", str(tmp_path / "live"))
         try:
+            # The plant's clock starts when the bridge's first command arrives (its port is
+            # open: pyserial flushes input on open), not when the process starts: a loaded
+            # machine took seconds to import, and the telemetry sent meanwhile was lost.
+            first = bytearray()
+
+            def bridge_speaks() -> bool:
+                first.extend(pty.read(timeout_s=0.05))
+                return bool(first)
+
+            wait_for(bridge_speaks, 60.0, "the bridge's first command on the link")
+            srv.receive(bytes(first))
+            th.start()
+
             def back_after_neutral() -> bool:
                 texts = [m.text for _, m in gcs.of("STATUSTEXT")]
                 i = next((i for i, t in enumerate(texts) if "neutral thrust" in t), None)
                 return i is not None and any("telemetry back" in t for t in texts[i:])
 
-            wait_for(back_after_neutral, 30.0, "telemetry back at the operator")
+            wait_for(back_after_neutral, 60.0, "telemetry back at the operator")
         finally:
             rc, err = stop(proc)
             halt.set()
-            th.join(2.0)
+            if th.is_alive():
+                th.join(2.0)
             ap.close()
             gcs.close()
     assert rc == 0, err
