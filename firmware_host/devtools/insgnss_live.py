@@ -199,10 +199,10 @@ def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer],
     first event; returns how many were written (fewer when ``stop`` is set). The receiver's
     bytes wait until the IMU has streamed ``gnss_after_s`` of wall clock (an autopilot is up
     before the receiver's first fix), so that which link the vehicle reads first does not
-    depend on the scheduler. ``drained``: each chunk waits until it says the reader has taken
-    what was written (at most ``drain_timeout_s``), so the reader is never more than a chunk
-    behind, however slow the machine (at 50x a loaded machine fell 1 s of wall clock behind,
-    the vehicle's ``max_wait_s``, and gave up on the IMU of an epoch)."""
+    depend on the scheduler. ``drained``: each chunk waits until it says the reader has kept
+    up (at most ``drain_timeout_s``), so that the reader's lag is bounded however slow the
+    machine (at 50x a loaded machine fell over 1 s of wall clock behind, the vehicle's
+    ``max_wait_s``, and gave up on the IMU of an epoch)."""
     t0 = time.monotonic()
     t_first = events[0][0] if events else 0.0
     i = 0
@@ -248,6 +248,9 @@ class LiveRun:
     epochs: npt.NDArray[np.int_]
     pos_err: npt.NDArray[np.float64]
     wall_s: float
+
+
+LAG_S = 0.25  # the vehicle's largest lag behind the player, s of data (below its hold_s)
 
 
 def unread(pair: PtyPair) -> int:
@@ -307,11 +310,17 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
         done = threading.Event()
         stop = threading.Event()
 
+        # Over the ptys the player waits while the vehicle has more than LAG_S of data unread.
+        span = events[-1][0] - events[0][0] if events else 0.0
+        budget = LAG_S * sum(len(e[2]) for e in events) / max(span, LAG_S)
+
+        def kept_up() -> bool:
+            return unread(gps) + unread(imu) <= budget
+
         def feed() -> None:
             try:
-                # over the ptys, each chunk waits until the vehicle has read the last one
                 play(events, (imu_write, gps.write), speed=speed, stop=stop,
-                     drained=None if via_router else lambda: not unread(gps) and not unread(imu))
+                     drained=None if via_router else kept_up)
             finally:
                 done.set()
 
