@@ -92,6 +92,15 @@ def stop(proc: subprocess.Popen[bytes]) -> tuple[int, str]:
     return proc.returncode, err.decode(errors="replace")
 
 
+def holds(proc: subprocess.Popen[bytes], path: str) -> bool:
+    """Whether the process has ``path`` open (its file descriptors in /proc)."""
+    fds = Path(f"/proc/{proc.pid}/fd")
+    try:
+        return any(os.readlink(fd) == path for fd in fds.iterdir())
+    except OSError:  # a descriptor closed while listed
+        return False
+
+
 def epochs(n: int, seed: int) -> list[bytes]:
     sc = RoverScenario(rate_hz=10.0, duration_s=n / 10.0, seed=seed, fault_every_s=1e9)
     return [data for _, data, _ in generate(sc)]
@@ -328,8 +337,8 @@ def test_nothing_stale_is_sent_at_shutdown(tmp_path: Path, n_epochs: int) -> Non
     with PtyPair(link=gps_link, baudrate=9600) as pty:
         proc = bridge(cfg, tmp_path, "--out", str(tmp_path / "live"))
         try:
-            wait_for(lambda: (tmp_path / "live" / "epochs.jsonl").exists(), 20.0, "the start")
-            time.sleep(0.3)  # the port is open (pyserial flushes input on open)
+            wait_for(lambda: holds(proc, pty.slave_path), 60.0, "the bridge's receiver port")
+            time.sleep(0.3)  # pyserial flushes input once the port is open: let it pass
             for chunk in epochs(n_epochs, seed=3):
                 pty.write(chunk)
                 time.sleep(0.1)
