@@ -59,6 +59,7 @@ def _check_records(lr: LiveRun) -> None:
     assert summary["ins"]["refused"] == ""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario,seed", [("paper-single", 1), ("paper-random", 1)])
 def test_live_vehicle_within_10_percent_of_sim_insgnss(scenario: sim.Scenario, seed: int,
                                                        tmp_path: Path) -> None:
