@@ -101,8 +101,10 @@ def test_without_gyro_one_hour_no_false_confirmation_after_turns(cfg: RovConfig,
     res = measure(cfg, plant, SEEDS, gyro=False, which=("long",))
     assert res["long.false_confirmations"]["worst"] == 0, res
     _check(plant, "long.drift_delay_s", res["long.drift_delay_s"])
+    # Without the window: seed 1 had its false confirmation at 1261 s (Nomoto) and 1262 s
+    # (nonlinear), seeds 2 and 3 at 842/1622 s and 1921/2341 s; half an hour of seed 1 shows it.
     off = replace(cfg, ft=replace(cfg.ft, turn_window_s=0.0))
-    assert measure(off, plant, SEEDS[:3], gyro=False, which=("long",))[
+    assert measure(off, plant, SEEDS[:1], gyro=False, which=("long",), long_s=1800.0)[
         "long.false_confirmations"]["worst"] >= 1
 
 
