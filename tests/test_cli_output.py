@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -286,4 +287,5 @@ def test_progress_bar_on_a_terminal_not_in_a_pipe(tmp_path: Path) -> None:
     assert piped.returncode == 0, piped.stderr
     assert "demo:" not in piped.stderr and "\r" not in piped.stderr
     quiet, tty_q = _under_pty([*demo, "q", "-q"], tmp_path)
-    assert quiet == 0 and "demo:" not in tty_q
+    assert quiet == 0 and "Rover demo:" in tty_q
+    assert not re.search(r"demo: +\d+%\|", tty_q)  # no bar (its text is "demo:  50%|...")
