@@ -250,7 +250,7 @@ class LiveRun:
     wall_s: float
 
 
-LAG_S = 0.25  # the vehicle's largest lag behind the player, s of data (below its hold_s)
+LAG_S = 1.0  # the vehicle's largest lag behind the player, s of data
 
 
 def unread(pair: PtyPair) -> int:
