@@ -1,4 +1,17 @@
-"""Shared fixtures: the project root and the shared corpus (read in place, never copied)."""
+"""Shared fixtures: the project root and the shared corpus (read in place, never copied); the
+test tiers.
+
+Tiers (markers registered in pyproject.toml; the default command runs them all, as CI does):
+
+* ``integration``: real ptys, sockets on 127.0.0.1, subprocesses of the CLI: every test in
+  ``hil_tests/`` and in the ``tests/`` files named in :data:`INTEGRATION_FILES` (a file is
+  named when most of its tests do such I/O); marked here, by file, in one place;
+* ``slow``: the long seed harnesses and the other heavy tests, marked where they are defined;
+* everything else: unit tests, in-process and fast.
+
+``pytest -m "not slow"`` runs the fast tiers; ``pytest -m "not slow and not integration"`` the
+unit tests alone.
+"""
 
 from __future__ import annotations
 
@@ -60,3 +73,25 @@ def pytest_configure(config: pytest.Config) -> None:
     commands under test get Python's KeyboardInterrupt as a user's terminal gives it."""
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+INTEGRATION_FILES = frozenset({
+    "test_ardusub_pilot_rules.py", "test_ardusub_replay.py", "test_ardusub_tlog.py",
+    "test_cli_errors.py", "test_cli_permission.py", "test_config_bounds.py", "test_doctor.py",
+    "test_epochs_kill.py", "test_insgnss_align.py", "test_insgnss_coast.py",
+    "test_insgnss_live.py", "test_mavlink_config.py", "test_mavlink_doctor.py",
+    "test_out_diskfull.py", "test_param_bounds.py", "test_port_exclusive.py",
+    "test_reconnect.py", "test_recorder_diskfull.py", "test_replay_signals.py",
+    "test_rov_replay.py", "test_run_dispatch.py", "test_runner.py", "test_transport_read.py",
+    "test_wheel.py",
+})
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The ``integration`` tier: ``hil_tests/`` and :data:`INTEGRATION_FILES`."""
+    hil = ROOT / "hil_tests"
+    for item in items:
+        path = item.path
+        if path.is_relative_to(hil) or (path.parent == ROOT / "tests"
+                                        and path.name in INTEGRATION_FILES):
+            item.add_marker(pytest.mark.integration)

@@ -92,6 +92,15 @@ def stop(proc: subprocess.Popen[bytes]) -> tuple[int, str]:
     return proc.returncode, err.decode(errors="replace")
 
 
+def holds(proc: subprocess.Popen[bytes], path: str) -> bool:
+    """Whether the process has ``path`` open (its file descriptors in /proc)."""
+    fds = Path(f"/proc/{proc.pid}/fd")
+    try:
+        return any(os.readlink(fd) == path for fd in fds.iterdir())
+    except OSError:  # a descriptor closed while listed
+        return False
+
+
 def epochs(n: int, seed: int) -> list[bytes]:
     sc = RoverScenario(rate_hz=10.0, duration_s=n / 10.0, seed=seed, fault_every_s=1e9)
     return [data for _, data, _ in generate(sc)]
@@ -224,19 +233,32 @@ def test_rov_with_operator_link(tmp_path: Path) -> None:
     halt = threading.Event()
     with PtyPair(link=link, baudrate=115200) as pty:
         th = threading.Thread(target=serve_pty, args=(pty, srv, halt), daemon=True)
-        th.start()
         proc = bridge(cfg, run_dir, "--out", str(tmp_path / "live"))
         try:
+            # The plant's clock starts when the bridge's first command arrives (its port is
+            # open: pyserial flushes input on open), not when the process starts: a loaded
+            # machine took seconds to import, and the telemetry sent meanwhile was lost.
+            first = bytearray()
+
+            def bridge_speaks() -> bool:
+                first.extend(pty.read(timeout_s=0.05))
+                return bool(first)
+
+            wait_for(bridge_speaks, 60.0, "the bridge's first command on the link")
+            srv.receive(bytes(first))
+            th.start()
+
             def back_after_neutral() -> bool:
                 texts = [m.text for _, m in gcs.of("STATUSTEXT")]
                 i = next((i for i, t in enumerate(texts) if "neutral thrust" in t), None)
                 return i is not None and any("telemetry back" in t for t in texts[i:])
 
-            wait_for(back_after_neutral, 30.0, "telemetry back at the operator")
+            wait_for(back_after_neutral, 60.0, "telemetry back at the operator")
         finally:
             rc, err = stop(proc)
             halt.set()
-            th.join(2.0)
+            if th.is_alive():
+                th.join(2.0)
             ap.close()
             gcs.close()
     assert rc == 0, err
@@ -315,8 +337,8 @@ def test_nothing_stale_is_sent_at_shutdown(tmp_path: Path, n_epochs: int) -> Non
     with PtyPair(link=gps_link, baudrate=9600) as pty:
         proc = bridge(cfg, tmp_path, "--out", str(tmp_path / "live"))
         try:
-            wait_for(lambda: (tmp_path / "live" / "epochs.jsonl").exists(), 20.0, "the start")
-            time.sleep(0.3)  # the port is open (pyserial flushes input on open)
+            wait_for(lambda: holds(proc, pty.slave_path), 60.0, "the bridge's receiver port")
+            time.sleep(0.3)  # pyserial flushes input once the port is open: let it pass
             for chunk in epochs(n_epochs, seed=3):
                 pty.write(chunk)
                 time.sleep(0.1)

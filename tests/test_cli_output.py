@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -272,12 +273,19 @@ def _under_pty(argv: list[str], cwd: Path, timeout: float = 120) -> tuple[int, s
 
 
 def test_progress_bar_on_a_terminal_not_in_a_pipe(tmp_path: Path) -> None:
+    """``eval --suite`` draws its bar on a terminal, not in a pipe; ``-q`` turns it off on a
+    terminal too. Every command's bar is one :class:`Progress`, which decides by the
+    terminal and the log level alone: the pipe and ``-q`` are checked on ``demo`` (a few
+    seconds), not on two more runs of the whole suite (``test_console_tables.py::
+    test_demo_progress_bar_on_a_terminal_only`` checks ``demo`` on a terminal too)."""
     argv = ["eval", "--suite", "--quick", "--no-plots", "--duration", "30"]
     status, tty = _under_pty(argv, tmp_path)
     assert status == 0, tty
     assert "eval --suite" in tty and "case" in tty and "\r" in tty  # a refreshing tqdm bar
-    piped = _cli(*argv, cwd=tmp_path)
+    demo = ["demo", "--duration", "20", "--presets", "rover", "--out"]
+    piped = _cli(*demo, "p", cwd=tmp_path)
     assert piped.returncode == 0, piped.stderr
-    assert "eval --suite" not in piped.stderr and "\r" not in piped.stderr
-    quiet, tty_q = _under_pty([*argv, "-q"], tmp_path)
-    assert quiet == 0 and "eval --suite:" not in tty_q
+    assert "demo:" not in piped.stderr and "\r" not in piped.stderr
+    quiet, tty_q = _under_pty([*demo, "q", "-q"], tmp_path)
+    assert quiet == 0 and "Rover demo:" in tty_q
+    assert not re.search(r"demo: +\d+%\|", tty_q)  # no bar (its text is "demo:  50%|...")

@@ -28,6 +28,7 @@ from firmware_host.devtools.insgnss_live import (
     offline_aligned,
     rms,
     run_live,
+    unread,
 )
 from firmware_host.insgnss.vehicle import InsGnssVehicle
 from firmware_host.runtime.config import CONFIG_DIR, BridgeConfig, load_bridge_file
@@ -58,6 +59,7 @@ def _check_records(lr: LiveRun) -> None:
     assert summary["ins"]["refused"] == ""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario,seed", [("paper-single", 1), ("paper-random", 1)])
 def test_live_vehicle_within_10_percent_of_sim_insgnss(scenario: sim.Scenario, seed: int,
                                                        tmp_path: Path) -> None:
@@ -316,15 +318,15 @@ def test_router_imu_without_a_router_is_refused(tmp_path: Path) -> None:
         vehicle = InsGnssVehicle(cfg, setup)
         assert [p.name for p in vehicle.ports()] == ["gps"]
         def feed() -> None:
-            time.sleep(0.3)  # the runner opens the port first
             for j in range(6):
                 gps.write(nmea_epoch(float(j), (34.25, 8.5, 300.0), (10.0, 0.0)))
-                time.sleep(0.05)
+                time.sleep(0.05)  # the receiver's epochs, apart
 
+        runner = Runner(vehicle, out_dir=tmp_path, handle_signals=False, duration_s=60.0)
+        runner.start()  # the port opens before anything is sent
         thread = threading.Thread(target=feed, daemon=True)
         thread.start()
-        summary = Runner(vehicle, out_dir=tmp_path, handle_signals=False,
-                         duration_s=1.5).run()
+        summary = runner.run(until=lambda: not thread.is_alive() and unread(gps) == 0)
         thread.join(2.0)
     assert "needs the router" in summary["ins"]["refused"]
     assert set(summary["ins"]["epochs"]) == {"rover"} and summary["ins"]["epochs"]["rover"] >= 5

@@ -5,12 +5,8 @@ know the receiver's fault periods."""
 from __future__ import annotations
 
 import json
-import os
 import re
 import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +17,7 @@ from firmware_host.cli import main
 from firmware_host.devtools import eval as eval_mod
 from firmware_host.devtools import insgnss_report
 from firmware_host.devtools.insgnss_sim import fault_spans
+from tests.ptyrun import StderrOnPty
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -132,17 +129,16 @@ def test_insgnss_report_interrupted_keeps_the_runs_done(monkeypatch: pytest.Monk
 def test_insgnss_report_sigint_as_a_user_sends_it(tmp_path: Path) -> None:
     """A real SIGINT to the command: exit 130, the report file written and marked partial."""
     out = tmp_path / "report.md"
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.cli", "sim", "insgnss-report",
-                             "--seeds", "1,2,3,4,5", "--out", str(out)],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(10.0)  # imports and the first runs (the whole report: about 2 min)
-    assert proc.poll() is None, "the report finished before the signal"
-    proc.send_signal(signal.SIGINT)
-    stdout, stderr = proc.communicate(timeout=60)
-    assert proc.returncode == 130, stderr
-    assert b"Traceback" not in stderr and b"partial report written" in stderr
+    cmd = StderrOnPty(["sim", "insgnss-report", "--seeds", "1,2,3,4,5", "--out", str(out)],
+                      cwd=tmp_path)
+    # The progress bar on the terminal counts a finished run (the whole report: 40 runs).
+    cmd.wait_for(r"insgnss-report:.*\| *[1-9]\d*/40 ", 300.0, "the first run done")
+    assert cmd.proc.poll() is None, "the report finished before the signal"
+    cmd.proc.send_signal(signal.SIGINT)
+    rc, stdout, stderr = cmd.finish(timeout_s=120.0)
+    assert rc == 130, stderr
+    assert "Traceback" not in stderr and "partial report written" in stderr
     text = out.read_text()
     assert text.startswith(insgnss_report.PARTIAL)
     # the console: the same report as aligned tables (issue 17)
-    assert stdout.decode().startswith("Partial (interrupted):") and b"|---" not in stdout
+    assert stdout.startswith("Partial (interrupted):") and "|---" not in stdout

@@ -73,6 +73,7 @@ def _check(plant: str, key: str, res: dict[str, Any]) -> None:
     assert worst <= bound + 1e-9, f"{plant} {key}: {worst} > {bound} at {res['where']} {why}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("plant", ["nomoto", "nonlinear"])
 @pytest.mark.parametrize("key", [k for k in GOALS if not k.startswith("long.")])
 def test_done_means_with_gyro(gyro_results: dict[str, dict[str, dict[str, Any]]], plant: str,
@@ -82,6 +83,7 @@ def test_done_means_with_gyro(gyro_results: dict[str, dict[str, dict[str, Any]]]
     _check(plant, key, res)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("plant", ["nomoto", "nonlinear"])
 def test_one_hour_at_2_deg_with_turns_then_a_drift(cfg: RovConfig, plant: Plant) -> None:
     res = measure(cfg, plant, SEEDS, gyro=True, which=("long",))
@@ -89,6 +91,7 @@ def test_one_hour_at_2_deg_with_turns_then_a_drift(cfg: RovConfig, plant: Plant)
     _check(plant, "long.drift_delay_s", res["long.drift_delay_s"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("plant", ["nomoto", "nonlinear"])
 def test_without_gyro_one_hour_no_false_confirmation_after_turns(cfg: RovConfig,
                                                                   plant: Plant) -> None:
@@ -98,11 +101,14 @@ def test_without_gyro_one_hour_no_false_confirmation_after_turns(cfg: RovConfig,
     res = measure(cfg, plant, SEEDS, gyro=False, which=("long",))
     assert res["long.false_confirmations"]["worst"] == 0, res
     _check(plant, "long.drift_delay_s", res["long.drift_delay_s"])
+    # Without the window: seed 1 had its false confirmation at 1261 s (Nomoto) and 1262 s
+    # (nonlinear), seeds 2 and 3 at 842/1622 s and 1921/2341 s; half an hour of seed 1 shows it.
     off = replace(cfg, ft=replace(cfg.ft, turn_window_s=0.0))
-    assert measure(off, plant, SEEDS[:3], gyro=False, which=("long",))[
+    assert measure(off, plant, SEEDS[:1], gyro=False, which=("long",), long_s=1800.0)[
         "long.false_confirmations"]["worst"] >= 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("plant", ["nomoto", "nonlinear"])
 def test_without_gyro_stuck_is_taken_back_and_spikes_bursts_pass(cfg: RovConfig,
                                                                   plant: Plant) -> None:
@@ -117,6 +123,7 @@ def test_without_gyro_stuck_is_taken_back_and_spikes_bursts_pass(cfg: RovConfig,
     assert res["burst.confirmations"]["worst"] <= 1
 
 
+@pytest.mark.slow
 def test_hold_floor_is_what_the_shortfall_says(cfg: RovConfig) -> None:
     """The nonlinear plant's no-fault heading error, the reason given above: through the
     thrust-curve inverse (the harness's vehicle PID) and, for comparison, on the raw command."""
@@ -127,6 +134,7 @@ def test_hold_floor_is_what_the_shortfall_says(cfg: RovConfig) -> None:
     assert hold_floor(cfg, "nomoto", SEEDS, gyro=True)["worst"] < 0.5
 
 
+@pytest.mark.slow
 def test_a_drift_after_a_compensated_step_is_confirmed_on_the_nonlinear_plant(
         cfg: RovConfig) -> None:
     """A 10 deg step at 40 s, then +-0.1 deg/s from 60 s (docs/rov.md, seventh pass): the

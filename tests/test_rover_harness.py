@@ -178,11 +178,13 @@ def rows() -> list[dict[str, Any]]:
     return summarise(runs)
 
 
+@pytest.mark.slow
 def test_every_error_model_and_rate_is_measured(rows: list[dict[str, Any]]) -> None:
     assert {(r["model"], r["rate_hz"]) for r in rows} == {
         (m, r) for m in ERROR_MODELS for r in (1.0, 5.0, 10.0)}
 
 
+@pytest.mark.slow
 def test_jumps_and_bursts_on_every_model(rows: list[dict[str, Any]]) -> None:
     for r in rows:
         for kind in ("jump", "burst"):
@@ -193,6 +195,7 @@ def test_jumps_and_bursts_on_every_model(rows: list[dict[str, Any]]) -> None:
             assert d["caught"] >= 0.99 * d["faulty"], (r["model"], r["rate_hz"], kind, d)
 
 
+@pytest.mark.slow
 def test_frozen_receiver_is_not_passed_on_far_from_the_truth(rows: list[dict[str, Any]]
                                                              ) -> None:
     """No frozen epoch is passed on as good more than 1 m from the truth (a frozen event's
@@ -206,11 +209,13 @@ def test_frozen_receiver_is_not_passed_on_far_from_the_truth(rows: list[dict[str
         assert d["good_far"] == 0, (r["model"], r["rate_hz"], d)
 
 
+@pytest.mark.slow
 def test_never_worse_than_the_receiver_overall(rows: list[dict[str, Any]]) -> None:
     for r in rows:
         assert r["rms_ratio_worst"] <= 0.9, (r["model"], r["rate_hz"], r["rms_ratio_worst"])
 
 
+@pytest.mark.slow
 def test_after_an_event_the_output_is_not_worse_than_the_receiver(rows: list[dict[str, Any]]
                                                                   ) -> None:
     """The bullet "in the 10 s after every event, output RMS <= raw": seeds 1-2, 10 minutes,
@@ -222,6 +227,7 @@ def test_after_an_event_the_output_is_not_worse_than_the_receiver(rows: list[dic
         assert r["after_worse"] == 0, (r["model"], r["rate_hz"], r["after_worse"])
 
 
+@pytest.mark.slow
 def test_clean_epochs_are_rarely_flagged(rows: list[dict[str, Any]]) -> None:
     """Clean epochs more than 10 s from any event, flagged: at its measured bound, 1 % a model
     and rate (measured 0-0.87 %, coarse at 1 Hz; the goal is 0.1 %, docs/evaluation.md)."""
@@ -229,6 +235,7 @@ def test_clean_epochs_are_rarely_flagged(rows: list[dict[str, Any]]) -> None:
         assert r["fa_worst"] <= 0.01, (r["model"], r["rate_hz"], r["fa_worst"])
 
 
+@pytest.mark.slow
 def test_field_models_detect_most_ramps_in_time(rows: list[dict[str, Any]]) -> None:
     """The ramp bullet (0.1 m/s within 10 s, 0.05 m/s within 30 s) is not met everywhere
     (docs/evaluation.md says where); pooled over the dgps-class models, most are."""

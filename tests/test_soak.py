@@ -5,12 +5,10 @@ from __future__ import annotations
 
 import json
 import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 from firmware_host.devtools.soak import run_soak
+from tests.ptyrun import StderrOnPty
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -52,13 +50,12 @@ def test_a_stopped_soak_reports_what_ran_as_partial(tmp_path: Path) -> None:
 
 def test_soak_interrupted_by_sigint_writes_partial_figures(tmp_path: Path) -> None:
     out = tmp_path / "soak.json"
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.cli", "soak", "--minutes",
-                             "600", "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    time.sleep(4.0)  # well into the run (600 simulated minutes take far longer)
-    proc.send_signal(signal.SIGINT)
-    stdout, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 130, stderr
+    cmd = StderrOnPty(["soak", "--minutes", "600", "--out", str(out)], cwd=ROOT)
+    # The progress bar on the terminal counts simulated minutes: well into the run.
+    cmd.wait_for(r"soak:.*\| *[1-9]\d*/600 ", 300.0, "the first simulated minutes")
+    cmd.proc.send_signal(signal.SIGINT)
+    returncode, stdout, stderr = cmd.finish(timeout_s=120.0)
+    assert returncode == 130, stderr
     assert "Traceback" not in stderr and "interrupted" in stderr
     doc = json.loads(out.read_text(encoding="utf-8"))
     assert doc["partial"] is True and 0 < doc["simulated_s"] < 36000

@@ -18,10 +18,13 @@ vehicle is paced by its data, its IMU ordering by the samples' own stamps).
 
 from __future__ import annotations
 
+import array
 import calendar
+import fcntl
 import json
 import math
 import socket
+import termios
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -194,12 +197,16 @@ def build_events(data: NavData, latitude_deg: float, *, imu_message: str = "HIGH
 
 def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer], *,
          speed: float = 10.0, stop: threading.Event | None = None,
-         chunk_s: float = 0.01, gnss_after_s: float = 0.3) -> int:
+         chunk_s: float = 0.01, gnss_after_s: float = 0.3,
+         drained: Callable[[], bool] | None = None, drain_timeout_s: float = 60.0) -> int:
     """Write the events to the two links, ``speed`` times faster than real time from the
     first event; returns how many were written (fewer when ``stop`` is set). The receiver's
     bytes wait until the IMU has streamed ``gnss_after_s`` of wall clock (an autopilot is up
     before the receiver's first fix), so that which link the vehicle reads first does not
-    depend on the scheduler."""
+    depend on the scheduler. ``drained``: each chunk waits until it says the reader has kept
+    up (at most ``drain_timeout_s``), so that the reader's lag is bounded however slow the
+    machine (at 50x a loaded machine fell over 1 s of wall clock behind, the vehicle's
+    ``max_wait_s``, and gave up on the IMU of an epoch)."""
     t0 = time.monotonic()
     t_first = events[0][0] if events else 0.0
     i = 0
@@ -217,6 +224,12 @@ def play(events: list[tuple[float, int, bytes]], writers: tuple[Writer, Writer],
         wait = due - time.monotonic()
         if wait > 0:
             time.sleep(wait)
+        if drained is not None:
+            give_up = time.monotonic() + drain_timeout_s
+            while not drained() and time.monotonic() < give_up:
+                if stop is not None and stop.is_set():
+                    return i
+                time.sleep(0.0005)
         if bufs[0]:
             writers[0](bytes(bufs[0]))
         held += bufs[1]
@@ -241,6 +254,16 @@ class LiveRun:
     wall_s: float
     coast: CoastReport | None = None  # with an outage (:func:`compare`)
     status: tuple[str, ...] = ()  # the vehicle's status line section at the end
+
+
+LAG_S = 1.0  # the vehicle's largest lag behind the player, s of data
+
+
+def unread(pair: PtyPair) -> int:
+    """Bytes written to ``pair`` that the port on its slave side has not read yet."""
+    n = array.array("i", [0])
+    fcntl.ioctl(pair.slave_fd, termios.TIOCINQ, n)
+    return n[0]
 
 
 def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
@@ -288,8 +311,8 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
         runner = Runner(vehicle, out_dir=out_dir, recorder=recorder, mavlink=mav,
                         open_router=open_router, handle_signals=False)
         imu_write: Writer = imu.write
+        runner.start()  # the ports (and the router's autopilot port) open before anything is sent
         if via_router:
-            runner.start()  # the router's autopilot port, before the autopilot sends
             assert isinstance(runner.router, Router)
             addr = runner.router.endpoints[0].link.local_address
             assert addr is not None
@@ -302,8 +325,14 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
         stop = threading.Event()
         conns: list[socket.socket] = []
 
+        # Over the ptys the player waits while the vehicle has more than LAG_S of data unread.
+        span = events[-1][0] - events[0][0] if events else 0.0
+        budget = LAG_S * sum(len(e[2]) for e in events) / max(span, LAG_S)
+
+        def kept_up() -> bool:
+            return unread(gps) + unread(imu) <= budget
+
         def feed() -> None:
-            time.sleep(0.2)  # the runner opens the ports first
             writer = imu_write
             try:
                 if imu_socket:  # the vehicle's port connects to the autopilot's listener
@@ -311,14 +340,15 @@ def run_live(setup: InsGnssSetup, data: NavData, out_dir: Path, *,
                     conn, _ = server.accept()
                     conns.append(conn)  # closed once the runner has stopped
                     writer = conn.sendall
-                play(events, (writer, gps.write), speed=speed, stop=stop)
+                play(events, (writer, gps.write), speed=speed, stop=stop,
+                     drained=None if via_router else kept_up)
             finally:
                 done.set()
 
         ended: list[float] = []
 
-        def until() -> bool:
-            if not done.is_set():
+        def until() -> bool:  # everything played and read, then 0.5 s for the last epoch
+            if not done.is_set() or unread(gps) or (not via_router and unread(imu)):
                 return False
             if not ended:
                 ended.append(time.monotonic())
