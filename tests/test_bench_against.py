@@ -3,11 +3,13 @@ process time. Speed is never asserted here: only that the figures are made and j
 
 from __future__ import annotations
 
+import argparse
 import subprocess
 from pathlib import Path
 
 import pytest
 
+from firmware_host import cli
 from firmware_host.devtools import bench
 
 
@@ -54,3 +56,27 @@ def test_export_tree_of_a_commit_and_of_a_directory(tmp_path: Path) -> None:
     assert (tmp_path / "b" / "pyproject.toml").is_file()
     with pytest.raises(RuntimeError, match="cannot export"):
         bench.export_tree("no-such-revision-xyz", tmp_path / "c")
+
+
+def test_a_figure_that_measured_nothing_exits_1_with_its_reason(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue E: ``--only startup`` with no corpus (as outside a checkout: nothing to replay)
+    printed "(nothing measured)" and exited 0; now the reason is on stderr and the exit is 1."""
+    assert cli.main(["bench", "--only", "startup", "--against", "none",
+                     "--corpus", str(tmp_path)]) == 1
+    got = capsys.readouterr()
+    assert "(nothing measured)" in got.out and "fdi-bridge bench:" in got.err
+
+
+@pytest.mark.parametrize(("argv", "long_s"), [
+    ([], 86400.0),  # the default: a 24 h log
+    (["--replay-duration", "30"], 4320.0),  # the short options: a short bench
+    (["--replay-duration", "1"], 600.0),  # never under 10 min
+    (["--replay-duration", "30", "--memory-duration", "7200"], 7200.0),
+])
+def test_the_memory_figure_s_long_log_follows_the_short_options(argv: list[str],
+                                                                long_s: float) -> None:
+    """Issue E: ``bench --duration 5 --replay-duration 30`` still replayed a 24 h log (7.6 min)."""
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    assert bench.memory_duration(parser.parse_args(argv)) == long_s
