@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from firmware_host.commands.replay import load_input
+from firmware_host.devtools import fleet
 from firmware_host.devtools.eval import run_ours
 from firmware_host.devtools.fleet import (
     discover,
@@ -95,3 +96,25 @@ def test_a_job_keeps_the_records_eval_reads_back_from_epochs_jsonl(runs: Path) -
         _, bare = replay_rover(cfg, data, records=False)
         for key in ("epochs", "faults", "alarms", "actions", "reasons", "input", "gate_health"):
             assert bare[key] == counted[key] == summary[key], key
+
+
+def test_the_tradeoff_plot_labels_in_a_legend_on_a_percentage_axis() -> None:
+    """Issue E: points near 100 % detected had their labels written over each other on a
+    96-104 % axis; now each marker carries a number, the labels are in the legend, and the
+    detection axis ends at 100.5 %."""
+    matplotlib = pytest.importorskip("matplotlib", reason="the dev extra's matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = [(f"rover.detector.gate_sigmas={g}", {"false_alarm_pct": 0.01 * g,
+                                                "detected_pct": 99.0 + 0.2 * g})
+           for g in (4, 5, 6)]
+    fig = fleet.tradeoff_figure(plt, pts)
+    ax = fig.axes[0]
+    try:
+        assert [t.get_text() for t in ax.get_legend().get_texts()] == [
+            f"{i}: {label}" for i, (label, _) in enumerate(pts, 1)]
+        assert [t.get_text() for t in ax.texts] == ["1", "2", "3"]
+        assert ax.get_ylim()[1] <= 100.5
+    finally:
+        plt.close(fig)

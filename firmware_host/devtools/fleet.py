@@ -606,19 +606,32 @@ def plot_tradeoff(result: FleetResult, path: Path) -> bool:
     pts = [(lbl, p) for lbl, p in pts if p.get("detected_pct") is not None]
     if not pts:
         return False
+    fig = tradeoff_figure(plt, pts)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return True
+
+
+def tradeoff_figure(plt: Any, pts: Sequence[tuple[str, dict[str, Any]]]) -> Any:
+    """The trade-off figure: each point's marker numbered, its label in the legend (labels
+    written beside close markers, all near 100 %, overprinted each other), the axes kept to
+    what a percentage can be (0-100 %, a little margin)."""
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    for label, p in pts:
-        ax.plot(p["false_alarm_pct"], p["detected_pct"], "o")
-        ax.annotate(label, (p["false_alarm_pct"], p["detected_pct"]), fontsize=7,
-                    xytext=(4, 4), textcoords="offset points")
+    for i, (label, p) in enumerate(pts, 1):
+        ax.plot(p["false_alarm_pct"], p["detected_pct"], "o", label=f"{i}: {label}")
+        ax.annotate(str(i), (p["false_alarm_pct"], p["detected_pct"]), fontsize=7,
+                    xytext=(3, 3), textcoords="offset points")
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(max(lo, -0.5), min(hi, 100.5))
+    lo, hi = ax.get_xlim()
+    ax.set_xlim(max(lo, -0.05 * max(hi, 0.01)), hi)
     ax.set_xlabel("clean epochs flagged (%)")
     ax.set_ylabel("faulty epochs detected (%)")
     ax.set_title("Detection against false alarms, pooled over the fleet")
     ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return True
+    return fig
 
 
 # --------------------------------------------------------------------------- CLI
