@@ -42,6 +42,9 @@ from firmware_host.runtime.records import (
     round4,
 )
 
+GREY_GATE_MARGIN = 1.1  # the grey gate's width over the minimum jump that is worth a warning
+GATE_PERSIST = 2  # gate-health checks in a row before a warning
+
 log = logging.getLogger("fdi_bridge.rover")
 
 
@@ -101,6 +104,7 @@ class RoverPipeline:
                               bits_per_byte(port.bytesize, port.parity, port.stopbits))
         self.warn_link = warn_link
         self._gate_said: tuple[str, bool] | None = None  # the gate health last said
+        self._gate_run = 0  # gate-health checks in a row that would warn
         self.frame: LocalFrame | None = None
         if cfg.reference is not None:
             ref = cfg.reference
@@ -256,13 +260,24 @@ class RoverPipeline:
         when nothing in the pipeline could see the minimum jump, or S is too small (good fixes
         flagged); an INFO line when that clears."""
         health = self.gate_health.report()
+        said = self._gate_said
+        # Hysteresis on the grey gate against the minimum jump: it wanders a few per cent with
+        # the fixes, and on a DGPS receiver it sat at 1.05-1.08 m against a 1.05 m minimum
+        # jump, so the warning and its all-clear alternated 20 times a day. A warning needs
+        # the gate GREY_GATE_MARGIN wider than the minimum jump; it clears once within it.
+        margin = 1.0 if said is not None and said[1] else GREY_GATE_MARGIN
         grey_covers = (
             self.cfg.detector.strategy == "grey"
             and health.grey_gate_h_m is not None
-            and health.grey_gate_h_m <= health.min_jump_m
+            and health.grey_gate_h_m <= margin * health.min_jump_m
         )
         alarming = bool(health.messages) and (health.status == "nis_high" or not grey_covers)
-        said = self._gate_said
+        # ... and it must hold on GATE_PERSIST checks in a row (each over its own 100 epochs):
+        # a single check's excursion (2 a day on that receiver, each gone at the next check)
+        # is the fixes' noise, not a mistuned gate.
+        self._gate_run = self._gate_run + 1 if alarming else 0
+        if alarming and not (said is not None and said[1]) and self._gate_run < GATE_PERSIST:
+            return
         key = (health.status, alarming)
         if key == said:
             return
