@@ -66,7 +66,7 @@ from drivers.mavlink import io as mio
 from drivers.mavlink.compass import body_field_mgauss
 from drivers.mavlink.modes import MODES
 from drivers.outland.link import Telemetry
-from firmware_host.devtools.rov_sim import FaultSpec, RovPlant, make_plant
+from firmware_host.devtools.rov_sim import FaultSpec, RovPlant, apply_faults, make_plant
 from firmware_host.runtime.config_rov import ARDUSUB_YAW_MODES, SimConfig
 
 _YAW_MODES = frozenset(MODES["sub"][m] for m in ARDUSUB_YAW_MODES)
@@ -202,23 +202,11 @@ class SubPlant(RovPlant):
         t = self.t
         noise = float(self.rng.normal(0.0, self.cfg.compass_noise_deg))
         healthy = self.psi + noise
-        h = healthy
-        self._dropout = False
-        for i, f in enumerate(self.faults):
-            if not f.active(t):
-                self._stuck.pop(i, None)
-                continue
-            if f.kind in ("drift", "spike"):
-                h += f.magnitude
-            elif f.kind == "ramp":
-                h += f.magnitude * (t - f.start_s)
-            elif f.kind == "noise":
-                h += float(self.rng.normal(0.0, f.magnitude))
-            elif f.kind == "stuck":
-                h = self._stuck.setdefault(i, h)
-            elif f.kind == "dropout":
-                self._dropout = True
-                return None
+        faulty = apply_faults(self.faults, t, healthy, self.rng, self._stuck)
+        self._dropout = faulty is None
+        if faulty is None:
+            return None
+        h = faulty
         self.fault_err = (h - healthy + 180.0) % 360.0 - 180.0
         return Telemetry(h % 360.0, self.cfg.depth_m, 0.0, 0.0, 0)
 

@@ -62,6 +62,28 @@ class FaultSpec:
         return t >= self.start_s - _EPS and (self.end_s is None or t < self.end_s - _EPS)
 
 
+def apply_faults(faults: Sequence[FaultSpec], t: float, h: float, rng: np.random.Generator,
+                 stuck: dict[int, float]) -> float | None:
+    """A compass reading ``h`` (deg) at time ``t`` with the active faults applied (drift and
+    spike add, a ramp grows from its start, noise draws from ``rng``, stuck holds the value
+    it had when it began, kept in ``stuck`` by the fault's index); None during a dropout."""
+    for i, f in enumerate(faults):
+        if not f.active(t):
+            stuck.pop(i, None)
+            continue
+        if f.kind in ("drift", "spike"):
+            h += f.magnitude
+        elif f.kind == "ramp":
+            h += f.magnitude * (t - f.start_s)
+        elif f.kind == "noise":
+            h += float(rng.normal(0.0, f.magnitude))
+        elif f.kind == "stuck":
+            h = stuck.setdefault(i, h)
+        elif f.kind == "dropout":
+            return None
+    return h
+
+
 def parse_fault(spec: str) -> FaultSpec:
     """Parse ``drift:30@70``, ``ramp:0.3@40``, ``stuck@60-80``, ``spike:25@80-80.4``, ...."""
     m = _SPEC.match(spec.strip())
@@ -128,24 +150,12 @@ class RovPlant:
         """The telemetry at the current time, faults applied; None during a dropout."""
         t = self.t
         noise = float(self.rng.normal(0.0, self.cfg.compass_noise_deg))
-        h = self.psi + noise + self._compass_extra()
-        self._dropout = False
-        for i, f in enumerate(self.faults):
-            if not f.active(t):
-                self._stuck.pop(i, None)
-                continue
-            if f.kind in ("drift", "spike"):
-                h += f.magnitude
-            elif f.kind == "ramp":
-                h += f.magnitude * (t - f.start_s)
-            elif f.kind == "noise":
-                h += float(self.rng.normal(0.0, f.magnitude))
-            elif f.kind == "stuck":
-                h = self._stuck.setdefault(i, h)
-            elif f.kind == "dropout":
-                self._dropout = True
-                return None
-        return Telemetry(h % 360.0, self.cfg.depth_m, 0.0, 0.0, 0)
+        faulty = apply_faults(self.faults, t, self.psi + noise + self._compass_extra(),
+                              self.rng, self._stuck)
+        self._dropout = faulty is None
+        if faulty is None:
+            return None
+        return Telemetry(faulty % 360.0, self.cfg.depth_m, 0.0, 0.0, 0)
 
     def gyro_dps(self) -> float | None:
         """The yaw-rate gyro for the last period (deg/s): call after :meth:`measure`.
