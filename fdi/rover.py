@@ -59,7 +59,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import Literal
 
 from fdi.chi2 import threshold
 from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
@@ -79,7 +79,10 @@ from fdi.rover_evidence import (
 )
 from fdi.rover_evidence import (
     Accepted,
+    Action,
+    Decision,
     Evidence,
+    FixInput,
     FixSignature,
     LastStep,
     Mode,
@@ -106,7 +109,6 @@ from fdi.rover_rules import (
 from fdi.three_zone import Action as ZoneAction
 from fdi.three_zone import ThreeZoneGate, ThreeZoneParams, Zone
 
-Action = Literal["accept", "replace", "alarm", "no_fix"]
 # Epochs over which the receiver must agree with its own Doppler to be restarted on after an
 # alarm: short, so a real step is accepted again soon, long enough to expose a frozen fix.
 RAW_HORIZON = 3
@@ -388,48 +390,6 @@ class RoverDetectorParams:
     def runs_drift_test(self) -> bool:
         """The drift test runs: it needs the Doppler predictor and the grey strategy."""
         return self.drift_test and self.predictor == "doppler" and self.strategy == "grey"
-
-
-class FixInput(NamedTuple):
-    """One receiver epoch in local metres (``None`` position: the receiver has no fix).
-
-    Immutable; a NamedTuple rather than a frozen dataclass (built once an epoch: a frozen
-    dataclass's ``__init__`` sets each field through ``object.__setattr__``)."""
-
-    t_s: float  # monotonic fix time (UTC seconds, rollover-corrected)
-    enu: tuple[float, float, float] | None
-    speed_mps: float | None = None
-    course_deg: float | None = None
-    sd_enu_m: tuple[float, float, float] | None = None  # from GST
-    num_sats: int | None = None
-    hdop: float | None = None
-
-
-class Decision(NamedTuple):
-    """What the isolator did with one epoch, and the statistics that led to it (immutable; a
-    NamedTuple, built once an epoch: see :class:`FixInput`; ``_replace`` for a changed copy)."""
-
-    action: Action
-    fault: bool
-    reason: str
-    out_enu: tuple[float, float, float] | None  # what is passed on (None: nothing valid)
-    pred_enu: tuple[float, float, float] | None
-    grey_res_h: float | None
-    grey_res_u: float | None
-    grey_gate_h: float
-    grey_gate_u: float
-    doppler_res: float | None
-    doppler_gate: float
-    chi2: float | None
-    chi2_threshold: float
-    consecutive: int
-    alarm: bool
-    alarm_raised: bool  # the alarm was raised at this epoch
-    kf_enu: tuple[float, float, float] | None
-    zones: tuple[int, ...] | None = None  # three_zone/combined: per axis 0/1/2 (e, n[, u])
-    drift: float | None = None  # the drift test's statistic (D4), or the hold's, in σ
-    rule: str = ""  # the rule of fdi/rover_rules.py that decided (R1 ...)
-    source: Source = Source.NONE  # where the estimate comes from (under the alarm: carried)
 
 
 class RoverIsolator:

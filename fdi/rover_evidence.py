@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 from fdi.drift import DriftResult
 
@@ -203,3 +203,48 @@ class PassedReversal:
     b: Vec2  # the first such fix's Doppler-free value ...
     t: float  # ... and time
     last: float  # the last such fix's time
+
+
+Action = Literal["accept", "replace", "alarm", "no_fix"]
+
+
+class FixInput(NamedTuple):
+    """One receiver epoch in local metres (``None`` position: the receiver has no fix).
+
+    Immutable; a NamedTuple rather than a frozen dataclass (built once an epoch: a frozen
+    dataclass's ``__init__`` sets each field through ``object.__setattr__``)."""
+
+    t_s: float  # monotonic fix time (UTC seconds, rollover-corrected)
+    enu: tuple[float, float, float] | None
+    speed_mps: float | None = None
+    course_deg: float | None = None
+    sd_enu_m: tuple[float, float, float] | None = None  # from GST
+    num_sats: int | None = None
+    hdop: float | None = None
+
+
+class Decision(NamedTuple):
+    """What the isolator did with one epoch, and the statistics that led to it (immutable; a
+    NamedTuple, built once an epoch: see :class:`FixInput`; ``_replace`` for a changed copy)."""
+
+    action: Action
+    fault: bool
+    reason: str
+    out_enu: tuple[float, float, float] | None  # what is passed on (None: nothing valid)
+    pred_enu: tuple[float, float, float] | None
+    grey_res_h: float | None
+    grey_res_u: float | None
+    grey_gate_h: float
+    grey_gate_u: float
+    doppler_res: float | None
+    doppler_gate: float
+    chi2: float | None
+    chi2_threshold: float
+    consecutive: int
+    alarm: bool
+    alarm_raised: bool  # the alarm was raised at this epoch
+    kf_enu: tuple[float, float, float] | None
+    zones: tuple[int, ...] | None = None  # three_zone/combined: per axis 0/1/2 (e, n[, u])
+    drift: float | None = None  # the drift test's statistic (D4), or the hold's, in σ
+    rule: str = ""  # the rule of fdi/rover_rules.py that decided (R1 ...)
+    source: Source = Source.NONE  # where the estimate comes from (under the alarm: carried)

@@ -20,11 +20,22 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from fdi.rover_evidence import TIME_RESET_EPOCHS, Evidence, Mode, Source, Stats
+from fdi.rover_evidence import (
+    TIME_RESET_EPOCHS,
+    Decision,
+    Evidence,
+    FixInput,
+    Mode,
+    Source,
+    Stats,
+)
+
+# The isolator the rules act on (fdi.rover.RoverIsolator), named only in annotations: fdi.rover
+# imports this table, so importing it here, even for types, would be an import cycle.
+RoverIsolator = Any
 
 if TYPE_CHECKING:
     from fdi.level import HoldStep, LevelHold
-    from fdi.rover import Decision, FixInput, RoverIsolator
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,7 @@
 """The layers, read from the source (ast): who may import whom.
 
-* no import cycle among the project's modules (every ``import`` that runs, wherever it is
-  written, counts: an import inside a function is still an edge; one under ``if
-  TYPE_CHECKING:`` is not, as it never runs: the rover's decision table names the isolator it
-  acts on only in annotations. tests/test_layers.py still counts those between packages);
+* no import cycle among the project's modules (every ``import``, wherever it is written, counts:
+  an import inside a function or under ``TYPE_CHECKING`` is still an edge);
 * no import of a project module inside a function (it would hide a cycle or a heavy
   dependency; the CLI's table of commands, loaded by name, is the one dynamic import);
 * ``drivers/`` imports nothing from ``firmware_host/``; ``fdi/`` nothing from ``drivers/`` or
@@ -78,23 +76,8 @@ def _imports(module: str) -> Iterator[tuple[ast.Import | ast.ImportFrom, str]]:
                 yield node, name
 
 
-def _type_only(module: str) -> set[int]:
-    """The ids of the import statements under ``if TYPE_CHECKING:`` (never run)."""
-    out: set[int] = set()
-    for node in ast.walk(TREES[module]):
-        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) \
-                and node.test.id == "TYPE_CHECKING":
-            out |= {id(n) for b in node.body for n in ast.walk(b)}
-    return out
-
-
 def _project_edges() -> dict[str, set[str]]:
-    edges = {}
-    for m in MODULES:
-        skip = _type_only(m)
-        edges[m] = {n for node, n in _imports(m)
-                    if n in MODULES and n != m and id(node) not in skip}
-    return edges
+    return {m: {n for _, n in _imports(m) if n in MODULES and n != m} for m in MODULES}
 
 
 def test_the_graph_is_the_whole_project() -> None:
