@@ -71,10 +71,17 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   deg at 77 deg/s) or the integration of a rate sampled once or twice a period (``dt`` x
   |r(k) - r(k-1)|: ArduSub's yaw rate steps from 2 to 77 deg/s between two samples) -- and
   the ``maneuver_settle`` periods after it are not tested, not fitted and do not move the
-  loops (the gyro carries the headings through); at its end the innovation's change is taken
-  into both headings up to the integration bound accumulated over it (sum of ``dt`` x
-  |r(k) - r(k-1)|), so that a turn's sampling error is not a fault, and whatever is beyond
-  the bound is left for the test. Not while a fault is suspected: the innovation then holds
+  loops (the gyro carries the headings through); at its end the innovation's change beyond
+  ``maneuver_dead_deg`` is taken into both headings up to the integration bound accumulated
+  over it (sum of ``maneuver_sample_s / 2`` x |r(k) - r(k-1)|: a rate step between two
+  samples), so that a fast turn's sampling error is not a fault, and whatever is within the
+  dead band or beyond the bound is left for the test. The dead band is one sample's noise:
+  the MANUAL limit cycle kicks the vehicle every ~2 s, and a 0.3 deg/s ramp adds ~0.5 deg
+  between two kicks, which a correction without it took into the dead reckoning kick after
+  kick (never confirmed, 61 deg off); with a raw compass one noisy sample (1.4 deg) once went
+  in and was then confirmed as a fault. What is taken is undone with the loop's corrections
+  at a confirmation, and stays out of the bias fit's z unless ``maneuver_into_bias``.
+  Not while a fault is suspected: the innovation then holds
   the suspected fault (on ArduSub's MANUAL dead band the hold kicks every ~2 s, each kick a
   manoeuvre, and their ends took a 30 deg step into the headings before it was confirmed).
 * Offset compensation (``comp_samples`` > 0) after a step confirmed by the fast CUSUM: the
@@ -289,6 +296,10 @@ class WitnessParams:
     maneuver_lag_s: float = 0.15  # the compass's lag behind the gyro (a bound), s
     maneuver_deg: float = 1.0  # a period whose lag + sampling bound exceeds this: a manoeuvre
     maneuver_settle: int = 2  # periods after a manoeuvre still carried by the gyro alone
+    maneuver_sample_s: float = 0.1  # the rate's sampling interval (its error bound: half of it
+    #                                 times each rate change); 0: the period, floored (old)
+    maneuver_dead_deg: float = 0.5  # a manoeuvre's end leaves a change within this to the test
+    maneuver_into_bias: bool = False  # ... and what it takes goes into z too (the bias fit)
 
 
 @dataclass(frozen=True)
@@ -417,21 +428,8 @@ class GyroWitness:
             self._nu_prev = None
             return WitnessStep(self.psi, nu, 0.0, self.var.sigma, self.suspect, False, False,
                                False, False)
-        if self._man_bound > 0.0 and not self.fault and self.suspect:
-            # the manoeuvre's end while a fault is suspected: the innovation holds the
-            # suspected fault, which the correction below would take into the headings (a
-            # limit cycle's manoeuvres every few seconds absorbed a 30 deg step in 5 s)
-            self._man_bound = 0.0
         if self._man_bound > 0.0 and not self.fault:
-            # the manoeuvre's end: its sampling error (within the bound) into both headings
-            d = max(-self._man_bound, min(self._man_bound, nu - self.nu_ref))
-            self._man_bound = 0.0
-            self.psi += d
-            self.psi_t += d
-            self._G += d  # z = y - sum r dt goes on as one line: the bias fit sees no step
-            nu_o -= d
-            nu -= d
-            self._y_unw = self.psi + nu_o
+            nu_o, nu = self._maneuver_end(nu_o, nu)
         if self.k < p.warmup_samples and self._warmup_step(nu_o, y_deg):
             return WitnessStep(y_deg, 0.0, 0.0, self.var.sigma, False, False, False, False,
                                False)
@@ -594,6 +592,30 @@ class GyroWitness:
         return WitnessStep(self.psi, nu, level, sigma, self.suspect, confirmed, dismissed, False,
                            burst)
 
+    def _maneuver_end(self, nu_o: float, nu: float) -> tuple[float, float]:
+        """The first period after a manoeuvre: its sampling error (within the bound, beyond
+        the dead band) into both headings; the innovations (output, test) after it."""
+        p = self.p
+        assert self.psi is not None
+        if self.suspect:
+            # the innovation holds the suspected fault, which the correction would take into
+            # the headings (a limit cycle's manoeuvres every few seconds absorbed a 30 deg
+            # step in 5 s)
+            self._man_bound = 0.0
+            return nu_o, nu
+        d = nu - self.nu_ref
+        # within the dead band: left to the test (a ramp's increment between two kicks)
+        d = math.copysign(max(0.0, abs(d) - p.maneuver_dead_deg), d)
+        d = max(-self._man_bound, min(self._man_bound, d))
+        self._man_bound = 0.0
+        self.psi += d
+        self.psi_t += d
+        self._corr.append((self.k, d))  # undone with the loop's if a fault began before
+        if p.maneuver_into_bias:
+            self._G += d  # z = y - sum r dt goes on as one line: the bias fit sees no step
+        self._y_unw = self.psi + nu_o - d
+        return nu_o - d, nu - d
+
     def _maneuvering(self, dt: float) -> bool:
         """This period is a manoeuvre, or settles after one (module docstring); keeps the
         integration bound accumulated since the manoeuvre began."""
@@ -601,17 +623,21 @@ class GyroWitness:
         if self._r is None or p.maneuver_deg <= 0.0:
             return False
         dr = abs(self._r - self._r_prev) if self._r_prev is not None else 0.0
+        # a rate step between two samples is integrated with an error of at most half the
+        # sampling interval times the step (``maneuver_sample_s``; 0: the period, as before)
+        per = 0.5 * p.maneuver_sample_s if p.maneuver_sample_s > 0.0 else dt
         if p.maneuver_lag_s * abs(self._r) + dt * dr > p.maneuver_deg:
             if self._man_left == 0 and self._man_bound == 0.0:
                 self.maneuvers += 1
             self._man_left = p.maneuver_settle + 1
-            self._man_bound += dt * dr
+            self._man_bound += per * dr
         elif self._man_left > 0:  # settling: its rate changes still add to the bound
-            self._man_bound += dt * dr
+            self._man_bound += per * dr
         if self._man_left > 0:
             self._man_left -= 1
             # the bound is at least the threshold: the last period's lag is still unwinding
-            self._man_bound = max(self._man_bound, p.maneuver_deg)
+            floor = p.maneuver_deg if p.maneuver_sample_s <= 0.0 else 1e-9
+            self._man_bound = max(self._man_bound, floor)
             return True
         return False
 

@@ -188,6 +188,19 @@ class FtConfig:
     gyro_maneuver_settle: int = field(default=2, metadata={
         "ge": 0, "le": 50, "doc": "periods after a manoeuvre still carried by the gyro",
         "unit": "periods"})
+    gyro_maneuver_sample_s: float = field(default=0.1, metadata={
+        "ge": 0.0, "le": 1.0, "unit": "s", "doc": "the yaw rate's sampling interval: a manoeuvre's "
+        "integration error is bounded by half of it times each rate change (ArduSub's ATTITUDE "
+        "at 10 Hz: 0.1; 0: the period, floored at gyro_maneuver_deg)"})
+    gyro_maneuver_dead_deg: float = field(default=0.5, metadata={
+        "ge": 0.0, "unit": "deg", "doc": "a manoeuvre's end takes into the headings only the "
+        "innovation's change beyond this (within it, a ramp's increment between two kicks, it "
+        "is left to the test); for the EKF's yaw (ArduSub heading = attitude)"})
+    gyro_maneuver_dead_raw_deg: float = field(default=1.5, metadata={
+        "ge": 0.0, "unit": "deg", "doc": "the same for a raw compass (ArduSub heading = "
+        "raw_compass: one sample's noise and the compass's lag are larger)"})
+    gyro_maneuver_into_bias: bool = field(default=False, metadata={
+        "doc": "what a manoeuvre's end takes goes into the bias fit's z too (one line)"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
     gyro_vote_gate_deg: float = field(default=1.0, metadata={

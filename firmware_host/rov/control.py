@@ -8,6 +8,7 @@ safe command is kept for ``dropout_hold_s``, then all thrusters go neutral (``ac
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from typing import Any
 
 from drivers.outland.link import NEUTRAL, ThrusterCommand
@@ -24,7 +25,10 @@ class RovController:
 
     def __init__(self, cfg: RovConfig, ft: bool = True, setpoint_deg: float | None = None):
         self.cfg = cfg
-        self.heading = FaultTolerantHeading(cfg.detector, cfg.ft, enabled=ft)
+        ft_cfg = cfg.ft
+        if cfg.ardusub.heading == "raw_compass":  # its per-sample noise and lag are larger
+            ft_cfg = replace(ft_cfg, gyro_maneuver_dead_deg=ft_cfg.gyro_maneuver_dead_raw_deg)
+        self.heading = FaultTolerantHeading(cfg.detector, ft_cfg, enabled=ft)
         self.pid = HeadingPid(cfg.pid)
         self.setpoint_deg = cfg.setpoint_deg if setpoint_deg is None else setpoint_deg
         self._setpoint_seen = self.setpoint_deg
