@@ -88,10 +88,11 @@ def _err(h: float, setpoint: float) -> float:
 
 
 MANUAL_PID = {"kp": 5.0, "kd": 1.0}
-"""The heading hold's gains for ArduSub's MANUAL on the calibrated plant (``--pid manual``):
-the defaults (kp 3, kd 2) limit-cycle up to 4.47 deg off the setpoint there (seeds 1-10: the
-dead band's ~9 deg/s kicks and the slow coasting after them); kp 5, kd 1 step over the dead
-band at a smaller error and brake less (3.07 deg)."""
+"""The heading hold's gains for ArduSub's MANUAL on the calibrated plant (``--pid manual``,
+and since issue A the example file's ``[rov.pid]``): config/rov.toml's (kp 3, kd 2)
+limit-cycle up to 4.47 deg off the setpoint there (seeds 1-10: the dead band's ~9 deg/s kicks
+and the slow coasting after them); kp 5, kd 1 step over the dead band at a smaller error and
+brake less."""
 
 
 def parse_pid(text: str) -> dict[str, float]:
@@ -289,7 +290,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenarios", type=choice_list(tuple(SCENARIOS), "scenarios"),
                         default=",".join(SCENARIOS), help="scenarios, comma separated")
     parser.add_argument("--pid", type=parse_pid, default="config",
-                        help="the hold's gains: config (the example file's), manual "
+                        help="the hold's gains: config (the example file's: kp 5, kd 1), manual "
                              "(kp 5, kd 1: tuned for MANUAL on this plant) or kp=..,ki=..,kd=..")
     parser.add_argument("--no-ft", action="store_true",
                         help="without fault tolerance (the hold on the judged heading)")
