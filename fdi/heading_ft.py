@@ -199,7 +199,7 @@ class FtConfig:
     gyro_maneuver_dead_raw_deg: float = field(default=1.5, metadata={
         "ge": 0.0, "unit": "deg", "doc": "the same for a raw compass (ArduSub heading = "
         "raw_compass: one sample's noise and the compass's lag are larger)"})
-    gyro_maneuver_into_bias: bool = field(default=False, metadata={
+    gyro_maneuver_into_bias: bool = field(default=True, metadata={
         "doc": "what a manoeuvre's end takes goes into the bias fit's z too (one line)"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})

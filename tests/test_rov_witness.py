@@ -309,8 +309,9 @@ def test_hinge_drift_matches_least_squares_through_its_rebuilds() -> None:
 
 def test_slow_drift_found_by_the_hinge_not_by_the_cusums() -> None:
     """0.05 deg/s from 60 s at 1 deg noise, the vehicle holding its heading (+-1.3 deg),
-    seeds 1-10: the CUSUMs alone confirm 3 of 10, at 33-66 s (the reference mean and the bias
-    fit follow it; none before the warm-up's bias line went on through the hold, fifth pass);
+    seeds 1-10: the CUSUMs alone confirm 4 of 10, at 29-48 s (the reference mean and the bias
+    fit follow it; none before the warm-up's bias line went on through the hold, fifth pass;
+    3 of 10 before the warm-up's end aligned the headings, issue A);
     the hinge test on compass minus integrated gyro confirms 8 of 10 within 45 s and all 10
     within 62 s (before: 9 within 45 s, seed 10 never; seeds 1-40: 37 -> 36 within 45 s, 37 ->
     38 at all). A drift this slow is ~1.5 deg from the dead reckoning when found, so it may be
@@ -322,8 +323,8 @@ def test_slow_drift_found_by_the_hinge_not_by_the_cusums() -> None:
 
     cusum = [delay(WitnessParams(drift_glr=0.0), s) for s in range(1, 11)]
     hinge = [delay(WitnessParams(), s) for s in range(1, 11)]
-    assert sum(d is not None for d in cusum) <= 3, cusum
-    assert all(d is None or d > 30.0 for d in cusum), cusum
+    assert sum(d is not None for d in cusum) <= 4, cusum
+    assert all(d is None or d > 25.0 for d in cusum), cusum
     assert sum(d is not None and 0.0 < d <= 45.0 for d in hinge) >= 8, hinge
     assert all(d is not None and 0.0 < d <= 65.0 for d in hinge), hinge
     swing = [delay(WitnessParams(), s, 2.0) for s in range(1, 4)]
