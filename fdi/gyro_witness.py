@@ -83,12 +83,12 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   one noisy sample (1.4 deg) once went in and was then confirmed as a fault. What is taken is
   undone with the loop's corrections at a confirmation, and goes into the bias fit's z too
   (``maneuver_into_bias``: z stays one line through a turn).
-* Warm-up's end: both headings aligned to the compass by the mean of its last 10
-  innovations when beyond 3 sigma of that mean (the loops converge as a running mean, so a late turn's integration error
-  was still in them and the test began on it).
   Not while a fault is suspected: the innovation then holds
   the suspected fault (on ArduSub's MANUAL dead band the hold kicks every ~2 s, each kick a
   manoeuvre, and their ends took a 30 deg step into the headings before it was confirmed).
+* Warm-up's end: both headings aligned to the compass by the mean of its last 10
+  innovations when beyond 3 sigma of that mean (the loops converge as a running mean, so
+  a late turn's integration error was still in them and the test began on it).
 * Offset compensation (``comp_samples`` > 0) after a step confirmed by the fast CUSUM: the
   compass minus its offset, once the offset is known to be a level, steers ``psi`` again
   (:meth:`GyroWitness._compensate`), so that the dead reckoning's drift stays bounded.
@@ -604,8 +604,9 @@ class GyroWitness:
 
     def _end_warmup(self) -> None:
         """The warm-up's end: both headings aligned to the compass by the mean of its last
-        innovations, if beyond the noise (the loops converge as a running mean, so a turn's integration error
-        late in the warm-up was still ~1 deg in them, and the test began on that offset:
+        innovations, if beyond the noise (the loops converge as a running mean, so a turn's
+        integration error late in the warm-up was still ~1 deg in them, and the test began
+        on that offset:
         ArduSub's EKF yaw on the calibrated simulator, 7 of 10 runs confirmed it)."""
         assert self.psi is not None
         n = len(self._warm_end)
