@@ -75,8 +75,8 @@ class EpochOutcome(NamedTuple):
 _new = tuple.__new__
 
 
-def _r(x: float | None, nd: int = 4) -> float | None:
-    return None if x is None else round(x, nd)
+def _r(x: float | None) -> float | None:
+    return None if x is None else round4(x)
 
 
 class RoverPipeline:
