@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     for p in args.logs:
         inp = load_input(p)
         records, summary = run_on_bytes(
-            cfg.rover, b"".join(c for _, c in inp.chunks),
+            cfg.rover, inp.data(),
             baudrate=inp.baudrate if inp.kind == "capture" else None)
         runs.append(records)
         print(receiver_line(p, summary.get("link"), inp.kind == "capture"))

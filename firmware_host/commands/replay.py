@@ -63,10 +63,18 @@ ARDUSUB_TICK = "ardusub tick"  # firmware_host.rov.ardusub's TICK: the ArduSub R
 # A live INS/GNSS recording (both inputs of firmware_host.insgnss.vehicle) likewise.
 INS_RX, INS_REPLAY = ("gps rx", "imu rx"), "firmware_host.insgnss.replay"
 _TIME_RE = re.compile(rb"^\$..(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
+_LINE_END = re.compile(rb"[\r\n]")
 
 
 Chunks = Iterable[tuple[float, bytes]]
 _LINE_MAX = 1 << 20  # a plain log is read a line at a time, at most this many bytes at once
+_READ = 1 << 16  # a plain log's blocks (ReplayInput.blocks) are read this many bytes at once
+# _TIME_RE at the start of each line of a block but its first (the ``$`` after CR or LF; the
+# address's two characters not a line end): the times of a block's lines in one scan (a
+# look-behind after the ``$``, so that the scan looks for ``$`` alone).
+_TIME_LINES_RE = re.compile(rb"\$(?<=[\r\n]\$)[^\r\n]{2}(?:GGA|RMC|GLL|ZDA|GST),"
+                            rb"(\d{6}(?:\.\d+)?)")
+_TIME_FIRST_RE = re.compile(rb"\$[^\r\n]{2}(?:GGA|RMC|GLL|ZDA|GST),(\d{6}(?:\.\d+)?)")
 
 
 @dataclass
@@ -77,6 +85,8 @@ class ReplayInput:
     log's length); ``total_bytes``, ``truncated`` and the capture's ``notes`` are known once
     it has been iterated to the end (``total_bytes`` reads the file once more if asked for
     before). A list of chunks may be given instead of a file (tests, benchmarks).
+    :meth:`blocks` streams the same bytes joined into blocks (a plain log's without a Python
+    step a line: ``blocked``).
     """
 
     source: Callable[[ReplayInput], Iterator[tuple[float, bytes]]] | Chunks
@@ -85,6 +95,8 @@ class ReplayInput:
     truncated: bool = False
     notes: list[str] = field(default_factory=list)
     _total: int | None = None
+    # (size) -> what blocks(size) yields, made without the chunks (a plain log's)
+    blocked: Callable[[int], Iterator[tuple[float, bytes]]] | None = None
 
     @property
     def chunks(self) -> Iterator[tuple[float, bytes]]:
@@ -95,13 +107,42 @@ class ReplayInput:
             yield t, data
         self._total = total
 
+    def blocks(self, size: int) -> Iterator[tuple[float, bytes]]:
+        """The chunks joined: each block ends with the chunk that brings it to ``size`` bytes
+        or more, with that chunk's time; then the rest (perhaps empty) with the last chunk's
+        time (0.0 without chunks). ``total_bytes`` is known at the end, as after ``chunks``."""
+        if self.blocked is None:
+            yield from _join(self.chunks, size)
+            return
+        total = 0
+        for t, data in self.blocked(size):
+            total += len(data)
+            yield t, data
+        self._total = total
+
+    def data(self) -> bytes:
+        """Every byte of the input, in one piece."""
+        return b"".join(data for _, data in self.blocks(_LINE_MAX))
+
     @property
     def total_bytes(self) -> int:
         if self._total is None:
-            for _ in self.chunks:
+            for _ in self.blocks(_LINE_MAX):
                 pass
         assert self._total is not None
         return self._total
+
+
+def _join(chunks: Chunks, size: int) -> Iterator[tuple[float, bytes]]:
+    """:meth:`ReplayInput.blocks` of any chunks."""
+    block = bytearray()
+    t = 0.0
+    for t, data in chunks:
+        block += data
+        if len(block) >= size:
+            yield t, bytes(block)
+            block.clear()
+    yield t, bytes(block)
 
 
 def load_input(path: str | Path, channel: str | None = None) -> ReplayInput:
@@ -122,7 +163,8 @@ def load_input(path: str | Path, channel: str | None = None) -> ReplayInput:
                 break
         baud = reader.channels[idx].baudrate if reader.channels else 9600
         return ReplayInput(lambda inp: _capture_chunks(reader, idx, inp), baud, "capture")
-    return ReplayInput(lambda inp: _nmea_chunks(p), 9600, "nmea")
+    return ReplayInput(lambda inp: _nmea_chunks(p), 9600, "nmea",
+                       blocked=lambda size: _nmea_blocks(p, size))
 
 
 def _capture_chunks(reader: CaptureReader, idx: int, inp: ReplayInput
@@ -138,33 +180,136 @@ def _capture_chunks(reader: CaptureReader, idx: int, inp: ReplayInput
     inp.notes = reader.all_notes()
 
 
+class _FixClock:
+    """A plain log's time (for pacing): its timed sentences' fix times from the first, a step
+    back or a gap of a minute or more not counted."""
+
+    __slots__ = ("_last_fix", "_last_text", "t")
+
+    def __init__(self) -> None:
+        self.t = 0.0
+        self._last_fix: float | None = None
+        self._last_text = b""
+
+    def fix(self, s: bytes) -> None:
+        """The next timed sentence's ``hhmmss[.ss]``."""
+        if s == self._last_text:  # the same time as the sentence before: nothing moves
+            return
+        self._last_text = s
+        fix = int(s[0:2]) * 3600 + int(s[2:4]) * 60 + float(s[4:])
+        last = self._last_fix
+        if last is not None and 0 < fix - last < 60:
+            self.t += fix - last
+        self._last_fix = fix
+
+    def line(self, line: bytes) -> float:
+        """The time at ``line`` (one line of the log)."""
+        m = _TIME_RE.match(line)
+        if m:
+            self.fix(m.group(1))
+        return self.t
+
+    def lines(self, data: bytes) -> float:
+        """The time at the last of ``data``'s lines (whole lines, no comment line)."""
+        fix = self.fix
+        m = _TIME_FIRST_RE.match(data)  # the first line
+        if m:
+            fix(m.group(1))
+        for s in _TIME_LINES_RE.findall(data):  # the others
+            fix(s)
+        return self.t
+
+
+def _lines(piece: bytes, clock: _FixClock) -> Iterator[tuple[float, bytes]]:
+    """A piece's lines (``splitlines``, ends kept), comment lines skipped, with their times."""
+    for line in piece.splitlines(keepends=True):
+        if line.lstrip().startswith(b"#"):
+            continue
+        yield clock.line(line), line
+
+
 def _nmea_chunks(path: Path) -> Iterator[tuple[float, bytes]]:
     """Plain log -> (time, line) with times from the fix times (for pacing only).
 
     The lines are exactly ``raw.splitlines(keepends=True)`` of the whole file (a line is cut
     after ``\n``, ``\r\n`` or a lone ``\r``), read a line at a time."""
-    t = 0.0
-    first: float | None = None
-    last_fix: float | None = None
+    clock = _FixClock()
     with open(path, "rb") as f:
         for piece in iter(lambda: f.readline(_LINE_MAX), b""):
-            for line in piece.splitlines(keepends=True):
-                if line.lstrip().startswith(b"#"):
-                    continue
-                m = _TIME_RE.match(line)
-                if m:
-                    s = m.group(1)
-                    fix = int(s[0:2]) * 3600 + int(s[2:4]) * 60 + float(s[4:])
-                    if first is None:
-                        first = fix
-                    if last_fix is not None and 0 < fix - last_fix < 60:
-                        t += fix - last_fix
-                    last_fix = fix
-                yield t, line
+            yield from _lines(piece, clock)
+
+
+def _readline_pieces(path: Path) -> Iterator[tuple[bytes, bool]]:
+    """What ``readline(_LINE_MAX)`` returns of the file, one after the other, read in blocks:
+    ``(data, True)`` for several whole pieces at once (each ending with ``\n``), else
+    ``(piece, False)`` (a line longer than ``_LINE_MAX``, the file's unended last line)."""
+    with open(path, "rb") as f:
+        pending = b""  # what follows the last piece (no LF in it)
+        for block in iter(lambda: f.read(_READ), b""):
+            buf = pending + block if pending else block
+            end = buf.rfind(b"\n") + 1
+            if 0 < end <= _LINE_MAX:  # every line up to the last LF is one whole piece
+                yield buf[:end], True
+                pending = buf[end:]
+                continue
+            pos = 0
+            while True:  # readline itself, on what is here
+                i = buf.find(b"\n", pos, pos + _LINE_MAX)
+                if i >= 0:
+                    piece = buf[pos : i + 1]
+                elif len(buf) - pos >= _LINE_MAX:
+                    piece = buf[pos : pos + _LINE_MAX]
+                else:
+                    break
+                yield piece, False
+                pos += len(piece)
+            pending = buf[pos:]
+        for pos in range(0, len(pending), _LINE_MAX):
+            yield pending[pos : pos + _LINE_MAX], False
+
+
+def _nmea_blocks(path: Path, size: int) -> Iterator[tuple[float, bytes]]:
+    """``_join(_nmea_chunks(path), size)``, the same blocks with the same times, without a
+    Python step a line where whole lines without a comment come in one piece: the block is
+    cut at the end of the line that brings it to ``size`` bytes, found by a search, and the
+    times are taken in one scan of the lines (:data:`_TIME_LINES_RE`)."""
+    clock = _FixClock()
+    block = bytearray()
+    t = 0.0
+    for data, whole in _readline_pieces(path):
+        if not whole or b"#" in data:  # line by line, as _nmea_chunks
+            for t, line in _lines(data, clock):
+                block += line
+                if len(block) >= size:
+                    yield t, bytes(block)
+                    block.clear()
+            continue
+        pos, n = 0, len(data)
+        while pos < n:
+            need = pos + size - len(block)  # the block is full at a line end at or past this
+            if need > n:
+                block += data[pos:] if pos else data
+                t = clock.lines(data[pos:] if pos else data)
+                break
+            j = _LINE_END.search(data, need - 1)
+            assert j is not None  # data ends with LF
+            end = j.end()
+            if data[end - 1 : end + 1] == b"\r\n":
+                end += 1
+            part = data[pos:end]
+            t = clock.lines(part)
+            block += part
+            yield t, bytes(block)
+            block.clear()
+            pos = end
+    yield t, bytes(block)
 
 
 class PtyFeeder(threading.Thread):
-    """Writes the chunks into the pty's master side, paced by ``speed`` (0: no pacing)."""
+    """Writes the chunks into the pty's master side, paced by ``speed`` (0: no pacing), in
+    writes of ``BATCH`` bytes or more (the last one perhaps less)."""
+
+    BATCH = 4096
 
     def __init__(
         self,
@@ -200,7 +345,7 @@ class PtyFeeder(threading.Thread):
                         self.sleep(due - now)
                 batch += data
                 self.t_written = t
-                if len(batch) >= 4096:
+                if len(batch) >= self.BATCH:
                     self.bytes_written += self.pty.write(bytes(batch))
                     batch.clear()
             if batch:
@@ -247,8 +392,11 @@ def _pty_steps(inp: ReplayInput, port: ReplayPort, facts: dict[str, Any], speed:
     ``facts["bytes_written"]`` then says how many it wrote."""
     with PtyPair(baudrate=inp.baudrate) as pty:
         serial = open_port(SerialSettings(url=pty.url, baudrate=inp.baudrate, timeout_s=0.05))
-        feeder = PtyFeeder(pty, WirePacer(inp.chunks, inp.baudrate) if speed > 0
-                           and inp.kind == "capture" else inp.chunks, speed)  # the line's pace
+        chunks: Chunks = inp.blocks(PtyFeeder.BATCH)  # unpaced: what the writer batches
+        if speed > 0:
+            chunks = (WirePacer(inp.chunks, inp.baudrate) if inp.kind == "capture"
+                      else inp.chunks)  # the line's pace
+        feeder = PtyFeeder(pty, chunks, speed)
         started = clock()
         feeder.start()
         read = 0
@@ -275,17 +423,10 @@ def _pty_steps(inp: ReplayInput, port: ReplayPort, facts: dict[str, Any], speed:
 
 
 def _direct_steps(inp: ReplayInput, port: ReplayPort) -> Iterator[float]:
-    """The input in blocks of up to 64 KiB, as a port read would return them (no pty)."""
-    block = bytearray()
-    t = 0.0
-    for t, data in inp.chunks:
-        block += data
-        if len(block) >= 65536:
-            port.load(bytes(block))
-            block.clear()
-            yield t
-    port.load(bytes(block))
-    yield t
+    """The input in blocks of about 64 KiB, as a port read would return them (no pty)."""
+    for t, block in inp.blocks(65536):
+        port.load(block)
+        yield t
 
 
 def _replay(driver: ReplayDriver, inp: ReplayInput, pipeline: RoverPipeline, *, use_pty: bool,
@@ -293,12 +434,14 @@ def _replay(driver: ReplayDriver, inp: ReplayInput, pipeline: RoverPipeline, *, 
             clock: Callable[[], float] = time.monotonic) -> dict[str, Any]:
     """``inp`` through ``pipeline`` on ``driver``; returns the transport facts."""
     port = ReplayPort()
-    facts: dict[str, Any] = {"bytes_written": inp.total_bytes} if not use_pty else {}
+    facts: dict[str, Any] = {}
     steps = (_pty_steps(inp, port, facts, speed, timeout_s, clock) if use_pty
              else _direct_steps(inp, port))
     driver.run(RoverFeed(pipeline, port), steps)
     if driver.interrupted_by:
         return {"bytes_total": inp.total_bytes, "pty": use_pty}
+    if not use_pty:  # every byte loaded: the input was read to its end (once)
+        facts["bytes_written"] = inp.total_bytes
     return {"bytes_total": inp.total_bytes, "bytes_written": facts["bytes_written"],
             "pty": use_pty}
 

@@ -533,17 +533,18 @@ def bench_gpsdecode(duration_s: float = 3600.0, rate_hz: float = 10.0, pairs: in
     One log (``sim rover --seed 1``, 1 h at 10 Hz by default: GGA+RMC+VTG); each round runs
     ``gpsdecode < LOG`` (its JSON to /dev/null) and then each variant of ``fdi-bridge replay
     --config CONFIG LOG``, as a user runs it: through a pty with ``epochs.jsonl`` written
-    (``records``), without the pty (``--no-pty``), and without records where ``replay`` has
-    ``--no-records``. Each figure is the processor time (user + system) of the whole child
-    process, start-up included, from :func:`measure_child`, which also gives each one's own
-    peak RSS. The ratio is the median over rounds of (variant / gpsdecode of the same round):
-    a change in the machine's load falls on both halves of a pair."""
+    (``records``), without the pty (``--no-pty``), and without the pty and records
+    (``--no-pty --no-records``, summary only) where ``replay`` has ``--no-records``. Each
+    figure is the processor time (user + system) of the whole child process, start-up
+    included, from :func:`measure_child`, which also gives each one's own peak RSS. The ratio
+    is the median over rounds of (variant / gpsdecode of the same round): a change in the
+    machine's load falls on both halves of a pair."""
     exe = shutil.which(GPSDECODE)
     if exe is None:
         return {"error": "gpsdecode not found on PATH (gpsd's clients: apt install gpsd-clients)"}
     variants = {"records": [], "no_pty": ["--no-pty"]}
-    if _no_records_option():
-        variants["no_records"] = ["--no-records"]
+    if _no_records_option():  # as its row says: records off, the pty too (as no_pty)
+        variants["no_records"] = ["--no-pty", "--no-records"]
     tmp = Path(tempfile.mkdtemp(prefix="fdi-bench-gpsdecode-"))
     times: dict[str, list[float]] = {k: [] for k in ("gpsdecode", *variants)}
     peaks: dict[str, list[float]] = {k: [] for k in times}

@@ -644,7 +644,7 @@ def evaluate_run(
     truth = read_jsonl(truth_path)
     methods = [MethodResult("this run", "input", score_rover(records, truth))]
     if capture is not None:
-        data = b"".join(c for _, c in load_input(capture).chunks)
+        data = load_input(capture).data()
         comp, _ = compare_rover(epochs_path.parent.name or "run", data, truth, cfg)
         methods += comp.methods
         default = comp.default

@@ -295,7 +295,7 @@ def replay_rover(cfg: BridgeConfig, data: bytes, records: bool
 
 def _rover_row(job: Job) -> dict[str, Any]:
     inp = load_input(job.log.path)
-    data = b"".join(c for _, c in inp.chunks)
+    data = inp.data()
     records, summary = replay_rover(job.rover, data, records=job.log.truth is not None)
     counters = summary["input"]
     if counters["sentences"] == 0 and not counters["ignored"]:

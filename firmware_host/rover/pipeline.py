@@ -75,8 +75,8 @@ class EpochOutcome(NamedTuple):
 _new = tuple.__new__
 
 
-def _r(x: float | None, nd: int = 4) -> float | None:
-    return None if x is None else round(x, nd)
+def _r(x: float | None) -> float | None:
+    return None if x is None else round4(x)
 
 
 class RoverPipeline:
@@ -385,7 +385,7 @@ class RoverPipeline:
 
     def summary(self) -> dict[str, Any]:
         stats = self.timer.stats
-        proc = [v * 1e3 for v in stats.proc_s]
+        proc = sorted([v * 1e3 for v in stats.proc_s])  # once, for both percentiles
         return {
             "epochs": self.epochs,
             "faults": self.faults,
