@@ -143,17 +143,20 @@ class GnssFaultMonitor:
 
     def healthy_epoch(
         self, nu0: FloatArray, s0: FloatArray, a: FloatArray, r: FloatArray,
-        var_inc: FloatArray,
+        var_inc: FloatArray, *, beyond_model: bool = False,
     ) -> Verdict:
         """H0 held up to now: test for an onset at this epoch.
 
         ``nu0``, ``s0``: the position innovation and its 3×3 covariance; ``a``: the receiver
         minus the uncorrected INS (:meth:`jump_statistic`), ``r`` the fix's noise variances,
         ``var_inc`` (per component) ``R_i`` plus the INS's increment variance over the window.
+        ``beyond_model``: the filter's estimate of the receiver's correlated error left its own
+        model (:meth:`fdi.insgnss.InsGnssFilter._wander_beyond_model`, a slow walk): an onset
+        whatever the step test says.
         """
-        onset = False
+        onset = beyond_model
         can_coast = bool(np.all(np.diag(s0) - r <= self.params.max_prior_ratio * r))
-        if can_coast and mahalanobis2(nu0, s0) > self._t_on:
+        if not onset and can_coast and mahalanobis2(nu0, s0) > self._t_on:
             g = self.jump_statistic(a, var_inc)
             onset = g is not None and g > self._t_on
         if onset:

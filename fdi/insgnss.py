@@ -1,5 +1,6 @@
 """Loosely coupled INS/GNSS: strapdown mechanisation and a 15-state error-state Kalman filter
-with the three-zone robust gate (Cai & Shao) on the GNSS innovations.
+(18 with the receiver's correlated error, (G1)-(G4)) with the three-zone robust gate (Cai &
+Shao) on the GNSS innovations.
 
 Frames and units
 ----------------
@@ -47,6 +48,23 @@ back. Then ``K = P⁻H'ᵀ(H'P⁻H'ᵀ + R')⁻¹``, ``δx̂ = K ν'``, Joseph f
 ``P⁺ = (I − KH')P⁻(I − KH')ᵀ + KR'Kᵀ``, and the correction is fed back into the nominal
 state (``δx̂`` reset to 0).
 
+The receiver's correlated error (ours; ``gnss_gm_sigma_m > 0``, off by default). A receiver's
+position error is not white: a DGPS fix wanders slowly (multipath, the atmosphere, the age of
+the corrections), and a filter that takes each fix as independent averages that wander at rest
+as if it were noise (its ``P`` collapses under the ZUPTs) and lags it. With the option, three
+states ``g`` (E, N, U, m) follow it as a first-order Gauss-Markov process (the textbook
+shaping filter of a correlated measurement error, e.g. Gelb, *Applied Optimal Estimation*):
+
+(G1) ``ġ = −g/τ + w_g``, ``q_g = 2σ_g²/τ`` (stationary variance σ_g²: ``gnss_gm_sigma_m`` E/N,
+``gnss_gm_sigma_up_m`` up; τ ``gnss_gm_tau_s``), its estimate decaying as ``ĝ e^(−Δt/τ)``;
+(G2) ``z = p + g + v``: a position row of ``H`` selects δp_i and g_i, ``R`` (``gnss_sigma_*``)
+is the white rest ``v``;
+(G3) a fault's onset also when ``Σ ĝ_i²/σ_gi² > χ²₃(1 − α_on)``: ``ĝ`` left its own model (a
+slow walk that ``g`` would follow, the INS absorbing part of it through ``P_pg``); ``ĝ`` then
+returns to its prior, the fault's bias holds the receiver's error;
+(G4) the filter starts at a fix, ``p̂₀ = z₀``, ``ĝ₀ = 0``: ``δp₀ = −g₀ − v₀``, so
+``P_pp = R + σ_g²``, ``P_pg = −σ_g²`` (:meth:`InsGnssFilter._start_at_fix`).
+
 Strategy ``fault_state`` (ours; :mod:`fdi.gnss_fault`): the gates only down-weight, and a
 :class:`~fdi.gnss_fault.GnssFaultMonitor` decides per epoch between a healthy receiver and a
 biased one. While a fault is believed the filter carries a GNSS position bias ``b`` (random
@@ -74,6 +92,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from fdi.chi2 import chi2_ppf
 from fdi.errors import EstimatorError
 from fdi.gnss_fault import GnssFaultMonitor, Verdict
 from fdi.insgnss_params import (  # re-exported: the parameters live without numpy
@@ -331,6 +350,33 @@ def check_imu_rate(rate_hz: float, min_rate_hz: float, source: str = "IMU") -> N
 # ---------------------------------------------------------------- the filter
 
 
+def _ins_noise(params: InsGnssParams) -> tuple[FloatArray, FloatArray]:
+    """The 15 INS states' initial variances (P0's diagonal) and the continuous white-noise
+    PSDs of (E2)–(E4); bias random walk: the 1σ bias over an hour (gyro: and its drift over
+    a minute, ImuErrorModel.gyro_bias_rw_rad_s2)."""
+    imu = params.imu
+    p0 = np.concatenate(
+        [
+            np.full(3, params.init_sigma_pos_m**2),
+            np.full(3, params.init_sigma_vel_m_s**2),
+            np.array([params.init_sigma_tilt_deg, params.init_sigma_tilt_deg,
+                      params.init_sigma_yaw_deg]) ** 2 * DEG**2,
+            np.full(3, max(imu.accel_bias_m_s2, 1e-6) ** 2),
+            np.full(3, max(imu.gyro_bias_rad_s, 1e-9) ** 2),
+        ]
+    )
+    q = np.concatenate(
+        [
+            np.zeros(3),
+            np.full(3, max(imu.accel_vrw_m_s_sqrt_s, 1e-6) ** 2),
+            np.full(3, max(imu.gyro_arw_rad_sqrt_s, 1e-9) ** 2),
+            np.full(3, max(imu.accel_bias_m_s2, 1e-6) ** 2 / 3600.0),
+            np.full(3, max(imu.gyro_bias_rw_rad_s2, 1e-18 / 3600.0)),
+        ]
+    )
+    return p0, q
+
+
 @dataclass(frozen=True)
 class EpochReport:
     """What one GNSS update did: per component (E, N, U position, then velocity) the decision."""
@@ -349,7 +395,9 @@ class InsGnssFilter:
     """Loosely coupled 15-state error-state Kalman filter (see the module docstring).
 
     ``x`` is the error state (always 0 between updates, its estimate is fed back), ``P`` its
-    covariance (15×15), ``y``/``S`` the last innovation and its covariance (after the gate).
+    covariance (``n × n``: 15, or 18 with the receiver's correlated error ``g``, states
+    15-17, its estimate ``gnss_wander``), ``y``/``S`` the last innovation and its covariance
+    (after the gate).
     """
 
     def __init__(
@@ -370,30 +418,13 @@ class InsGnssFilter:
         self.b_a: Vec3 = (0.0, 0.0, 0.0)  # accelerometer bias estimate, m/s²
         self.b_g: Vec3 = (0.0, 0.0, 0.0)  # gyro bias estimate, rad/s
         self.t_s = float(t0_s)
-        imu = params.imu
-        p0 = np.concatenate(
-            [
-                np.full(3, params.init_sigma_pos_m**2),
-                np.full(3, params.init_sigma_vel_m_s**2),
-                np.array([params.init_sigma_tilt_deg, params.init_sigma_tilt_deg,
-                          params.init_sigma_yaw_deg]) ** 2 * DEG**2,
-                np.full(3, max(imu.accel_bias_m_s2, 1e-6) ** 2),
-                np.full(3, max(imu.gyro_bias_rad_s, 1e-9) ** 2),
-            ]
-        )
-        self.P: FloatArray = np.diag(p0)
-        self.x: FloatArray = np.zeros(N_STATES)
-        # Continuous white-noise PSDs of (E2)–(E4); bias random walk: the 1σ bias over an hour
-        # (gyro: and its drift over a minute, ImuErrorModel.gyro_bias_rw_rad_s2).
-        self._q = np.concatenate(
-            [
-                np.zeros(3),
-                np.full(3, max(imu.accel_vrw_m_s_sqrt_s, 1e-6) ** 2),
-                np.full(3, max(imu.gyro_arw_rad_sqrt_s, 1e-9) ** 2),
-                np.full(3, max(imu.accel_bias_m_s2, 1e-6) ** 2 / 3600.0),
-                np.full(3, max(imu.gyro_bias_rw_rad_s2, 1e-18 / 3600.0)),
-            ]
-        )
+        self._init_wander(params)
+        p0, q = _ins_noise(params)
+        self.P: FloatArray = np.diag(np.concatenate([p0, self.gm_var[: self.n - N_STATES]]))
+        self._start_at_fix()
+        self.x: FloatArray = np.zeros(self.n)
+        # the PSDs, with the receiver's error's (G1): q_g = 2σ_g²/τ
+        self._q = np.concatenate([q, 2.0 * self.gm_var[: self.n - N_STATES] / self.gm_tau])
         self.y: FloatArray = np.zeros(0)
         self.S: FloatArray = np.zeros((0, 0))
         # The lock-in breaker (fdi.three_zone.JumpTracker) watches the position fix as a whole
@@ -415,7 +446,7 @@ class InsGnssFilter:
         self.fault_monitor = GnssFaultMonitor(params.fault_state)
         self.gnss_bias: FloatArray = np.zeros(3)
         self.bias_active = False
-        self._Pxb: FloatArray = np.zeros((N_STATES, 3))
+        self._Pxb: FloatArray = np.zeros((self.n, 3))
         self._Pbb: FloatArray = np.zeros((3, 3))
         self._q_bias = params.fault_state.bias_rw_m_sqrt_s**2
         # the filter's accumulated corrections as a trajectory (position offset c_p moved by
@@ -431,6 +462,40 @@ class InsGnssFilter:
         g0 = self.earth.g0
         self._grav_grad = np.diag([-g0, -g0, 2.0 * g0]) / EARTH_RADIUS_M
         self._omega_skew = _skew(self.earth.omega_ie_n)
+
+    def _init_wander(self, params: InsGnssParams) -> None:
+        """The receiver's correlated error g (E, N, U), a first-order Gauss-Markov state per
+        axis ((G1), module docstring), appended as states 15-17 when gnss_gm_sigma_m > 0;
+        ``gm_var``: its stationary variances σ_g²."""
+        self.gm_sigma = params.gnss_gm_sigma_m
+        self.gm_var = np.array([params.gnss_gm_sigma_m, params.gnss_gm_sigma_m,
+                                params.gnss_gm_sigma_up_m]) ** 2
+        self.gm_tau = params.gnss_gm_tau_s
+        self.n = N_STATES + (3 if self.gm_sigma > 0.0 else 0)
+        self.gnss_wander: FloatArray = np.zeros(self.n - N_STATES)  # ĝ, m (E, N, U)
+        self._r_white = np.array([params.gnss_sigma_h_m, params.gnss_sigma_h_m,
+                                  params.gnss_sigma_v_m]) ** 2
+        self._t_wander = chi2_ppf(1.0 - params.fault_state.alpha_onset, 3)  # (G3)
+
+    def _start_at_fix(self) -> None:
+        """(G4) The filter starts at a fix, ``p̂₀ = z₀``, ``ĝ₀ = 0``: its position error is the
+        fix's, ``δp₀ = −g₀ − v₀``, so besides the white part (``init_sigma_pos_m``)
+        ``P_pp += σ_g²`` and ``P_pg = −σ_g²`` (the fix tells p + g, not which)."""
+        if self.n == N_STATES:
+            return
+        g = np.arange(N_STATES, self.n)
+        p = np.arange(3)
+        self.P[p, p] += self.gm_var
+        self.P[p, g] = -self.gm_var
+        self.P[g, p] = -self.gm_var
+
+    def set_ins_covariance(self, P: FloatArray) -> None:
+        """Replace the 15 INS states' covariance (an alignment's, with the attitude tied to
+        the biases); the receiver's correlated error keeps its start (:meth:`_start_at_fix`)."""
+        self.P = np.zeros((self.n, self.n))
+        self.P[:N_STATES, :N_STATES] = P
+        self.P[N_STATES:, N_STATES:] = np.diag(self.gm_var[: self.n - N_STATES])
+        self._start_at_fix()
 
     # ------------------------------------------------------------ state accessors
 
@@ -507,7 +572,7 @@ class InsGnssFilter:
             return
         fn = np.array(self._acc_fn) / dt  # mean specific force in n over the block
         c = quat_to_dcm(self.nav.q)
-        F = np.zeros((N_STATES, N_STATES))
+        F = np.zeros((self.n, self.n))
         F[0:3, 3:6] = np.eye(3)  # (E1)
         F[3:6, 0:3] = self._grav_grad  # (E2)
         F[3:6, 3:6] = -2.0 * self._omega_skew
@@ -515,8 +580,11 @@ class InsGnssFilter:
         F[3:6, 9:12] = -c
         F[6:9, 6:9] = -self._omega_skew  # (E3)
         F[6:9, 12:15] = c
+        if self.n > N_STATES:  # (G1) ġ = −g/τ: the estimate decays as its mean does
+            F[N_STATES:, N_STATES:] = -np.eye(3) / self.gm_tau
+            self.gnss_wander = self.gnss_wander * math.exp(-dt / self.gm_tau)
         Fdt = F * dt
-        Phi = np.eye(N_STATES) + Fdt + 0.5 * (Fdt @ Fdt)
+        Phi = np.eye(self.n) + Fdt + 0.5 * (Fdt @ Fdt)
         # P⁻ = Φ P Φᵀ + Q_d
         self.P = Phi @ self.P @ Phi.T + np.diag(self._q * dt)
         if self.bias_active:  # b is a random walk: Φ_b = I, Q_b = q_b Δt
@@ -539,6 +607,44 @@ class InsGnssFilter:
 
     # ------------------------------------------------------------ measurement update
 
+    def _h_fix(self, k: int) -> FloatArray:
+        """Row ``k`` of ``H`` (0-2: the E, N, U position fix, 3-5: the velocity) over the
+        filter's states: a position row selects δp_k and, with the receiver's correlated error
+        in the state, g_k too, (G2) ``z = p + g + v``."""
+        h = np.zeros(self.n)
+        h[k] = 1.0
+        if k < 3 and self.n > N_STATES:
+            h[N_STATES + k] = 1.0
+        return h
+
+    def predicted_fix(self) -> tuple[FloatArray, FloatArray]:
+        """What a healthy receiver should report now, ``p̂ + ĝ`` (E, N, U, m), and its
+        covariance ``H P Hᵀ`` (3×3, m², without the receiver's white noise R or a fault's
+        bias)."""
+        zhat = np.array(self.nav.p)
+        zhat[: len(self.gnss_wander)] += self.gnss_wander
+        H = np.array([self._h_fix(k) for k in range(3)])
+        return zhat, H @ self.P @ H.T
+
+    def _observation(
+        self, t_s: float, position_enu_m: VecLike, velocity_enu_m_s: VecLike | None,
+    ) -> tuple[list[float], list[float], list[float], list[int]]:
+        """``z``, its prediction ``ẑ`` (position ``p̂ + ĝ``, velocity ``v̂``), the white
+        variances ``R_ii`` and the rows of ``H`` (:meth:`_h_fix`) of one fix."""
+        prm = self.params
+        z = [float(c) for c in position_enu_m[:3]]
+        zhat = self.predicted_fix()[0].tolist()
+        r = [prm.gnss_sigma_h_m**2, prm.gnss_sigma_h_m**2, prm.gnss_sigma_v_m**2]
+        rows = [0, 1, 2]
+        if velocity_enu_m_s is not None and prm.use_velocity:
+            z += [float(c) for c in velocity_enu_m_s[:3]]
+            zhat += list(self.nav.v)
+            r += [prm.gnss_sigma_vel_m_s**2] * 3
+            rows += [3, 4, 5]
+        if not all(math.isfinite(c) for c in z):
+            raise EstimatorError(f"non-finite GNSS observation at t = {t_s}: {z}")
+        return z, zhat, r, rows
+
     def update(
         self,
         t_s: float,
@@ -552,38 +658,40 @@ class InsGnssFilter:
                 "propagate the IMU up to the fix first"
             )
         self._propagate_covariance()
-        prm = self.params
-        z = [float(c) for c in position_enu_m[:3]]
-        zhat = list(self.nav.p)
-        r = [prm.gnss_sigma_h_m**2, prm.gnss_sigma_h_m**2, prm.gnss_sigma_v_m**2]
-        rows = [0, 1, 2]
-        if velocity_enu_m_s is not None and prm.use_velocity:
-            z += [float(c) for c in velocity_enu_m_s[:3]]
-            zhat += list(self.nav.v)
-            r += [prm.gnss_sigma_vel_m_s**2] * 3
-            rows += [3, 4, 5]
-        if not all(math.isfinite(c) for c in z):
-            raise EstimatorError(f"non-finite GNSS observation at t = {t_s}: {z}")
+        z, zhat, r, rows = self._observation(t_s, position_enu_m, velocity_enu_m_s)
         verdict: Verdict | None = None
-        if prm.strategy == "fault_state":
+        if self.params.strategy == "fault_state":
             verdict = self._fault_verdict(z, zhat, r)
             if self.bias_active:
                 return self._update_biased(float(t_s), z, zhat, r, rows, verdict)
-        P = self.P
-        idx = np.array(rows)
-        # (2) ν = z − H x̂ ; (3) S = H P⁻ Hᵀ + R  (H selects position / velocity states)
+        H = np.array([self._h_fix(k) for k in rows])
+        # (2) ν = z − H x̂ ; (3) S = H P⁻ Hᵀ + R
         nu = np.array(z) - np.array(zhat)
-        s_diag = P[idx, idx] + np.array(r)
+        s_diag = np.einsum("ij,jk,ik->i", H, self.P, H) + np.array(r)
+        decisions = self._gate(z, nu, s_diag, r, rows)
+        P = self._readmit(decisions, nu, s_diag, rows)
+        keep = [j for j, d in enumerate(decisions) if d.action is not Action.REJECT]
+        if keep:
+            y = np.array([decisions[j].value - zhat[j] for j in keep])  # ν' with the gate's value
+            Rm = np.diag([decisions[j].variance for j in keep])
+            self._correct(P, H[keep], y, Rm)
+        else:
+            self.y, self.S = np.zeros(0), np.zeros((0, 0))
+        return EpochReport(float(t_s), decisions, verdict)
+
+    def _gate(self, z: list[float], nu: FloatArray, s_diag: FloatArray, r: list[float],
+              rows: list[int]) -> tuple[GateDecision, ...]:
+        """(7)–(8): the per-dimension three-zone gate, after the lock-in breaker's look at the
+        position fix as a whole (each position gate sees the tracker's verdict on its own
+        component: a fault in east and north does not make a normal up value faulty,
+        section 2.1)."""
         receiver: ReceiverState | None = None
         if self.gates[0].tracks_jumps:
-            t2 = prm.three_zone.t2
+            t2 = self.params.three_zone.t2
             receiver = self.position_tracker.update(
                 nu[:3].tolist(), s_diag[:3].tolist(), r[:3],
                 [float(nu[j]) ** 2 > t2 * float(s_diag[j]) for j in range(3)],
             )
-        # (7)–(8) per-dimension three-zone gate
-        # (each position gate sees the tracker's verdict on its own component: a fault in east
-        # and north does not make a normal up value faulty, section 2.1)
         decisions = tuple(
             self.gates[k].step(
                 z[j], float(nu[j]), float(s_diag[j]), r[j],
@@ -593,32 +701,33 @@ class InsGnssFilter:
         )
         if any(d.readmit for d in decisions[:3]):
             self.position_tracker.clear()  # the state is corrected below: a step in ν follows
+        return decisions
+
+    def _readmit(self, decisions: Sequence[GateDecision], nu: FloatArray, s_diag: FloatArray,
+                 rows: list[int]) -> FloatArray:
+        """``P⁻`` for the update: a receiver accepted again after max_replacements over-limit
+        epochs found the INS drifted beyond its covariance; ``P_kk`` is raised so that
+        ``S_ii = ν_i²`` and the fix pulls the state back (velocity and attitude follow through
+        the correlations). ``self.P`` itself when no gate readmits."""
+        P = self.P
         for j, d in enumerate(decisions):
             if d.readmit and float(nu[j]) ** 2 > float(s_diag[j]):
-                # Receiver accepted again after max_replacements over-limit epochs: the INS
-                # drifted beyond its covariance; raise it so that S_ii = ν_i² and the fix pulls
-                # the state back (velocity and attitude follow through the correlations).
                 k = rows[j]
                 P = P.copy() if P is self.P else P
                 P[k, k] += float(nu[j]) ** 2 - float(s_diag[j])
-        keep = [j for j, d in enumerate(decisions) if d.action is not Action.REJECT]
-        if keep:
-            sel = idx[keep]
-            y = np.array([decisions[j].value - zhat[j] for j in keep])  # ν' with the gate's value
-            Rm = np.diag([decisions[j].variance for j in keep])
-            PHt = P[:, sel]  # P Hᵀ
-            S = P[np.ix_(sel, sel)] + Rm
-            K = np.linalg.solve(S, PHt.T).T  # K = P Hᵀ S⁻¹
-            dx = K @ y
-            IKH = np.eye(N_STATES)
-            IKH[:, sel] -= K
-            self.P = IKH @ P @ IKH.T + K @ Rm @ K.T  # Joseph form
-            self.P = 0.5 * (self.P + self.P.T)
-            self.y, self.S = y, S
-            self._inject(dx)
-        else:
-            self.y, self.S = np.zeros(0), np.zeros((0, 0))
-        return EpochReport(float(t_s), decisions, verdict)
+        return P
+
+    def _correct(self, P: FloatArray, H: FloatArray, y: FloatArray, Rm: FloatArray) -> None:
+        """(4)–(6): ``K = P Hᵀ S⁻¹``, ``δx̂ = K y``, Joseph form
+        ``P⁺ = (I − KH)P(I − KH)ᵀ + KRKᵀ``; the correction fed back (:meth:`_inject`)."""
+        PHt = P @ H.T
+        S = H @ PHt + Rm
+        K = np.linalg.solve(S, PHt.T).T  # K = P Hᵀ S⁻¹
+        IKH = np.eye(self.n) - K @ H
+        self.P = IKH @ P @ IKH.T + K @ Rm @ K.T  # Joseph form
+        self.P = 0.5 * (self.P + self.P.T)
+        self.y, self.S = y, S
+        self._inject(K @ y)
 
     def coast(self, t_s: float, velocity_enu_m_s: VecLike | None = None) -> None:
         """No position fix at ``t_s``: the INS coasts (a plain velocity update when the preset
@@ -628,31 +737,14 @@ class InsGnssFilter:
         if velocity_enu_m_s is None or not self.params.use_velocity:
             return
         y = np.array([float(c) for c in velocity_enu_m_s[:3]]) - np.array(self.nav.v)
-        Rm = np.eye(3) * self.params.gnss_sigma_vel_m_s**2
-        PHt = self.P[:, 3:6]
-        S = self.P[3:6, 3:6] + Rm
-        K = np.linalg.solve(S, PHt.T).T
-        IKH = np.eye(N_STATES)
-        IKH[:, 3:6] -= K
-        self.P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
-        self.P = 0.5 * (self.P + self.P.T)
-        self._inject(K @ y)
+        self._select_update(3, y, np.eye(3) * self.params.gnss_sigma_vel_m_s**2)
 
     def zero_velocity(self, sigma_m_s: float) -> None:
         """Zero-velocity update (ZUPT): the vehicle is known to be at rest, ``v = 0`` with
         1σ ``sigma_m_s`` per axis, a plain Kalman update of the velocity states, (2)-(6) with
         ``H`` selecting them; after :meth:`update` or :meth:`coast` at the same time (the
         covariance is not propagated here). Used by the live vehicle's alignment at rest."""
-        y = -np.array(self.nav.v)
-        Rm = np.eye(3) * float(sigma_m_s) ** 2
-        PHt = self.P[:, 3:6]
-        S = self.P[3:6, 3:6] + Rm
-        K = np.linalg.solve(S, PHt.T).T
-        IKH = np.eye(N_STATES)
-        IKH[:, 3:6] -= K
-        self.P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
-        self.P = 0.5 * (self.P + self.P.T)
-        self._inject(K @ y)
+        self._select_update(3, -np.array(self.nav.v), np.eye(3) * float(sigma_m_s) ** 2)
 
     def zero_rate(self, gyro_mean_rad_s: VecLike, sigma_rad_s: float,
                   gate: float = 21.108) -> bool:
@@ -666,55 +758,115 @@ class InsGnssFilter:
         w_ie_b = c.T @ np.array(self.earth.omega_ie_n)
         y = np.array([float(v) for v in gyro_mean_rad_s[:3]]) - w_ie_b - np.array(self.b_g)
         Rm = np.eye(3) * float(sigma_rad_s) ** 2
-        PHt = self.P[:, 12:15]
         S = self.P[12:15, 12:15] + Rm
         if float(y @ np.linalg.solve(S, y)) > gate:
             return False
-        K = np.linalg.solve(S, PHt.T).T
-        IKH = np.eye(N_STATES)
-        IKH[:, 12:15] -= K
-        self.P = IKH @ self.P @ IKH.T + K @ Rm @ K.T
-        self.P = 0.5 * (self.P + self.P.T)
-        self._inject(K @ y)
+        self._select_update(12, y, Rm)
         return True
+
+    def _select_update(self, first: int, y: FloatArray, Rm: FloatArray) -> None:
+        """(4)–(6) for an observation of the three states ``first .. first + 2`` (``H``
+        selects them): ``K = P Hᵀ S⁻¹``, ``δx̂ = K y``, Joseph form; while a fault's bias is in
+        the state (strategy "fault_state") on the augmented covariance, so that its blocks
+        ``P_xb``, ``P_bb`` stay consistent with ``P`` (a ZUPT at rest goes on during a fault)."""
+        sel = slice(first, first + 3)
+        P = self._augmented() if self.bias_active else self.P
+        PHt = P[:, sel]
+        S = P[sel, sel] + Rm
+        K = np.linalg.solve(S, PHt.T).T
+        IKH = np.eye(len(P))
+        IKH[:, sel] -= K
+        P = IKH @ P @ IKH.T + K @ Rm @ K.T
+        self._set_augmented(0.5 * (P + P.T), K @ y)
+
+    def _augmented(self) -> FloatArray:
+        """The covariance of ``[δx, b]`` (the fault's bias last), from ``P``, ``P_xb``, ``P_bb``."""
+        m = self.n
+        Pa = np.zeros((m + 3, m + 3))
+        Pa[:m, :m] = self.P
+        Pa[:m, m:] = self._Pxb
+        Pa[m:, :m] = self._Pxb.T
+        Pa[m:, m:] = self._Pbb
+        return Pa
+
+    def _set_augmented(self, P: FloatArray, dx: FloatArray) -> None:
+        """Store an updated covariance (``[δx]`` or ``[δx, b]``) and feed back ``dx``."""
+        m = self.n
+        self.P = P[:m, :m].copy() if len(P) > m else P
+        if len(P) > m:
+            self._Pxb = P[:m, m:].copy()
+            self._Pbb = P[m:, m:].copy()
+            self.gnss_bias = self.gnss_bias + dx[m:]
+        self._inject(dx[:m])
 
     # ------------------------------------------------------------ strategy "fault_state"
 
     def _fault_verdict(self, z: list[float], zhat: list[float], r: list[float]) -> Verdict:
         """The monitor's decision on this fix (fdi.gnss_fault); opens / drops the bias state."""
         nu0 = np.array(z[:3]) - np.array(zhat[:3])
-        s0 = self.P[0:3, 0:3] + np.diag(r[:3])  # S0 = P_pp + R
+        hph = self.predicted_fix()[1]
+        s0 = hph + np.diag(r[:3])  # S0 = H0 P H0ᵀ + R
         mon = self.fault_monitor
         self._corr_p = self._corr_p + self._corr_v * (self.t_s - self._corr_t)
         self._corr_t = self.t_s
-        a = nu0 + self._corr_p  # z − (p̂ − c_p): the receiver minus the uncorrected INS
+        a = nu0 + self._corr_p  # z − ĝ − (p̂ − c_p): the receiver minus the uncorrected INS
         rv = np.array(r[:3])
+        t_w = float(self.params.fault_state.window)
+        gm = np.zeros(3)  # the receiver's correlated error: its uncertainty now (G1)
+        gm_inc = np.zeros(3)  # and its change over the window, 2σ²(1 − e^(−T/τ))
+        if self.n > N_STATES:
+            gm = np.diag(self.P)[N_STATES:].copy()
+            gm_inc = 2.0 * self.gm_var * (1.0 - math.exp(-t_w / self.gm_tau))
         if not self.bias_active:
             # the INS's own increment over the window: velocity error over T plus the white
             # accelerometer noise, P_vv T² + q_a T³/3, with T the window's length
-            t_w = float(self.params.fault_state.window)
-            var_inc = rv + np.diag(self.P)[3:6] * t_w**2 + self._q[3:6] * t_w**3 / 3.0
-            verdict = mon.healthy_epoch(nu0, s0, a, rv, var_inc)
+            var_inc = rv + gm_inc + np.diag(self.P)[3:6] * t_w**2 + self._q[3:6] * t_w**3 / 3.0
+            beyond = self._wander_beyond_model()
+            verdict = mon.healthy_epoch(nu0, s0, a, rv + gm, var_inc, beyond_model=beyond)
             if verdict is Verdict.ONSET:
                 # open b ~ N(0, σ_b0² I), uncorrelated: this epoch's update puts the jump in b
+                if beyond:  # ĝ followed the fault's start: the fault's bias holds it now
+                    self._reset_wander()
                 self.bias_active = True
                 self.gnss_bias = np.zeros(3)
-                self._Pxb = np.zeros((N_STATES, 3))
+                self._Pxb = np.zeros((self.n, 3))
                 self._Pbb = np.eye(3) * self.params.fault_state.bias_sigma0_m**2
             return verdict
-        pxb = self._Pxb[0:3, :]
-        nu1 = nu0 - self.gnss_bias  # ν1 = z − p̂ − b̂
-        s1 = s0 + pxb + pxb.T + self._Pbb  # S1 = H1 P H1ᵀ + R, H1 = [I 0 0 0 0 I]
-        verdict = mon.faulted_epoch(nu0, s0, nu1, s1, a, rv)
+        pxb = np.array([self._h_fix(k) for k in range(3)]) @ self._Pxb
+        nu1 = nu0 - self.gnss_bias  # ν1 = z − p̂ − ĝ − b̂
+        s1 = s0 + pxb + pxb.T + self._Pbb  # S1 = H1 P H1ᵀ + R, H1 = [H0 I]
+        verdict = mon.faulted_epoch(nu0, s0, nu1, s1, a, rv + gm)
         if verdict is Verdict.RETURN:
             # b jumps back to 0: marginalise it out (its old estimate says nothing now)
             self.bias_active = False
             self.gnss_bias = np.zeros(3)
-            self._Pxb = np.zeros((N_STATES, 3))
+            self._Pxb = np.zeros((self.n, 3))
             self._Pbb = np.zeros((3, 3))
         elif verdict is Verdict.RELEVEL:
             self._Pbb = self._Pbb + np.eye(3) * self.params.fault_state.bias_sigma0_m**2
         return verdict
+
+    def _wander_beyond_model(self) -> bool:
+        """(G3) The estimate of the receiver's correlated error beyond its own model: its
+        ``ĝᵀ ĝ / σ_g² > χ²₂(1 − α_on)`` (about 3 σ_g); a slow walk the wander state would
+        otherwise follow (and the INS absorb through it) is a fault. ``σ_g²`` is the stationary
+        variance, an upper bound on the estimate's own (``σ_g² − P_gg``): the test is
+        conservative."""
+        if self.n == N_STATES:
+            return False
+        var = np.maximum(self.gm_var - np.diag(self.P)[N_STATES:], self._r_white)
+        g2 = float(np.sum(self.gnss_wander**2 / var))
+        return g2 > self._t_wander
+
+    def _reset_wander(self) -> None:
+        """The receiver's correlated error back to its prior: ``ĝ = 0``, ``P_gg = σ_g² I``,
+        uncorrelated (a fault's onset: the bias ``b`` holds the receiver's whole error)."""
+        if self.n == N_STATES:
+            return
+        self.gnss_wander = np.zeros(3)
+        self.P[N_STATES:, :] = 0.0
+        self.P[:, N_STATES:] = 0.0
+        self.P[N_STATES:, N_STATES:] = np.diag(self.gm_var)
 
     def _update_biased(
         self, t_s: float, z: list[float], zhat: list[float], r: list[float], rows: list[int],
@@ -722,12 +874,9 @@ class InsGnssFilter:
     ) -> EpochReport:
         """Update of the 18-state filter ``[δx, b]`` under H1: position ``z = p + b + v``,
         velocity as usual (through its gates)."""
-        n = N_STATES + 3
-        Pa = np.zeros((n, n))
-        Pa[:N_STATES, :N_STATES] = self.P
-        Pa[:N_STATES, N_STATES:] = self._Pxb
-        Pa[N_STATES:, :N_STATES] = self._Pxb.T
-        Pa[N_STATES:, N_STATES:] = self._Pbb
+        m = self.n
+        n = m + 3
+        Pa = self._augmented()
         decisions: list[GateDecision] = []
         h_rows: list[FloatArray] = []
         y: list[float] = []
@@ -737,13 +886,14 @@ class InsGnssFilter:
             if k < 3:
                 # the fix informs b and, through b's constancy, the INS's changes; judged
                 # against the healthy prediction for the zone counts
-                s0 = float(self.P[k, k]) + r[j]
+                hk = self._h_fix(k)
+                s0 = float(hk @ self.P @ hk) + r[j]
                 dm = nu * nu / s0
                 zone = classify(dm, self.params.three_zone.t1, self.params.three_zone.t2)
                 decisions.append(GateDecision(zone, Action.REJECT, dm, z[j], math.inf))
                 h = np.zeros(n)
-                h[k] = 1.0
-                h[N_STATES + k] = 1.0
+                h[:m] = hk
+                h[m + k] = 1.0
                 h_rows.append(h)
                 y.append(nu - float(self.gnss_bias[k]))
                 rv.append(r[j])
@@ -765,13 +915,8 @@ class InsGnssFilter:
         dx = K @ yv
         IKH = np.eye(n) - K @ H
         Pa = IKH @ Pa @ IKH.T + K @ Rm @ K.T  # Joseph form
-        Pa = 0.5 * (Pa + Pa.T)
-        self.P = Pa[:N_STATES, :N_STATES].copy()
-        self._Pxb = Pa[:N_STATES, N_STATES:].copy()
-        self._Pbb = Pa[N_STATES:, N_STATES:].copy()
-        self.gnss_bias = self.gnss_bias + dx[N_STATES:]
         self.y, self.S = yv, S
-        self._inject(dx[:N_STATES])
+        self._set_augmented(0.5 * (Pa + Pa.T), dx)
         return EpochReport(t_s, tuple(decisions), verdict)
 
     def _inject(self, dx: FloatArray) -> None:
@@ -788,7 +933,9 @@ class InsGnssFilter:
         n.q = quat_normalize(quat_mul(quat_exp(-d[6], -d[7], -d[8]), n.q))
         self.b_a = (self.b_a[0] + d[9], self.b_a[1] + d[10], self.b_a[2] + d[11])
         self.b_g = (self.b_g[0] + d[12], self.b_g[1] + d[13], self.b_g[2] + d[14])
-        self.x = np.zeros(N_STATES)
+        if self.n > N_STATES:
+            self.gnss_wander = self.gnss_wander + dx[N_STATES:self.n]
+        self.x = np.zeros(self.n)
 
 
 def _vec3(a: VecLike) -> Vec3:

@@ -150,6 +150,20 @@ class InsGnssParams:
     gnss_sigma_v_m: float = field(default=5.0, metadata={"gt": 0.0, "doc": "R: up 1σ", "unit": "m"})
     gnss_sigma_vel_m_s: float = field(default=0.1, metadata={
         "gt": 0.0, "unit": "m/s", "doc": "R: GNSS velocity 1σ per axis"})
+    gnss_gm_sigma_m: float = field(default=0.0, metadata={
+        "off": 0.0, "ge": 0.001, "le": 100.0, "unit": "m",
+        "doc": "1σ per horizontal axis of the receiver's slowly varying error (multipath, "
+               "atmosphere, a DGPS correction's age): a first-order Gauss-Markov state per axis "
+               "(E, N, U) in the filter, z = p + g + v; gnss_sigma_h_m / gnss_sigma_v_m are "
+               "then the white rest (0: off, the fix's error white). A DGPS receiver: its "
+               "[rover.detector] sigma_m"})
+    gnss_gm_sigma_up_m: float = field(default=0.7, metadata={
+        "gt": 0.0, "le": 100.0, "unit": "m",
+        "doc": "the same error's 1σ up (with gnss_gm_sigma_m > 0; a DGPS receiver: its "
+               "[rover.detector] sigma_up_m)"})
+    gnss_gm_tau_s: float = field(default=60.0, metadata={
+        "ge": 1.0, "le": 86400.0, "unit": "s",
+        "doc": "correlation time of that error: ġ = −g/τ + w, E[g²] = gnss_gm_sigma_m²"})
     use_velocity: bool = field(default=True, metadata={"doc": "use GNSS velocity when given"})
     latitude_deg: float = field(default=34.25, metadata={
         "ge": -89.0, "le": 89.0, "unit": "deg",

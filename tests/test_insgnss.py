@@ -206,3 +206,43 @@ def test_zaru_estimates_every_gyro_bias_at_rest_and_rejects_a_turn() -> None:
     assert abs(yaw_err) < 3.0 * math.degrees(math.sqrt(float(kf.P[8, 8])))
     turning = (g[0], g[1], g[2] - math.radians(1.0))  # 1 deg/s about down
     assert not kf.zero_rate(turning, math.radians(0.02))
+
+
+def test_the_receiver_s_correlated_error_is_a_state_and_a_walk_leaves_its_model() -> None:
+    """fdi/insgnss.py (G1)-(G4) at rest (error-free IMU, ZUPT each second): fixes with a DGPS
+    receiver's error (Gauss-Markov σ 0.35 m E/N, 0.7 m up, τ 60 s), the filter modelling it
+    (R the 0.1 m white rest). It starts at the first fix with the fix's error tied to its
+    position (P_pg = −σ_g²); 150 s of the receiver's wander open no fault and the position
+    stays within 3σ of its claim; then a walk of 0.2 m/s east at zero speed is a fault within
+    12 s, and the INS takes less than 0.4 m of its 5 m."""
+    params = replace(InsGnssParams(), use_velocity=False, gnss_sigma_h_m=0.1,
+                     gnss_sigma_v_m=0.2, gnss_gm_sigma_m=0.35, gnss_gm_sigma_up_m=0.7,
+                     gnss_gm_tau_s=60.0)
+    rpy = (0.0, 0.0, 0.0)
+    gyro, accel = _stationary_samples(params.earth, rpy)
+    rng = np.random.default_rng(7)
+    sig = np.array([0.35, 0.35, 0.7])
+    phi = math.exp(-1.0 / 60.0)
+    g = rng.normal(0.0, 1.0, 3) * sig
+    kf = InsGnssFilter(params, 0.0, g, (0, 0, 0), rpy)
+    assert kf.n == 18 and kf.P[0, 15] == pytest.approx(-0.35**2)
+    assert kf.P[0, 0] == pytest.approx(params.init_sigma_pos_m**2 + 0.35**2)
+    onset_t = None
+    for t in range(1, 176):
+        for k in range(1, 101):
+            kf.propagate(t - 1 + k / 100.0, gyro, accel)
+        g = phi * g + math.sqrt(1.0 - phi * phi) * sig * rng.normal(0.0, 1.0, 3)
+        walk = 0.2 * (t - 150) if t > 150 else 0.0
+        kf.update(float(t), g + np.array([walk, 0.0, 0.0]))
+        kf.zero_velocity(0.01)
+        if t <= 150:
+            assert not kf.bias_active, t  # the receiver's own wander is no fault
+            err = kf.position[:2]
+            assert np.all(np.abs(err) <= 3.0 * np.sqrt(np.diag(kf.P)[:2])), (t, err)
+            east_150 = float(kf.position[0])
+        elif kf.bias_active and onset_t is None:
+            onset_t = t
+            east_at_onset = float(kf.position[0])
+    assert onset_t is not None and onset_t - 150 <= 12, onset_t
+    assert abs(east_at_onset - east_150) < 0.4, (east_at_onset, east_150)
+    assert abs(float(kf.position[0]) - east_at_onset) < 0.1  # held through the fault

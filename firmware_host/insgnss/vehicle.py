@@ -515,7 +515,7 @@ class InsGnssVehicle:
                 self._fix_acc_h = receiver_accuracy(out.epoch, self.cfg.rover.detector)[0]
                 self._var_h_fix = self._var_h(kf)
             self._coasting = rep is None
-            if still and not kf.bias_active:
+            if still:
                 kf.zero_velocity(self.live.rest_sigma_vel_m_s)  # at rest: ZUPT
                 self.zupts += 1
                 zupt = True
@@ -649,7 +649,7 @@ class InsGnssVehicle:
         self.kf = InsGnssFilter(a.params(self.params), t_g, enu, vel, (a.roll, a.pitch, a.yaw))
         self._last_fix_t = t_g
         if self._align_P is not None:  # at rest: the attitude error tied to the biases
-            self.kf.P = self._align_P
+            self.kf.set_ins_covariance(self._align_P)
             self._align_P = None
         self.aligned_at = t_g
         self.alignment = a
@@ -872,8 +872,9 @@ class InsGnssVehicle:
         the filter's model drifted faster than it claimed."""
         kf = self.kf
         assert kf is not None
-        nu = np.array(enu[:2]) - kf.position[:2]
-        P = kf.P[:2, :2] + (kf._Pbb[:2, :2] if kf.bias_active else 0.0)
+        zhat, hph = kf.predicted_fix()  # p̂ + ĝ, H P Hᵀ (the receiver's error in the state)
+        nu = np.array(enu[:2]) - zhat[:2]
+        P = hph[:2, :2] + (kf._Pbb[:2, :2] if kf.bias_active else 0.0)
         R = np.eye(2) * self.params.gnss_sigma_h_m**2
         nees = float(nu @ np.linalg.solve(P + R, nu))
         self.coast_checks += 1
