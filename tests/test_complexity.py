@@ -25,7 +25,6 @@ KNOWN: dict[tuple[str, str], tuple[int, int]] = {
     ("heading_ft.py", "FaultTolerantHeading._step_fir"): (27, 83),
     ("heading_ft.py", "FaultTolerantHeading._step_gyro"): (34, 72),
     ("insgnss.py", "InsGnssFilter.update"): (26, 80),
-    ("three_zone.py", "JumpTracker.update"): (29, 60),
 }
 
 
