@@ -70,8 +70,12 @@ For horizons of at least ``margin_min_h`` the calibrated σ carries its own unce
 
     σ_H ← σ_H·(1 + m/√n_H),   n_H = max(1, 2·(T − H)/H)              (D8)
 
-with m = ``margin`` and T = ``calibrate_s``; the shorter horizons, which have many samples
-and find the ramps in time, are left as they are.
+with m = ``margin`` and T = ``calibrate_s``. For Gaussian differences the median-absolute-
+deviation estimate has a standard error of about 1.166·σ/√n (its efficiency is 0.37), so
+m/1.166 is the margin in standard errors: m = 1.5 is 1.29 of them, a one-sided 10 % chance
+that σ_H is still low. The rover's default applies it from the shortest horizon on: a 5σ test is
+sensitive to a σ a few per cent low (P(χ²₂ > 25) = 3.7e-6, P(χ²₂ > (5·0.92)²) = 2.5e-5), and
+σ(3 s) from about 200 differences is that low often enough to hold clean fixes.
 
 Coarse coordinates (a receiver that writes 4 decimals of minutes rounds latitude to 0.19 m)
 add the variance of the difference of two rounding errors, uniform in ±q/2, to every σ:
