@@ -40,7 +40,8 @@ seconds of committed references the test runs with the configured σ (meant to b
 collects the references' differences at each horizon; then σ_H becomes 1.4826 × their median
 absolute value (robust: faults that slip into the calibration, up to a large minority of the
 time, barely move it, and only upwards), never below ``floor_frac`` of the configured σ,
-capped by (D5) (:func:`concave_cap`), and is frozen for good. Until then, with
+capped by (D5) (:func:`concave_cap`), never below a shorter horizon's (D9,
+:func:`monotone_floor`), and is frozen for good. Until then, with
 ``precal_s > 0``, a provisional σ from the differences collected over the first ``precal_s``,
 estimated again every :data:`PRECAL_EVERY_S` on all collected so far (T seconds of them):
 
@@ -69,8 +70,12 @@ For horizons of at least ``margin_min_h`` the calibrated σ carries its own unce
 
     σ_H ← σ_H·(1 + m/√n_H),   n_H = max(1, 2·(T − H)/H)              (D8)
 
-with m = ``margin`` and T = ``calibrate_s``; the shorter horizons, which have many samples
-and find the ramps in time, are left as they are.
+with m = ``margin`` and T = ``calibrate_s``. For Gaussian differences the median-absolute-
+deviation estimate has a standard error of about 1.166·σ/√n (its efficiency is 0.37), so
+m/1.166 is the margin in standard errors: m = 1.5 is 1.29 of them, a one-sided 10 % chance
+that σ_H is still low. The rover's default applies it from the shortest horizon on: a 5σ test is
+sensitive to a σ a few per cent low (P(χ²₂ > 25) = 3.7e-6, P(χ²₂ > (5·0.92)²) = 2.5e-5), and
+σ(3 s) from about 200 differences is that low often enough to hold clean fixes.
 
 Coarse coordinates (a receiver that writes 4 decimals of minutes rounds latitude to 0.19 m)
 add the variance of the difference of two rounding errors, uniform in ±q/2, to every σ:
@@ -253,7 +258,7 @@ class DriftTest:
                 est *= 1.0 + self.margin / math.sqrt(n)
             est = max(est, self.floor_frac * configured)
             out.append(min(configured, est) if provisional else est)
-        return concave_cap(self.horizons, out)
+        return monotone_floor(concave_cap(self.horizons, out))
 
     def _sorted_cal(self, j: int) -> list[float]:
         """Every difference collected at horizon ``j``, ascending."""
@@ -422,6 +427,26 @@ def concave_cap(horizons_s: Sequence[float], sigmas: Sequence[float]) -> tuple[f
     return tuple(out)
 
 
+def monotone_floor(sigmas: Sequence[float]) -> tuple[float, ...]:
+    """σ_H raised to the largest σ_h of any shorter horizon h (D9).
+
+    The same components' increment variance D(H) = E[(b(t) − b(t−H))²] does not fall as H
+    grows (a Gauss-Markov process: 2σ²(1 − e^(−H/τ)); white noise: constant; a random walk:
+    linear), so
+
+        σ_H ≥ σ_h  for H ≥ h                                        (D9)
+
+    and with (D5) σ_h ≤ σ_H ≤ σ_h·√(H/h). A long horizon has few independent differences in a
+    calibration (about 2·(T − H)/H: 4 at 100 s in 300 s), and their median can come out far
+    below a shorter horizon's, which has many: the test then flags clean fixes at that horizon
+    (``sim rover-harness``, dgps 1 Hz: σ(100 s) 0.39 m under σ(30 s) 0.52 m, a false hold).
+    Applied after (D5): a floor from capped values keeps every cap."""
+    out = list(sigmas)
+    for i in range(1, len(out)):
+        out[i] = max(out[i], out[i - 1])
+    return tuple(out)
+
+
 def calibrate(samples: Sequence[tuple[float, float, float]],
               horizons_s: Sequence[float]) -> tuple[float, ...]:
     """Per-axis σ of (D2) at each horizon from a clean recording, once per receiver.
@@ -443,4 +468,4 @@ def calibrate(samples: Sequence[tuple[float, float, float]],
             raise ValueError(f"no pair of samples {h} s apart to calibrate on")
         diffs.sort()
         out.append(1.4826 * diffs[len(diffs) // 2])
-    return concave_cap(horizons_s, out)
+    return monotone_floor(concave_cap(horizons_s, out))

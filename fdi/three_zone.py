@@ -334,37 +334,17 @@ class JumpTracker:
         over_limit: Sequence[bool],
     ) -> ReceiverState:
         """One epoch: update the fault state from the innovations of the fix's components."""
-        n, dims = self.n, self.dims
+        dims = self.dims
         b, vb = self.offset, self.offset_var
-        ready = len(self._seq) == n
-        jumped = False
-        jv = [0.0] * dims
-        var_j = [ri * (1.0 + 1.0 / n) for ri in r]
-        if ready:
-            s_old = self._seq[0][1]
-            for i in range(dims):
-                jv[i] = (nu[i] - b[i]) - math.fsum(x[i] for x, _ in self._seq) / n
-                var_j[i] += (math.sqrt(s[i]) - math.sqrt(s_old[i])) ** 2
-            jumped = _chi2(jv, var_j) > self._t2
+        ready, jv, var_j = self._increment(nu, s, r)
+        jumped = ready and _chi2(jv, var_j) > self._t2
         was_faulted = self.faulted
         if not was_faulted:
-            if (
-                jumped
-                and any(over_limit)
-                # in the direction of the innovation where it is over-limit ...
-                and all(jv[i] * nu[i] > 0.0 for i in range(dims) if over_limit[i])
-                # ... and explaining it: what is left is what the prediction's S allows
-                and _chi2([nu[i] - jv[i] for i in range(dims)],
-                          [s[i] + var_j[i] for i in range(dims)]) <= self._t2
-            ):
+            if jumped and self._explains(nu, s, jv, var_j, over_limit):
                 self.faulted = True
                 self.offset, self.offset_var = tuple(jv), tuple(var_j)
                 self.fault_onsets += 1
-        elif ready and (
-            (h := _chi2([jv[i] + b[i] for i in range(dims)],
-                        [var_j[i] + vb[i] for i in range(dims)])) <= self._t2
-            and h < _chi2(jv, var_j)
-        ):
+        elif ready and self._back_on_track(jv, var_j):
             # Back on its own pre-fault track: the fix is closer to the receiver's healthy
             # history (ν against the offset-corrected window) than to its faulted one (J).
             self._set_healthy()
@@ -379,13 +359,54 @@ class JumpTracker:
             self._seq.append(
                 (tuple(nu[i] - self.offset[i] for i in range(dims)), tuple(s[:dims]))
             )
+        axes = self._fault_axes(was_faulted)
+        return ReceiverState(self.faulted, returned, jumped, ready, axes)
+
+    def _increment(self, nu: Sequence[float], s: Sequence[float], r: Sequence[float]
+                   ) -> tuple[bool, list[float], list[float]]:
+        """(ready, J, σ_J²) per component: J = (ν_k − b) − mean_j (ν_j − b) over a full window
+        (0 until it is full), σ_J² = R (1 + 1/n) plus the growth of √S across the window."""
+        n, dims, b = self.n, self.dims, self.offset
+        ready = len(self._seq) == n
+        jv = [0.0] * dims
+        var_j = [ri * (1.0 + 1.0 / n) for ri in r]
+        if ready:
+            s_old = self._seq[0][1]
+            for i in range(dims):
+                jv[i] = (nu[i] - b[i]) - math.fsum(x[i] for x, _ in self._seq) / n
+                var_j[i] += (math.sqrt(s[i]) - math.sqrt(s_old[i])) ** 2
+        return ready, jv, var_j
+
+    def _explains(self, nu: Sequence[float], s: Sequence[float], jv: Sequence[float],
+                  var_j: Sequence[float], over_limit: Sequence[bool]) -> bool:
+        """A jump is a fault's onset: some component is over-limit, the jump is in the
+        direction of the innovation where it is, and what it leaves of the innovation is what
+        the prediction's S allows."""
+        dims = self.dims
+        return (
+            any(over_limit)
+            and all(jv[i] * nu[i] > 0.0 for i in range(dims) if over_limit[i])
+            and _chi2([nu[i] - jv[i] for i in range(dims)],
+                      [s[i] + var_j[i] for i in range(dims)]) <= self._t2
+        )
+
+    def _back_on_track(self, jv: Sequence[float], var_j: Sequence[float]) -> bool:
+        """The fix against the offset-corrected window passes, and better than against the
+        faulted one."""
+        b, vb, dims = self.offset, self.offset_var, self.dims
+        h = _chi2([jv[i] + b[i] for i in range(dims)], [var_j[i] + vb[i] for i in range(dims)])
+        return h <= self._t2 and h < _chi2(jv, var_j)
+
+    def _fault_axes(self, was_faulted: bool) -> tuple[bool, ...]:
+        """Per component: faulted, and its offset significant on its own (or it was)."""
+        dims = self.dims
         prev = self._axes if was_faulted else (False,) * dims
         axes = tuple(
             self.faulted and (prev[i] or self.offset[i] ** 2 >= self._t1_axis * self.offset_var[i])
             for i in range(dims)
         )
         self._axes = axes
-        return ReceiverState(self.faulted, returned, jumped, ready, axes)
+        return axes
 
 
 def _chi2(x: Sequence[float], var: Sequence[float]) -> float:

@@ -24,7 +24,6 @@ KNOWN: dict[tuple[str, str], tuple[int, int]] = {
     ("gyro_witness.py", "GyroWitness._compensate"): (24, 93),
     ("heading_ft.py", "FaultTolerantHeading._step_fir"): (27, 83),
     ("heading_ft.py", "FaultTolerantHeading._step_gyro"): (34, 72),
-    ("three_zone.py", "JumpTracker.update"): (29, 60),
 }
 
 

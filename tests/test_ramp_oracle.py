@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from firmware_host.devtools import ramp_oracle as rb
+from firmware_host.devtools import ramp_score as rs
 from firmware_host.rover import drift_bound as db
 from firmware_host.runtime.config import load_config
 
@@ -97,7 +98,7 @@ def test_the_gm_receiver_at_1_hz_cannot_have_every_slow_ramp_in_time() -> None:
 def test_harness_rows_put_the_oracle_beside_the_preset() -> None:
     """Each ramp the bullets ask for (>= 0.05 m/s) is counted once, on its side of the
     calibration and under its deadline; slower ramps and other kinds are not."""
-    gamma = np.zeros(70)
+    gamma = np.zeros(100)  # lags for 60 s of history and 30 s of ramp at 1 Hz
     gamma[0] = 0.01
 
     def get(model: str, seed: int, rate: float) -> rb.Receiver:
@@ -154,3 +155,72 @@ def test_a_recording_that_does_not_move_gives_no_bound() -> None:
     chain = [(float(k), 1.0, 2.0) for k in range(400)]
     with pytest.raises(ValueError, match="does not move"):
         db.bullet_bounds([chain])
+
+
+# ------------------------------------------------ the oracle scored as the harness scores
+
+
+def _white(rate_hz: float, s2: float = 0.01) -> np.ndarray:
+    gamma = np.zeros(round(100 * rate_hz) + 2)
+    gamma[0] = s2
+    return gamma
+
+
+@pytest.mark.parametrize("rate_hz", [1.0, 5.0])
+def test_each_epoch_s_test_on_white_increments_is_the_closed_form(rate_hz: float) -> None:
+    """(O1) on white increments of variance s²: the k-th faulty epoch's matched filter sums
+    k + 1 increments of dt, d_k = sqrt(k + 1)·dt / s for a 1 m/s ramp; K = T·rate + 1 epochs
+    (the first faulty epoch is already a full increment off)."""
+    t = rs.epoch_tests(_white(rate_hz), rate_hz, 10.0, 60.0)
+    dt = 1.0 / rate_hz
+    k = np.arange(len(t.y))
+    assert len(t.y) == round(10.0 * rate_hz) + 1
+    assert np.allclose(t.d_unit, np.sqrt(k + 1) * dt / 0.1)
+
+
+def test_the_harness_scored_oracle_against_the_single_test() -> None:
+    """One epoch (deadline 0): the single test not told the direction, within the draws' error.
+    No ramp: the false-alarm probability over K epochs, above α and at most K·α. A ramp:
+    at least the single test at the deadline (the union of the epochs' tests holds it, with
+    one increment more), and growing with the rate."""
+    gamma = _white(1.0)
+    one = rs.epoch_tests(gamma, 1.0, 0.0, 60.0)
+    for rate in (0.5, 0.8, 1.2):
+        d = rate * float(one.d_unit[-1])
+        assert rs.p_detect(one, rate) == pytest.approx(db.p_detect_2d(d, 0.001), abs=0.01)
+    t = rs.epoch_tests(gamma, 1.0, 10.0, 60.0)
+    k = len(t.y)
+    assert 0.001 < rs.p_detect(t, 0.0) <= k * 0.001 + 0.002
+    single = db.p_detect_2d(db.d_prime(gamma, 1.0, 0.1, 10.0, 60.0), 0.001)
+    ps = [rs.p_detect(t, r) for r in (0.05, 0.1, 0.2)]
+    assert ps[1] > single
+    assert ps == sorted(ps) and ps[-1] > 0.99
+
+
+def test_a_correlated_error_s_history_helps_the_oracle() -> None:
+    """A Gauss-Markov error whose increments are correlated: with 60 s of history the oracle
+    predicts the error's drift and finds more than with none."""
+    tau, sig, n = 20.0, 0.3, 200
+    phi_ = math.exp(-1.0 / tau)
+    # increments of an AR(1) process: γ(0) = 2σ²(1 − φ), γ(k) = −σ²(1 − φ)² φ^(k−1)
+    gamma = np.array([2 * sig**2 * (1 - phi_)] + [
+        -(sig**2) * (1 - phi_) ** 2 * phi_ ** (k - 1) for k in range(1, n)])
+    gamma[0] += 0.02**2  # white noise
+    with_h = rs.p_detect(rs.epoch_tests(gamma, 1.0, 10.0, 60.0), 0.1)
+    without = rs.p_detect(rs.epoch_tests(gamma, 1.0, 10.0, 0.0), 0.1)
+    assert with_h > without + 0.01, (with_h, without)
+
+
+def test_the_harness_prints_the_oracle_beside_the_preset(tmp_path: Path) -> None:
+    out = tmp_path / "h.json"
+    proc = subprocess.run(
+        [sys.executable, "-m", "firmware_host.cli", "sim", "rover-harness", "--seeds", "1",
+         "--models", "gm,multipath", "--rates", "1", "--duration", "600", "--oracle",
+         "--json", str(out)], capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert "oracle expects" in proc.stdout and "found / oracle" in proc.stdout
+    doc = json.loads(out.read_text())
+    assert doc["oracle"] and {r["model"] for r in doc["oracle"]} == {"gm"}  # Gaussian only
+    for r in doc["oracle"]:
+        assert 0 <= r["found_in_time"] <= r["ramps"]
+        assert 0.0 < r["oracle_expects"] <= r["ramps"]

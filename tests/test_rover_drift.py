@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fdi.drift import DriftTest, calibrate, concave_cap, sigma_at
+from fdi.drift import DriftTest, calibrate, concave_cap, monotone_floor, sigma_at
 from fdi.errors import ConfigError
 from fdi.level import HoldParams, LevelHold
 from fdi.rover import Decision, FixInput, RoverDetectorParams, RoverIsolator
@@ -427,6 +427,24 @@ def test_concave_cap_bounds_long_horizons_by_the_shorter_ones() -> None:
     assert capped[3] == pytest.approx(0.27 * math.sqrt(3.0))
     assert capped[4] == pytest.approx(capped[3] * math.sqrt(100.0 / 30.0))
     assert concave_cap(H, SIG) == SIG  # a consistent calibration is unchanged
+
+
+def test_a_long_horizon_is_never_below_a_shorter_one() -> None:
+    """(D9): σ_H >= σ_h for H >= h; a long horizon whose few differences came out low (dgps
+    1 Hz: σ(100 s) 0.39 m under σ(30 s) 0.52 m, a false hold) is raised to the shorter one's."""
+    assert monotone_floor((0.095, 0.165, 0.3, 0.52, 0.386)) == (0.095, 0.165, 0.3, 0.52, 0.52)
+    assert monotone_floor(SIG) == SIG  # a consistent calibration is unchanged
+    # In the calibration at start: a series whose 100 s differences are small against its
+    # 30 s ones (a 20 s oscillation that the 100 s pairs happen to straddle in phase).
+    dt = 1.0
+    t = np.arange(400) * dt
+    b = 0.5 * np.sin(2.0 * math.pi * t / 20.0 + 0.3)
+    test = DriftTest(H, (1.0,) * 5, 0.0, calibrate_s=300.0, floor_frac=0.01)
+    for k in range(400):
+        test.commit(k * dt, (float(b[k]), 0.0), (0.0, 0.0))
+    assert test.calibrated
+    assert list(test.sigmas) == sorted(test.sigmas)
+    assert test.sigmas[4] == test.sigmas[3]
 
 
 # ------------------------------------------------------------------ frozen receivers

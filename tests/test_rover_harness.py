@@ -439,7 +439,8 @@ def test_a_step_back_only_the_drift_test_flags_is_held_as_a_step(
                                                               alarms(after))
     monkeypatch.setattr(rover, "SLOW_MAX_MPS", math.inf)
     m, after = run()
-    assert m.clean_far_flagged > 20 and alarms(after) > 40, (m.clean_far_flagged,
+    # Without the rule (drift_cal_min_h 1 s, issue 42: 25 flagged, 28 alarms; 30 s: over 40).
+    assert m.clean_far_flagged > 20 and alarms(after) > 20, (m.clean_far_flagged,
                                                              alarms(after))
 
 

@@ -24,6 +24,10 @@ pessimistic) and is not offered.
 With ``--harness`` (a ``fdi-bridge sim rover-harness --json`` file), every ramp the bullets
 ask for in it is given its d' from its own receiver and rate, and the table puts the
 number the oracle could expect to find in time (Σ P_D) beside the number the preset found.
+The column "as the harness scores" is the oracle under the harness's own rules (a per-epoch
+false-alarm budget, the delay from the first faulty epoch, direction unknown, 60 s of
+history: :mod:`firmware_host.devtools.ramp_score`); ``fdi-bridge sim rover-harness --oracle``
+prints it beside the preset's runs directly.
 """
 
 from __future__ import annotations
@@ -49,55 +53,35 @@ from firmware_host.commands.checks import (
     seed_list,
 )
 from firmware_host.devtools.progress import Progress
-from firmware_host.devtools.rover_harness import REPORT_SEEDS, clean_drive, replay
+from firmware_host.devtools.ramp_score import (
+    HARNESS_HISTORY_S,
+    EpochTests,
+    epoch_tests,
+    p_detect,
+    standard_draws,
+)
+from firmware_host.devtools.rover_harness import (
+    BOUND_MODELS,
+    REPORT_SEEDS,
+    Receiver,
+    bullet_deadline,
+    receiver,
+)
 from firmware_host.devtools.rover_sim import RoverScenario
-from firmware_host.rover.calibration import doppler_free, estimate_lag
 from firmware_host.rover.drift_bound import (
     BULLETS,
     bounds_from_gamma,
     d_prime,
-    gamma_lags,
-    increment_acov,
     p_detect_2d,
     phi,
     z_alpha,
 )
 from firmware_host.runtime.config import load_config
 
-#: Error models with Gaussian errors (see the module doc for ``multipath``).
-BOUND_MODELS: tuple[str, ...] = ("gm", "dgps", "coarse")
-#: The clean drive of a receiver is seed + this (the harness's runs and its offline
-#: calibration use seed and seed + 100 000).
-BOUND_SEED_OFFSET = 500_000
-#: The drive's length: long enough for γ at lags up to H + 30 s.
-DRIVE_S = {1.0: 3600.0}
-DRIVE_S_DEFAULT = 1200.0
 #: Ramps that start this soon are before the online calibration (``drift_calibrate_s``).
 CALIBRATION_S = 300.0
 #: Where the generator's runs start (seconds of day).
 START_UTC_S = RoverScenario.start_utc_s
-
-
-@dataclass
-class Receiver:
-    """One generator receiver at one rate: γ of its Doppler-free increments."""
-
-    model: str
-    seed: int
-    rate_hz: float
-    gamma: np.ndarray
-    lag_s: float
-
-
-def receiver(cfg: Any, model: str, seed: int, rate_hz: float, history_s: float) -> Receiver:
-    """γ of the receiver ``seed`` of ``model`` at ``rate_hz``, from its clean drive."""
-    drive = clean_drive(model, seed + BOUND_SEED_OFFSET, seed, rate_hz,
-                        DRIVE_S.get(rate_hz, DRIVE_S_DEFAULT))
-    records = replay(cfg, drive)[0]
-    lag = estimate_lag([records])
-    lag_s = cfg.rover.detector.drift_lag_s if lag is None else lag.lag_s
-    return Receiver(model, seed, rate_hz, increment_acov(doppler_free(records, lag_s),
-                                                         gamma_lags(rate_hz, history_s)), lag_s)
 
 
 @dataclass
@@ -112,6 +96,7 @@ class Row:
     found: int = 0
     oracle: float = 0.0
     oracle_2d: float = 0.0
+    oracle_harness: float = 0.0  # scored as the harness scores (ramp_score)
     d: list[float] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
@@ -119,6 +104,7 @@ class Row:
                 "before_calibration": self.precal, "ramps": self.ramps,
                 "found_in_time": self.found, "oracle_at_most": self.oracle,
                 "oracle_2d_at_most": self.oracle_2d,
+                "oracle_as_scored": self.oracle_harness,
                 "d_min": min(self.d), "d_median": float(np.median(self.d))}
 
 
@@ -145,22 +131,34 @@ def load_harness(path: str) -> dict[str, Any]:
     return doc
 
 
-def harness_rows(doc: dict[str, Any], get: Any, alpha: float, history_s: float) -> list[Row]:
+def harness_rows(doc: dict[str, Any], get: Any, alpha: float, history_s: float,
+                 harness_history_s: float = HARNESS_HISTORY_S) -> list[Row]:
     """Every ramp the bullets ask for in a harness JSON ``doc``: the preset's result beside the
     oracle's expectation, per model, rate, bullet and side of the calibration. ``get(model,
-    seed, rate)`` gives the :class:`Receiver`."""
+    seed, rate)`` gives the :class:`Receiver` (its γ long enough for both histories). Three
+    oracles: one test at the deadline told the direction (``history_s``), the same not told it,
+    and the oracle scored as the harness scores (:mod:`firmware_host.devtools.ramp_score`, with
+    ``harness_history_s``)."""
     z = z_alpha(alpha)
     rows: dict[tuple[str, float, float, bool], Row] = {}
+    tests: dict[tuple[int, float], EpochTests] = {}
+    draws: dict[int, Any] = {}
     for run in doc["runs"]:
         if run["model"] not in BOUND_MODELS:
             continue
         rec: Receiver | None = None
         for e in run["events"]:
-            if e["kind"] != "ramp" or e["rate_mps"] < BULLETS[-1][0]:
+            deadline = bullet_deadline(e["rate_mps"]) if e["kind"] == "ramp" else None
+            if deadline is None:
                 continue
-            deadline = next(d for r, d in BULLETS if e["rate_mps"] >= r)
             rec = rec or get(run["model"], run["seed"], run["rate_hz"])
             d = d_prime(rec.gamma, run["rate_hz"], e["rate_mps"], deadline, history_s)
+            key_t = (id(rec), deadline)
+            if key_t not in tests:
+                tests[key_t] = epoch_tests(rec.gamma, run["rate_hz"], deadline,
+                                           harness_history_s)
+            et = tests[key_t]
+            zs = draws.setdefault(len(et.y), standard_draws(len(et.y)))
             t0 = e["start_s"] % 86400.0 - START_UTC_S  # seconds into the run
             key = (run["model"], run["rate_hz"], deadline, t0 < CALIBRATION_S)
             row = rows.setdefault(key, Row(*key))
@@ -168,6 +166,7 @@ def harness_rows(doc: dict[str, Any], get: Any, alpha: float, history_s: float) 
             row.found += e["delay_s"] is not None and e["delay_s"] <= deadline
             row.oracle += phi(d - z)
             row.oracle_2d += p_detect_2d(d, alpha)
+            row.oracle_harness += p_detect(et, e["rate_mps"], alpha, zs)
             row.d.append(d)
     return [rows[k] for k in sorted(rows)]
 
@@ -203,11 +202,13 @@ def edge_table(rows: Sequence[dict[str, Any]]) -> tables.Table:
 
 def harness_table(rows: Sequence[Row]) -> tables.Table:
     t = tables.Table(["model", "Hz", "bullet", "calibration", "ramps", "found in time",
-                      "oracle at most", "direction unknown", "d' min", "d' median"])
+                      "oracle at most", "direction unknown", "as the harness scores",
+                      "d' min", "d' median"])
     for row in rows:
         bullet = next(f"{r:g} m/s in {dl:g} s" for r, dl in BULLETS if dl == row.deadline_s)
         t.add(row.model, f"{row.rate_hz:g}", bullet, "before" if row.precal else "after",
               row.ramps, row.found, f"{row.oracle:.1f}", f"{row.oracle_2d:.1f}",
+              f"{row.oracle_harness:.1f}",
               f"{min(row.d):.2f}",
               f"{float(np.median(row.d)):.2f}")
     return t
@@ -247,7 +248,8 @@ def run(args: argparse.Namespace) -> int:
     def get(model: str, seed: int, rate_hz: float) -> Receiver:
         key = (model, 0 if model == "gm" else seed, rate_hz)  # gm: one receiver (all seeds)
         if key not in cache:
-            cache[key] = receiver(cfg, model, seed, rate_hz, args.history)
+            cache[key] = receiver(cfg, model, seed, rate_hz,
+                                  max(args.history, HARNESS_HISTORY_S))
         return cache[key]
 
     doc: dict[str, Any] = {"config": cfg.name, "alpha": args.alpha, "history_s": args.history}
@@ -270,7 +272,8 @@ def run(args: argparse.Namespace) -> int:
         doc["receivers"] = erows
     print(f"\n{len(cache)} receivers in {time.perf_counter() - t0:.1f} s (config {cfg.name}); "
           f"oracle: start, direction and error covariance known, one test at alpha "
-          f"{args.alpha:g}: an upper bound")
+          f"{args.alpha:g}: an upper bound; as the harness scores: every epoch tested at "
+          f"alpha {args.alpha:g}, direction unknown, {HARNESS_HISTORY_S:g} s of history")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(doc, f, indent=1)

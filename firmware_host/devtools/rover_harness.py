@@ -48,8 +48,21 @@ from firmware_host.commands.checks import (
     seed_list,
 )
 from firmware_host.devtools.progress import Progress
+from firmware_host.devtools.ramp_score import (
+    HARNESS_HISTORY_S,
+    EpochTests,
+    epoch_tests,
+    p_detect,
+    standard_draws,
+)
 from firmware_host.devtools.rover_sim import ERROR_MODELS, RoverScenario, generate
-from firmware_host.rover.calibration import calibrate_records, calibrated_detector
+from firmware_host.rover.calibration import (
+    calibrate_records,
+    calibrated_detector,
+    doppler_free,
+    estimate_lag,
+)
+from firmware_host.rover.drift_bound import gamma_lags, increment_acov
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 
@@ -275,16 +288,115 @@ def offline_calibrated(cfg: BridgeConfig, model: str, seed: int, rate_hz: float,
     return dataclasses.replace(cfg, rover=dataclasses.replace(cfg.rover, detector=det))
 
 
+# --------------------------------------------------------------------------- the oracle
+
+#: Error models with Gaussian errors, the ramp oracle's (``multipath``'s steps are not).
+BOUND_MODELS: tuple[str, ...] = ("gm", "dgps", "coarse")
+#: The clean drive a receiver's γ is measured on is seed + this (the runs use seed, the
+#: offline calibration seed + CALIBRATION_SEED_OFFSET).
+BOUND_SEED_OFFSET = 500_000
+#: The drive's length (s) per rate: long enough for γ at lags up to the history + 30 s.
+DRIVE_S = {1.0: 3600.0}
+DRIVE_S_DEFAULT = 1200.0
+
+
+@dataclass
+class Receiver:
+    """One generator receiver at one rate: γ of its Doppler-free increments."""
+
+    model: str
+    seed: int
+    rate_hz: float
+    gamma: Any  # numpy array, lags 0, 1, ...
+    lag_s: float
+
+
+def receiver(cfg: BridgeConfig, model: str, seed: int, rate_hz: float,
+             history_s: float) -> Receiver:
+    """γ of the receiver ``seed`` of ``model`` at ``rate_hz``, from a clean drive of its own
+    (another error realisation, path and Doppler noise), the Doppler's lag estimated there as
+    ``fdi-bridge calibrate`` does."""
+    drive = clean_drive(model, seed + BOUND_SEED_OFFSET, seed, rate_hz,
+                        DRIVE_S.get(rate_hz, DRIVE_S_DEFAULT))
+    records = replay(cfg, drive)[0]
+    lag = estimate_lag([records])
+    lag_s = cfg.rover.detector.drift_lag_s if lag is None else lag.lag_s
+    return Receiver(model, seed, rate_hz, increment_acov(doppler_free(records, lag_s),
+                                                         gamma_lags(rate_hz, history_s)), lag_s)
+
+
+def bullet_deadline(rate_mps: float) -> float | None:
+    """The bullet a ramp of ``rate_mps`` falls under: its deadline (s), None below both."""
+    if rate_mps >= 0.1:
+        return 10.0
+    if rate_mps >= 0.05:
+        return 30.0
+    return None
+
+
+def oracle_rows(cfg: BridgeConfig, runs: Sequence[RunMetrics], alpha: float = 0.001,
+                history_s: float = HARNESS_HISTORY_S,
+                get: Callable[[str, int, float], Receiver] | None = None
+                ) -> list[dict[str, Any]]:
+    """Per (model, rate, bullet deadline) of the Gaussian models: the ramps the bullets ask
+    for, those the preset found in time, and the number the oracle scored as the harness
+    scores (:mod:`firmware_host.devtools.ramp_score`) expects to find: Σ P_D over the same
+    ramps, each on its own receiver and rate. ``get(model, seed, rate)``: the receiver
+    (default :func:`receiver` on ``cfg``, the ``gm`` model's one receiver once)."""
+    cache: dict[tuple[str, int, float], Receiver] = {}
+
+    def own(model: str, seed: int, rate: float) -> Receiver:
+        key = (model, 0 if model == "gm" else seed, rate)
+        if key not in cache:
+            cache[key] = receiver(cfg, model, seed, rate, history_s)
+        return cache[key]
+
+    fetch = get or own
+    tests: dict[tuple[int, float], EpochTests] = {}
+    draws: dict[int, Any] = {}
+    rows: dict[tuple[str, float, float], dict[str, Any]] = {}
+    for run in runs:
+        if run.model not in BOUND_MODELS:
+            continue
+        for ev in run.events:
+            deadline = bullet_deadline(ev.rate_mps) if ev.kind == "ramp" else None
+            if deadline is None:
+                continue
+            rec = fetch(run.model, run.seed, run.rate_hz)
+            key = (id(rec), deadline)
+            if key not in tests:
+                tests[key] = epoch_tests(rec.gamma, run.rate_hz, deadline, history_s)
+            et = tests[key]
+            z = draws.setdefault(len(et.y), standard_draws(len(et.y)))
+            row = rows.setdefault((run.model, run.rate_hz, deadline), {
+                "model": run.model, "rate_hz": run.rate_hz, "deadline_s": deadline,
+                "ramps": 0, "found_in_time": 0, "oracle_expects": 0.0})
+            row["ramps"] += 1
+            row["found_in_time"] += bool(ramp_in_time(ev))
+            row["oracle_expects"] += p_detect(et, ev.rate_mps, alpha, z)
+    return [rows[k] for k in sorted(rows, key=lambda k: (
+        ERROR_MODELS.index(k[0]), k[1], k[2]))]
+
+
+def oracle_table(rows: Sequence[dict[str, Any]]) -> tables.Table:
+    """The preset's ramps found in time beside the harness-scored oracle's expectation."""
+    t = tables.Table(["model", "Hz", "bullet", "ramps", "found in time", "oracle expects",
+                      "found / oracle"])
+    for r in rows:
+        bullet = "0.1 m/s in 10 s" if r["deadline_s"] == 10.0 else "0.05 m/s in 30 s"
+        ratio = r["found_in_time"] / r["oracle_expects"] if r["oracle_expects"] else math.nan
+        t.add(r["model"], f"{r['rate_hz']:g}", bullet, r["ramps"], r["found_in_time"],
+              f"{r['oracle_expects']:.1f}", _f(ratio))
+    return t
+
+
 # --------------------------------------------------------------------------- the bullets
 
 
 def ramp_in_time(ev: EventResult) -> bool | None:
     """The issue's ramp bullet for one event (None: a ramp below 0.05 m/s, no requirement)."""
-    if ev.rate_mps >= 0.1:
-        limit = 10.0
-    elif ev.rate_mps >= 0.05:
-        limit = 30.0
-    else:
+    limit = bullet_deadline(ev.rate_mps)
+    if limit is None:
         return None
     return ev.delay_s is not None and ev.delay_s <= limit
 
@@ -434,6 +546,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "its own (as fdi-bridge calibrate): it starts from 1.5 x those "
                              "sigma instead of the wide drift_sigma_m, with the Doppler lag "
                              "measured there")
+    parser.add_argument("--oracle", action="store_true",
+                        help="also the ramp oracle scored as the harness scores (known start "
+                             "and error covariance, direction unknown, every epoch tested at "
+                             "0.1 %%, 60 s of history): the ramps it expects to find in time "
+                             "beside the preset's, per model (gm, dgps, coarse) and rate; one "
+                             "clean drive per receiver more")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -453,10 +571,13 @@ def run(args: argparse.Namespace) -> int:
             partial = True
     rows = summarise(runs)
     print(console_table(rows))
+    orows = oracle_rows(cfg, runs) if args.oracle and not partial else []
+    if orows:
+        print("\n" + oracle_table(orows).console())
     print(f"\n{len(runs)} runs in {time.perf_counter() - t0:.1f} s (config {cfg.name})"
           + (" -- interrupted: partial" if partial else ""))
     if args.json:
-        doc = {"config": cfg.name, "partial": partial, "rows": rows,
+        doc = {"config": cfg.name, "partial": partial, "rows": rows, "oracle": orows,
                "runs": [{**{k: v for k, v in r.__dict__.items() if k != "events"},
                          "events": [e.__dict__ for e in r.events]} for r in runs]}
         with open(args.json, "w", encoding="utf-8") as f:
