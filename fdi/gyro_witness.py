@@ -283,8 +283,6 @@ class WitnessParams:
     burst_ratio: float = 2.5
     spread_ratio: float = 1.6
     step_min_deg: float = 3.5  # the fast CUSUM confirms a level only this far off (0: any)
-    step_fast_sigmas: float = 4.0  # ... at once only this many sigmas off (0: any), ...
-    step_small_samples: int = 10  # ... else once this many samples since the change are a level
     warmup_samples: int = 100
     recover_gate_deg: float = 1.5
     recover_samples: int = 10
@@ -369,7 +367,7 @@ class GyroWitness:
         # compass, and whether the recovery also needs it to have stopped (_not_drifting)
         self._agree_long: deque[tuple[float, float]] = deque()
         self._recover_still = False
-        self._run: deque[tuple[int, float]] = deque(maxlen=max(10, p.step_small_samples))
+        self._run: deque[tuple[int, float]] = deque(maxlen=10)  # the last innovations
         self.nu_ref = 0.0
         self._suspect_k = 0
         self.confirmed_fast = False  # the last confirmation came from the fast CUSUM
@@ -770,40 +768,25 @@ class GyroWitness:
         burst that dwell on one side look like a small step to the fast CUSUM (3 deg bursts on
         a 0.5 deg compass: means of 2.4-4.0 deg over 4-6 samples); steps of interest are 5 deg
         or more. Such a level is left to the slow CUSUM (a real 3 deg step on a 0.5 deg
-        compass: 8-11 samples in the unit test, against 3 on the fast one).
-
-        A level above that but under ``step_fast_sigmas`` sigmas (issue 14, restated: steps
-        of 5 sigma or more within 5 samples, smaller ones within 10) waits for
-        ``step_small_samples`` samples since the change that are one level (the spread test
-        over all of them): at 1 deg compass noise a 3 deg burst's first six samples sat at
-        -3 to -4.4 deg, a 4 deg step's to the eye, and its next ones did not."""
-        p = self.p
-        if p.step_min_deg <= 0.0:
+        compass: 8-11 samples in the unit test, against 3 on the fast one)."""
+        if self.p.step_min_deg <= 0.0:
             return False
         r = self._change_run()
         if not r:
             return False
-        level = abs(sum(r) / len(r) - self.nu_ref)
-        if level < p.step_min_deg:
-            return True
-        if p.step_fast_sigmas <= 0.0 or level >= p.step_fast_sigmas * self.var.sigma:
-            return False
-        long = self._change_run(p.step_small_samples)
-        return len(long) < p.step_small_samples or not self._spread_ok(self.var.sigma, long)
+        return abs(sum(r) / len(r) - self.nu_ref) < self.p.step_min_deg
 
-    def _change_run(self, n: int = 6) -> list[float]:
+    def _change_run(self) -> list[float]:
         """The innovations since the change began (Page's estimate: the last step the
-        confirming CUSUM was 0), the newest ``n``: a step's first samples may straddle it."""
+        confirming CUSUM was 0), the newest 6: a step's first samples may straddle it."""
         k0 = self._zero_at[self._confirming_side()]
-        return [x for k, x in self._run if k > k0][-n:]
+        return [x for k, x in self._run if k > k0][-6:]
 
-    def _spread_ok(self, sigma: float, r: list[float] | None = None) -> bool:
-        """The innovations since the change began (Page's estimate; the newest 6, or ``r``)
-        are a level or a ramp, not a burst: about a line fitted to them without one sample
-        (the one whose removal leaves the least spread), their spread is within
-        ``spread_ratio`` sigmas."""
-        if r is None:
-            r = self._change_run()
+    def _spread_ok(self, sigma: float) -> bool:
+        """The innovations since the change began (Page's estimate; the newest 6) are a level
+        or a ramp, not a burst: about a line fitted to them without one sample (the one whose
+        removal leaves the least spread), their spread is within ``spread_ratio`` sigmas."""
+        r = self._change_run()
         if len(r) < 4:
             return True
         # without the sample whose removal leaves the least spread: an outlier at an end

@@ -137,13 +137,6 @@ class FtConfig:
         "ge": 0.0, "doc": "the fast CUSUM confirms a level only this far off the innovation's "
                           "mean (the smallest step of interest, less the noise; 0: any)",
         "unit": "deg"})
-    gyro_step_fast_sigmas: float = field(default=4.0, metadata={
-        "ge": 0.0, "unit": "σ", "doc": "a level this many σ off is confirmed by the fast CUSUM "
-        "at once (0: any); a smaller one ..."})
-    gyro_step_small_samples: int = field(default=10, metadata={
-        "ge": 4, "le": 60, "unit": "samples", "doc": "... once this many samples since the "
-        "change are one level (a noise burst's first samples on one side look like a small "
-        "step)"})
     gyro_warmup_samples: int = field(default=100, metadata={
         "ge": 0, "unit": "samples", "doc": "samples before the witness tests (its bias fit's "
                                            "warm-up)"})
