@@ -304,6 +304,8 @@ class WitnessParams:
     maneuver_sample_s: float = 0.1  # the rate's sampling interval (its error bound: half of it
     #                                 times each rate change); 0: the period, floored (old)
     maneuver_dead_deg: float = 0.5  # a manoeuvre's end leaves a change within this to the test
+    #                                 (times maneuver_deg / its bound where that is larger) ...
+    maneuver_dead_min_deg: float = 0.0  # ... and within this (one compass sample's noise)
     maneuver_into_bias: bool = True  # ... and what it takes goes into z too (the bias fit)
 
 
@@ -633,7 +635,11 @@ class GyroWitness:
         # the innovation's change across the manoeuvre (a level it had before, a ramp's or a
         # fault's, is not the manoeuvre's); within the dead band: left to the test
         d = nu - (self.nu_ref if self._nu_pre is None else self._nu_pre)
-        d = math.copysign(max(0.0, abs(d) - p.maneuver_dead_deg), d)
+        # the dead band shrinks as the sampling bound grows (a 77 deg/s turn's ~1 deg is
+        # sampling; a kick's is not), never below the compass's own sample noise
+        dead = max(p.maneuver_dead_min_deg,
+                   p.maneuver_dead_deg * min(1.0, p.maneuver_deg / self._man_bound))
+        d = math.copysign(max(0.0, abs(d) - dead), d)
         if abs(d) > self._man_bound:
             # beyond what the sampling can explain: not the manoeuvre's (a step, or a noise
             # burst's sample: its 3 deg once went in at a kick's end and was confirmed after)

@@ -195,10 +195,14 @@ class FtConfig:
     gyro_maneuver_dead_deg: float = field(default=0.5, metadata={
         "ge": 0.0, "unit": "deg", "doc": "a manoeuvre's end takes into the headings only the "
         "innovation's change beyond this (within it, a ramp's increment between two kicks, it "
-        "is left to the test); for the EKF's yaw (ArduSub heading = attitude)"})
+        "is left to the test) times gyro_maneuver_deg / its sampling bound where smaller; for "
+        "the EKF's yaw (ArduSub heading = attitude)"})
+    gyro_maneuver_dead_min_deg: float = field(default=0.0, metadata={
+        "ge": 0.0, "unit": "deg", "doc": "the dead band shrinks with gyro_maneuver_deg / the "
+        "manoeuvre's sampling bound (a fast turn's error is sampling), never below this"})
     gyro_maneuver_dead_raw_deg: float = field(default=1.5, metadata={
-        "ge": 0.0, "unit": "deg", "doc": "the same for a raw compass (ArduSub heading = "
-        "raw_compass: one sample's noise and the compass's lag are larger)"})
+        "ge": 0.0, "unit": "deg", "doc": "for a raw compass (ArduSub heading = raw_compass: one "
+        "sample's noise and the compass's lag are larger) both of the above are this"})
     gyro_maneuver_into_bias: bool = field(default=True, metadata={
         "doc": "what a manoeuvre's end takes goes into the bias fit's z too (one line)"})
     gyro_vote: bool = field(default=False, metadata={

@@ -27,7 +27,8 @@ class RovController:
         self.cfg = cfg
         ft_cfg = cfg.ft
         if cfg.ardusub.heading == "raw_compass":  # its per-sample noise and lag are larger
-            ft_cfg = replace(ft_cfg, gyro_maneuver_dead_deg=ft_cfg.gyro_maneuver_dead_raw_deg)
+            raw = ft_cfg.gyro_maneuver_dead_raw_deg
+            ft_cfg = replace(ft_cfg, gyro_maneuver_dead_deg=raw, gyro_maneuver_dead_min_deg=raw)
         self.heading = FaultTolerantHeading(cfg.detector, ft_cfg, enabled=ft)
         self.pid = HeadingPid(cfg.pid)
         self.setpoint_deg = cfg.setpoint_deg if setpoint_deg is None else setpoint_deg
