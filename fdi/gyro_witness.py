@@ -77,7 +77,9 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   ``maneuver_sample_s / 2`` x |r(k) - r(k-1)|: a rate step between two samples), so that a
   fast turn's sampling error (~1 deg at ArduSub's 77 deg/s) is not a fault; a change within
   the dead band, or beyond the bound (a step, a noise burst's sample), is left to the test.
-  The dead band is one sample's noise: the MANUAL limit cycle kicks the vehicle every ~2 s,
+  The dead band (times ``maneuver_deg`` / the bound where smaller: a large bound is a fast
+  turn, whose change is sampling; never below ``maneuver_dead_min_deg``, a raw compass's
+  sample noise) protects a fault's increments: the MANUAL limit cycle kicks the vehicle every ~2 s,
   and a correction of the innovation's whole level (not its change) took a 0.3 deg/s ramp
   into the dead reckoning kick after kick (never confirmed, 61 deg off); with a raw compass
   one noisy sample (1.4 deg) once went in and was then confirmed as a fault. What is taken is

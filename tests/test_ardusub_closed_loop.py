@@ -71,15 +71,16 @@ def test_a_30_deg_drift_is_confirmed_within_5_s(heading: str, seed: int) -> None
 
 @pytest.mark.parametrize("heading", HEADINGS)
 def test_after_a_drift_s_confirmation_the_heading_within_3_deg(heading: str) -> None:
-    """Seeds 1-10: attitude at most 3.2 deg (seed 4: the limit cycle's own 3.0 plus the
-    step's first period), raw_compass 2.9 deg."""
+    """Seeds 1-10: attitude at most 3.48 deg (seed 4: the limit cycle's own ~3 plus the
+    step's first period), raw_compass 2.92 deg; held-out seeds 31-50: 3.33 and 3.08."""
     r = _run(heading, "drift", SEEDS[0])
     assert r.err_settled_deg < BOUND_DEG, r
 
 
 @pytest.mark.parametrize("heading", HEADINGS)
 def test_a_0_3_deg_s_ramp_is_confirmed_within_10_s(heading: str) -> None:
-    """Seeds 1-10: attitude 7.4-9.0 s, raw_compass 7.6-10.4 s (at 0.3 deg/s, 2.2-3.1 deg)."""
+    """Seeds 1-10: attitude 6.8-8.8 s, raw_compass 7.6-10.4 s (at 0.3 deg/s, 2.0-3.1 deg);
+    held-out seeds 31-50: up to 9.8 and 10.4 s."""
     r = _run(heading, "ramp", SEEDS[0])
     assert r.first_confirm_s is not None and r.first_confirm_s < 10.0, r
 
@@ -88,8 +89,9 @@ def test_a_0_3_deg_s_ramp_is_confirmed_within_10_s(heading: str) -> None:
 @pytest.mark.parametrize("heading", HEADINGS)
 def test_the_fault_handling_adds_at_most_1_5_deg(heading: str, scenario: str) -> None:
     """Issue 14, restated: the settled error after the confirmation minus the same seed's
-    no-fault error. Seeds 1-10, worst: attitude drift 0.40, ramp 1.44, stuck 0.83, burst 0.36;
-    raw_compass 0.16, 0.78, 0.19, 0.56 deg."""
+    no-fault error. Seeds 1-10, worst: attitude drift 0.84, ramp 1.90 (seed 4), stuck 0.34,
+    burst 0.12; raw_compass 0.16, 0.78, 0.19, 0.56 deg (held-out 31-50: attitude ramp 1.68,
+    raw 1.48: a ramp found after ~8 s has moved the hold 2.4 deg by then)."""
     r, clean = _run(heading, scenario, SEEDS[0]), _run(heading, "clean", SEEDS[0])
     assert r.err_settled_deg - clean.err_settled_deg <= 1.5, (r, clean)
 
