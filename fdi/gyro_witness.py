@@ -44,7 +44,9 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   like a small step). Dismissed: the fast CUSUM
   back at 0 and the slow one under ``slow_h / 4``, or ``max_suspect_s`` elapsed.
 * Noise burst: the trimmed short scale of the innovation's first differences
-  (:class:`fdi.noise_scale.TrimmedScale`) above ``burst_ratio`` sigmas resets the CUSUMs,
+  (:class:`fdi.noise_scale.TrimmedScale`; it goes on across a manoeuvre: restarted at each,
+  it never filled between the MANUAL limit cycle's kicks, and 3 deg bursts on ATTITUDE's
+  yaw were confirmed as steps) above ``burst_ratio`` sigmas resets the CUSUMs,
   unless the last three innovations are one level beyond ``jump_sigmas`` sigmas and 3
   short-scale sigmas (same side, within 2.5 sigma of a difference of each other): a step,
   whose fast CUSUM is then rebuilt from those three (an earlier burst call may have reset it).
@@ -436,7 +438,7 @@ class GyroWitness:
             # carried by the gyro alone: nothing tested, fitted or corrected (module doc)
             if self.k >= p.warmup_samples:
                 self._delayed.append((self.t, self._y_unw - self._G, False, self.psi))
-            self.short.restart()
+            # the burst test's short scale goes on across it (module doc, "Noise burst")
             self._nu_prev = None
             return WitnessStep(self.psi, nu, 0.0, self.var.sigma, self.suspect, False, False,
                                False, False)
