@@ -86,7 +86,7 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   into the dead reckoning kick after kick (never confirmed, 61 deg off); with a raw compass
   one noisy sample (1.4 deg) once went in and was then confirmed as a fault. What is taken is
   undone with the loop's corrections at a confirmation, and goes into the bias fit's z too
-  (``maneuver_into_bias``: z stays one line through a turn).
+  (z stays one line through a turn).
   Not while a fault is suspected: the innovation then holds
   the suspected fault (on ArduSub's MANUAL dead band the hold kicks every ~2 s, each kick a
   manoeuvre, and their ends took a 30 deg step into the headings before it was confirmed).
@@ -306,11 +306,10 @@ class WitnessParams:
     maneuver_deg: float = 1.0  # a period whose lag + sampling bound exceeds this: a manoeuvre
     maneuver_settle: int = 2  # periods after a manoeuvre still carried by the gyro alone
     maneuver_sample_s: float = 0.1  # the rate's sampling interval (its error bound: half of it
-    #                                 times each rate change); 0: the period, floored (old)
+    #                                 times each rate change), s
     maneuver_dead_deg: float = 0.5  # a manoeuvre's end leaves a change within this to the test
     #                                 (times maneuver_deg / its bound where that is larger) ...
     maneuver_dead_min_deg: float = 0.0  # ... and within this (one compass sample's noise)
-    maneuver_into_bias: bool = True  # ... and what it takes goes into z too (the bias fit)
 
 
 @dataclass(frozen=True)
@@ -425,7 +424,9 @@ class GyroWitness:
         self.short.restart()
 
     def update(self, y_deg: float, dt: float, repeating: bool = False) -> WitnessStep:
-        """The compass reading of this period (after :meth:`propagate`)."""
+        """The compass reading of this period (after :meth:`propagate`): a manoeuvre is
+        carried by the gyro, the warm-up fits, a fault waits for the compass to agree again,
+        and otherwise the change test runs (module docstring, in that order)."""
         p = self.p
         if self.psi is None:
             self.psi = self.psi_t = y_deg
@@ -435,115 +436,124 @@ class GyroWitness:
         self._y_unw = self.psi + nu_o
         nu = _wrap180(y_deg - self.psi_t)
         if not self.fault and self._maneuvering(dt):
-            # carried by the gyro alone: nothing tested, fitted or corrected (module doc)
-            if self.k >= p.warmup_samples:
-                self._delayed.append((self.t, self._y_unw - self._G, False, self.psi))
-            # the burst test's short scale goes on across it (module doc, "Noise burst")
-            self._nu_prev = None
-            return WitnessStep(self.psi, nu, 0.0, self.var.sigma, self.suspect, False, False,
-                               False, False)
+            return self._carry(nu)
         if self._man_bound > 0.0 and not self.fault:
             nu_o, nu = self._maneuver_end(nu_o, nu)
         self._nu_pre = nu  # the last tested innovation before a manoeuvre
         if self.k < p.warmup_samples and self._warmup_step(nu_o, y_deg):
             return WitnessStep(y_deg, 0.0, 0.0, self.var.sigma, False, False, False, False,
                                False)
-        if self.k >= p.warmup_samples:  # the bias fit's delay line (trusted: set below)
-            self._delayed.append((self.t, self._y_unw - self._G, False, self.psi))
-            # the hinge test halfway up: the bias fit does not take the samples of its hinge
-            t_h = math.inf
-            if p.drift_glr > 0.0 and self.drift_stat >= 0.5 * p.drift_glr:
-                t_h = self.t - self._drift_lag * self._dt - p.fast_margin_s
-            while self._delayed and self._delayed[0][0] < self.t - p.bias_delay_s - 1e-9:
-                t_old, z_old, ok, psi_old = self._delayed.popleft()
-                if ok and not self.fault and t_old < t_h:
-                    self._fit(self._segment(psi_old), self._lam, t_old, z_old)
+        if self.k >= p.warmup_samples:
+            self._feed_bias_fit()
         self.short.push(nu)
-        sigma = self.var.sigma
-        confirmed = dismissed = recovered = burst = False
         self.k += 1
         if self.k <= p.warmup_samples:
-            self._correct(nu_o, nu, dt, self.k)
-            self._warm_end.append((nu_o, nu))
-            if self.k == p.warmup_samples:
-                self._end_warmup()
-            if self.k > 10:  # the warm-up's compass is the drift test's first baseline
-                self._drift_test(nu_o, sigma, False, True)
-            # sigma from the first differences while the loops converge (a transient of the
-            # heading or the bias does not inflate it; white noise: var(d nu) = 2 sigma^2)
-            if self._nu_prev is not None:
-                self.var.update((nu - self._nu_prev) / math.sqrt(2.0),
-                                alpha=max(self.var.alpha, 1.0 / self.k))
-            self._nu_prev = nu
-            return WitnessStep(self.psi, nu, 0.0, sigma, False, False, False, False, False)
+            return self._warmup_update(nu_o, nu, dt)
+        if self.fault:
+            return self._fault_update(nu_o, nu, repeating)
+        return self._test(nu_o, nu, y_deg, dt)
+
+    def _carry(self, nu: float) -> WitnessStep:
+        """A manoeuvre's period, carried by the gyro alone: nothing tested, fitted or
+        corrected (module docstring); the burst test's short scale goes on across it."""
+        assert self.psi is not None
+        if self.k >= self.p.warmup_samples:
+            self._delayed.append((self.t, self._y_unw - self._G, False, self.psi))
+        self._nu_prev = None
+        return WitnessStep(self.psi, nu, 0.0, self.var.sigma, self.suspect, False, False,
+                           False, False)
+
+    def _feed_bias_fit(self) -> None:
+        """This sample into the bias fit's delay line (trusted: set by :meth:`_correct`), and
+        the samples ``bias_delay_s`` old out of it into the fit, but for those of a fault and,
+        while the hinge test is halfway up, of its hinge."""
+        p = self.p
+        assert self.psi is not None
+        self._delayed.append((self.t, self._y_unw - self._G, False, self.psi))
+        t_h = math.inf
+        if p.drift_glr > 0.0 and self.drift_stat >= 0.5 * p.drift_glr:
+            t_h = self.t - self._drift_lag * self._dt - p.fast_margin_s
+        while self._delayed and self._delayed[0][0] < self.t - p.bias_delay_s - 1e-9:
+            t_old, z_old, ok, psi_old = self._delayed.popleft()
+            if ok and not self.fault and t_old < t_h:
+                self._fit(self._segment(psi_old), self._lam, t_old, z_old)
+
+    def _warmup_update(self, nu_o: float, nu: float, dt: float) -> WitnessStep:
+        """A warm-up sample: the loops and the fit converge, the drift test gets its first
+        baseline, sigma comes from the first differences."""
+        assert self.psi is not None
+        sigma = self.var.sigma
+        self._correct(nu_o, nu, dt, self.k)
+        self._warm_end.append((nu_o, nu))
+        if self.k == self.p.warmup_samples:
+            self._end_warmup()
+        if self.k > 10:  # the warm-up's compass is the drift test's first baseline
+            self._drift_test(nu_o, sigma, False, True)
+        # sigma from the first differences while the loops converge (a transient of the
+        # heading or the bias does not inflate it; white noise: var(d nu) = 2 sigma^2)
+        if self._nu_prev is not None:
+            self.var.update((nu - self._nu_prev) / math.sqrt(2.0),
+                            alpha=max(self.var.alpha, 1.0 / self.k))
+        self._nu_prev = nu
+        return WitnessStep(self.psi, nu, 0.0, sigma, False, False, False, False, False)
+
+    def _fault_update(self, nu_o: float, nu: float, repeating: bool) -> WitnessStep:
+        """During a fault: recovery once the compass agrees with the dead reckoning again and
+        is alive; else the step's offset compensation, where it applies."""
+        assert self.psi is not None
+        sigma = self.var.sigma
+        confirmed = False
+        recovered = self._recovery(nu_o, nu, sigma, repeating)
+        if not recovered and self._comp_ok:
+            confirmed = self._compensate(nu_o, nu, sigma)
+        elif recovered:
+            self._end_comp(keep_segment=True)
+        return WitnessStep(self.psi, nu, 0.0, sigma, self.suspect, confirmed, False,
+                           recovered, False)
+
+    def _recovery(self, nu_o: float, nu: float, sigma: float, repeating: bool) -> bool:
+        """Recovery (module docstring): ``recover_samples`` innovations within the gate with
+        the compass alive, their mean within the recovery's gate, and not drifting; then both
+        headings re-aligned to the compass. True if it recovered now."""
+        p = self.p
+        assert self.psi is not None
+        gate = max(p.recover_gate_deg, 3.0 * sigma)
+        if abs(nu_o) <= gate and not repeating:
+            self._agree.append((nu_o, nu))
+        else:
+            self._agree.clear()
+        if repeating:
+            self._agree_long.clear()
+        elif self._recover_still:
+            self._agree_long.append((self.t, max(-gate, min(gate, nu_o))))
+            while self._agree_long[0][0] < self.t - p.drift_recover_s - 1e-9:
+                self._agree_long.popleft()
+        n_ok = len(self._agree)
+        mean_o = sum(a for a, _ in self._agree) / n_ok if n_ok else 0.0
+        if (n_ok < p.recover_samples or abs(mean_o) > self._recover_mean
+                or not self._not_drifting()):
+            return False
+        self.fault = self.suspect = False
+        self.clear()
+        self._recover_mean = p.recover_gate_deg
+        # Back on the compass: re-align both headings to it (the dead reckoning's error, at
+        # most the gate), so that the test restarts from no offset.
+        self.psi += mean_o
+        self.psi_t += sum(b for _, b in self._agree) / n_ok
+        self._agree.clear()
+        self._agree_long.clear()
+        self._recover_still = False
+        return True
+
+    def _test(self, nu_o: float, nu: float, y_deg: float, dt: float) -> WitnessStep:
+        """The change test on the normalised innovation (module docstring): the CUSUMs, the
+        burst test, the hinge test, then the decision and, unless suspect, the loops."""
+        p = self.p
+        sigma = self.var.sigma
         x = (nu - self.nu_ref) / sigma
         s = max(-p.clip, min(p.clip, x))
-        if self.fault:
-            # Recovery: the compass agrees with the dead reckoning again, and is alive.
-            gate = max(p.recover_gate_deg, 3.0 * sigma)
-            if abs(nu_o) <= gate and not repeating:
-                self._agree.append((nu_o, nu))
-            else:
-                self._agree.clear()
-            if repeating:
-                self._agree_long.clear()
-            elif self._recover_still:
-                self._agree_long.append((self.t, max(-gate, min(gate, nu_o))))
-                while self._agree_long[0][0] < self.t - p.drift_recover_s - 1e-9:
-                    self._agree_long.popleft()
-            n_ok = len(self._agree)
-            mean_o = sum(a for a, _ in self._agree) / n_ok if n_ok else 0.0
-            if (n_ok >= p.recover_samples and abs(mean_o) <= self._recover_mean
-                    and self._not_drifting()):
-                self.fault = self.suspect = False
-                self.clear()
-                self._recover_mean = p.recover_gate_deg
-                # Back on the compass: re-align both headings to it (the dead reckoning's
-                # error, at most the gate), so that the test restarts from no offset.
-                self.psi += mean_o
-                self.psi_t += sum(b for _, b in self._agree) / n_ok
-                self._agree.clear()
-                self._agree_long.clear()
-                self._recover_still = False
-                recovered = True
-            if not recovered and self._comp_ok:
-                confirmed = self._compensate(nu_o, nu, sigma)
-            elif recovered:
-                self._end_comp(keep_segment=True)
-            return WitnessStep(self.psi, nu, 0.0, sigma, self.suspect, confirmed, False,
-                               recovered, False)
-        self.g_pos = max(0.0, self.g_pos + s - p.kappa)
-        self.g_neg = max(0.0, self.g_neg - s - p.kappa)
-        xs = max(-p.slow_clip, min(p.slow_clip, x))
-        self.gs_pos = max(0.0, self.gs_pos + xs - p.slow_kappa)
-        self.gs_neg = max(0.0, self.gs_neg - xs - p.slow_kappa)
-        self._x_last.append(x)
-        ss = self.short.sigma
-        if self.short.full and ss > p.burst_ratio * sigma:
-            burst = True  # the compass is noisy, not biased ...
-            # ... unless the last 3 innovations are one level beyond the jump test and 3
-            # short-scale (the burst's) sigmas, on the same side and within the noise of each
-            # other (2.5 sigma of a difference): a step after a chance run of large
-            # differences (a 10 deg step once waited 2 more samples; against sigma alone, 3 deg
-            # bursts that dwelt on one side confirmed; 4 short sigmas delayed 10 deg steps at
-            # 1 deg noise)
-            xs3 = self._x_last
-            lo = min(abs(v) for v in xs3) if len(xs3) == 3 else 0.0
-            a_step = (lo >= p.jump_sigmas and lo * sigma >= 3.0 * ss
-                      and (min(xs3) > 0.0 or max(xs3) < 0.0)
-                      and max(xs3) - min(xs3) <= 2.5 * math.sqrt(2.0))
-            if not a_step:
-                self.clear()
-            else:
-                # a step whose second sample a burst call reset (seed 409, drift:-10@23): the
-                # fast CUSUM as Page's would have it from these three
-                g3 = sum(min(abs(v), p.clip) - p.kappa for v in xs3)
-                if xs3[0] > 0.0 and g3 > self.g_pos:
-                    self.g_pos = g3
-                    self._zero_at[0] = self.k - 3
-                elif xs3[0] < 0.0 and g3 > self.g_neg:
-                    self.g_neg = g3
-                    self._zero_at[1] = self.k - 3
+        self._step_cusums(x, s)
+        burst = self._burst_test(sigma)
         fast = max(self.g_pos, self.g_neg)
         slow = max(self.gs_pos, self.gs_neg)
         level = max(fast / p.h, slow / p.slow_h)
@@ -554,59 +564,125 @@ class GyroWitness:
                 self._zero_at[i] = self.k
         drift_lag = self._drift_test(nu_o, sigma, burst or abs(x) >= p.jump_sigmas,
                                      fast > p.h_suspect)
-        conf_level = level
+        suspicious = (fast > p.h_suspect or slow > 0.5 * p.slow_h or abs(s) >= p.jump_sigmas
+                      or burst)
+        confirmed, dismissed = self._decide(fast, slow, suspicious, drift_lag, was, y_deg,
+                                            dt, sigma)
+        self.var.frozen = self.suspect
+        if not self.suspect:
+            self._track(nu_o, nu, dt, sigma)
+        assert self.psi is not None
+        return WitnessStep(self.psi, nu, level, sigma, self.suspect, confirmed, dismissed, False,
+                           burst)
+
+    def _step_cusums(self, x: float, s: float) -> None:
+        """Both two-sided CUSUMs (Page), the fast on ``s`` (clipped at ``clip``), the slow on
+        ``x`` clipped at ``slow_clip``."""
+        p = self.p
+        self.g_pos = max(0.0, self.g_pos + s - p.kappa)
+        self.g_neg = max(0.0, self.g_neg - s - p.kappa)
+        xs = max(-p.slow_clip, min(p.slow_clip, x))
+        self.gs_pos = max(0.0, self.gs_pos + xs - p.slow_kappa)
+        self.gs_neg = max(0.0, self.gs_neg - xs - p.slow_kappa)
+        self._x_last.append(x)
+
+    def _burst_test(self, sigma: float) -> bool:
+        """A noise burst (module docstring): the short scale above ``burst_ratio`` sigmas
+        resets the CUSUMs, unless the last 3 innovations are one level beyond the jump test
+        and 3 short-scale (the burst's) sigmas, on the same side and within the noise of each
+        other (2.5 sigma of a difference): a step after a chance run of large differences (a
+        10 deg step once waited 2 more samples; against sigma alone, 3 deg bursts that dwelt on
+        one side confirmed; 4 short sigmas delayed 10 deg steps at 1 deg noise)."""
+        p = self.p
+        ss = self.short.sigma
+        if not (self.short.full and ss > p.burst_ratio * sigma):
+            return False
+        xs3 = self._x_last
+        lo = min(abs(v) for v in xs3) if len(xs3) == 3 else 0.0
+        a_step = (lo >= p.jump_sigmas and lo * sigma >= 3.0 * ss
+                  and (min(xs3) > 0.0 or max(xs3) < 0.0)
+                  and max(xs3) - min(xs3) <= 2.5 * math.sqrt(2.0))
+        if not a_step:
+            self.clear()
+            return True
+        # a step whose second sample a burst call reset (seed 409, drift:-10@23): the fast
+        # CUSUM as Page's would have it from these three
+        g3 = sum(min(abs(v), p.clip) - p.kappa for v in xs3)
+        if xs3[0] > 0.0 and g3 > self.g_pos:
+            self.g_pos = g3
+            self._zero_at[0] = self.k - 3
+        elif xs3[0] < 0.0 and g3 > self.g_neg:
+            self.g_neg = g3
+            self._zero_at[1] = self.k - 3
+        return True
+
+    def _decide(self, fast: float, slow: float, suspicious: bool, drift_lag: int, was: bool,
+                y_deg: float, dt: float, sigma: float) -> tuple[bool, bool]:
+        """The decision, first rule that holds: (confirmed, dismissed).
+
+        1. a CUSUM at its level (a level too small for a step: the slow one's) and the run
+           since the change one level or ramp: confirmed, rolled back to Page's change time;
+        2. the hinge test: a slow drift, confirmed from its hinge;
+        3. a suspect older than ``max_suspect_s``: a steady offset the frozen loops cannot
+           follow (their own dead-reckoning drift), dismissed;
+        4. a CUSUM past its suspect level, a jump or a burst: suspect;
+        5. a suspect whose fast CUSUM is back at 0 and slow one under a quarter: dismissed."""
+        p = self.p
+        conf_level = max(fast / p.h, slow / p.slow_h)
         if fast / p.h >= 1.0 and self._too_small_for_a_step():
             conf_level = slow / p.slow_h  # a level too small for a step: the slow CUSUM judges
         if conf_level >= 1.0 and self._spread_ok(sigma):
-            confirmed = True
-            self.confirmed_fast = fast / p.h >= slow / p.slow_h
-            self.fault = True
-            self.suspect = True
-            self._agree.clear()
-            self._recover_still = False
-            self._rollback()
-            self._end_comp()
+            self._open_fault(fast / p.h >= slow / p.slow_h)
             self._comp_ok = p.comp_samples > 0 and self.confirmed_fast
-            if self.hinge is not None:
-                self.hinge.clear()
-        elif drift_lag:
-            # a slow drift (the hinge test): the change began drift_lag samples ago, sharply
-            confirmed = True
-            self.confirmed_fast = False
-            self.fault = self.suspect = True
-            self._agree.clear()
-            self._recover_still = False
-            self._rollback(self.k - drift_lag, fast=True)
-            self._end_comp()
+            return True, False
+        if drift_lag:
+            # the change began drift_lag samples ago, sharply
+            self._open_fault(False, self.k - drift_lag)
             # a slow drift is small when found (0.05 deg/s: ~1.8 deg): taken back only once
             # the compass is back nearer than half of that (else it was taken back at once)
+            assert self.psi is not None
             self._recover_mean = min(p.recover_gate_deg, 0.5 * abs(y_deg - self.psi))
-            if self.hinge is not None:
-                self.hinge.clear()
-        elif was and self.k - self._suspect_k > p.max_suspect_s / dt:
-            # A suspect that neither confirms nor fades within max_suspect_s is a steady offset
-            # that the frozen loops cannot follow (their own dead-reckoning drift): dismissed.
+            return True, False
+        if was and self.k - self._suspect_k > p.max_suspect_s / dt:
             self.suspect = False
-            dismissed = True
             self.clear()
-        elif (fast > p.h_suspect or slow > 0.5 * p.slow_h or abs(s) >= p.jump_sigmas
-              or burst):
+            return False, True
+        if suspicious:
             if not was:
                 self._suspect_k = self.k
             self.suspect = True
-        elif was and fast == 0.0 and slow <= 0.25 * p.slow_h:
+            return False, False
+        if was and fast == 0.0 and slow <= 0.25 * p.slow_h:
             self.suspect = False
-            dismissed = True
-        self.var.frozen = self.suspect
-        if not self.suspect:
-            self._correct(nu_o, nu, dt, 0)
-            self.var.update(nu - self.nu_ref)
-            d = max(-p.clip * sigma, min(p.clip * sigma, nu - self.nu_ref))
-            # a running mean at first (the offset is learned as fast as the data allow)
-            self._ref_n += 1
-            self.nu_ref += max(dt / p.ref_tau_s, 1.0 / (self._ref_n + 25)) * d
-        return WitnessStep(self.psi, nu, level, sigma, self.suspect, confirmed, dismissed, False,
-                           burst)
+            return False, True
+        return False, False
+
+    def _open_fault(self, fast: bool, k0: int | None = None) -> None:
+        """A confirmation: the fault state, the output loop's corrections since the change
+        undone (from ``k0``, sharply, for the hinge test), the compensation and the hinge
+        restarted."""
+        self.confirmed_fast = fast
+        self.fault = self.suspect = True
+        self._agree.clear()
+        self._recover_still = False
+        if k0 is None:
+            self._rollback()
+        else:
+            self._rollback(k0, fast=True)
+        self._end_comp()
+        if self.hinge is not None:
+            self.hinge.clear()
+
+    def _track(self, nu_o: float, nu: float, dt: float, sigma: float) -> None:
+        """Not suspect: the loops and the bias fit take the sample, sigma and the
+        innovation's slow mean follow it (a running mean at first: the offset is learned as
+        fast as the data allow)."""
+        p = self.p
+        self._correct(nu_o, nu, dt, 0)
+        self.var.update(nu - self.nu_ref)
+        d = max(-p.clip * sigma, min(p.clip * sigma, nu - self.nu_ref))
+        self._ref_n += 1
+        self.nu_ref += max(dt / p.ref_tau_s, 1.0 / (self._ref_n + 25)) * d
 
     def _end_warmup(self) -> None:
         """The warm-up's end: both headings aligned to the compass by the mean of its last
@@ -652,8 +728,7 @@ class GyroWitness:
         self.psi += d
         self.psi_t += d
         self._corr.append((self.k, d))  # undone with the loop's if a fault began before
-        if p.maneuver_into_bias:
-            self._G += d  # z = y - sum r dt goes on as one line: the bias fit sees no step
+        self._G += d  # z = y - sum r dt goes on as one line: the bias fit sees no step
         self._y_unw = self.psi + nu_o - d
         return nu_o - d, nu - d
 
@@ -665,8 +740,8 @@ class GyroWitness:
             return False
         dr = abs(self._r - self._r_prev) if self._r_prev is not None else 0.0
         # a rate step between two samples is integrated with an error of at most half the
-        # sampling interval times the step (``maneuver_sample_s``; 0: the period, as before)
-        per = 0.5 * p.maneuver_sample_s if p.maneuver_sample_s > 0.0 else dt
+        # sampling interval times the step (``maneuver_sample_s``)
+        per = 0.5 * p.maneuver_sample_s
         if p.maneuver_lag_s * abs(self._r) + dt * dr > p.maneuver_deg:
             if self._man_left == 0 and self._man_bound == 0.0:
                 self.maneuvers += 1
@@ -676,9 +751,7 @@ class GyroWitness:
             self._man_bound += per * dr
         if self._man_left > 0:
             self._man_left -= 1
-            # the bound is at least the threshold: the last period's lag is still unwinding
-            floor = p.maneuver_deg if p.maneuver_sample_s <= 0.0 else 1e-9
-            self._man_bound = max(self._man_bound, floor)
+            self._man_bound = max(self._man_bound, 1e-9)  # > 0: the end is handled
             return True
         return False
 
@@ -948,48 +1021,7 @@ class GyroWitness:
         p = self.p
         assert self.psi is not None
         if self.offset is None:
-            self._comp.append((self.t, nu_o, self._y_unw - self._G))
-            if len(self._comp) < p.comp_samples:
-                return False
-            t_first = self._comp[0][0]
-            pts = self._comp
-            for _ in range(2):  # the line, then again without the outliers (> 3 sigma)
-                n = len(pts)
-                mt = sum(q[0] for q in pts) / n
-                mx = sum(q[1] for q in pts) / n
-                stt = sum((q[0] - mt) ** 2 for q in pts)
-                slope = sum((q[0] - mt) * (q[1] - mx) for q in pts) / stt
-                res = [q[1] - mx - slope * (q[0] - mt) for q in pts]
-                sd = math.sqrt(sum(e * e for e in res) / (n - 2))
-                kept = [q for q, e in zip(pts, res, strict=True) if abs(e) <= 3.0 * sigma]
-                if len(kept) < max(4, len(pts) // 2):
-                    break
-                pts = kept
-            if abs(slope) <= p.comp_max_slope_dps and sd <= p.spread_ratio * sigma:
-                # The slope is the dead reckoning's drift: the bias estimate's error, which
-                # the bias fit knows to sigma / sqrt(info). The window's compass (z = y -
-                # sum r dt, a level: its own intercept) joins the fit as a segment, and the
-                # offset is the line at the window's start with the combined slope (the
-                # window's own slope alone has 2x the intercept's error there: 0.9 deg once
-                # at 1 deg noise, seed 6 drift:20@35 of the nonlinear plant); the segment
-                # then learns on from the compensated compass (_feed_segment).
-                b_old = self.bias
-                # the hinge's slope before the drift: the bias without the step's compass
-                b0, info0 = self._slope(self._S, self._Sp)
-                if p.comp_drift_bias_sd_dps > 0.0:  # known to no better than this
-                    s_h = max(sigma, p.drift_sigma_min_deg)
-                    info0 = min(info0, (s_h / p.comp_drift_bias_sd_dps) ** 2)
-                self._comp_prior = (-b0, info0)
-                self._Sf = [0.0, 0.0, 0.0, 0.0, 0.0]
-                for t_i, _, z_i in pts:
-                    self._fit(self._Sf, self._lam, t_i, z_i, update_bias=False)
-                self._combine()
-                self.offset = mx + (b_old - self.bias) * (t_first - mt)
-                if self._hinge_c is not None:
-                    self._hinge_c.clear()
-            else:
-                self._comp_ok = False  # not a level: dead reckoning for this fault
-            self._comp.clear()
+            self._learn_offset(nu_o, sigma)
             return False
         x = (nu_o - self.offset) / sigma
         xs_ = max(-p.slow_clip, min(p.slow_clip, x))
@@ -1021,6 +1053,55 @@ class GyroWitness:
         self.psi_t += a * c
         self._corr.append((self.k, a * c))
         return False
+
+    def _learn_offset(self, nu_o: float, sigma: float) -> None:
+        """The compensation's first ``comp_samples``: the innovation fitted with a line
+        (again without the samples beyond 3 sigma of it); a level gives the offset, with the
+        window's compass joining the bias fit as a segment; anything else ends the
+        compensation for this fault (:meth:`_compensate`)."""
+        p = self.p
+        self._comp.append((self.t, nu_o, self._y_unw - self._G))
+        if len(self._comp) < p.comp_samples:
+            return
+        t_first = self._comp[0][0]
+        pts = self._comp
+        for _ in range(2):  # the line, then again without the outliers (> 3 sigma)
+            n = len(pts)
+            mt = sum(q[0] for q in pts) / n
+            mx = sum(q[1] for q in pts) / n
+            stt = sum((q[0] - mt) ** 2 for q in pts)
+            slope = sum((q[0] - mt) * (q[1] - mx) for q in pts) / stt
+            res = [q[1] - mx - slope * (q[0] - mt) for q in pts]
+            sd = math.sqrt(sum(e * e for e in res) / (n - 2))
+            kept = [q for q, e in zip(pts, res, strict=True) if abs(e) <= 3.0 * sigma]
+            if len(kept) < max(4, len(pts) // 2):
+                break
+            pts = kept
+        if abs(slope) <= p.comp_max_slope_dps and sd <= p.spread_ratio * sigma:
+            # The slope is the dead reckoning's drift: the bias estimate's error, which
+            # the bias fit knows to sigma / sqrt(info). The window's compass (z = y -
+            # sum r dt, a level: its own intercept) joins the fit as a segment, and the
+            # offset is the line at the window's start with the combined slope (the
+            # window's own slope alone has 2x the intercept's error there: 0.9 deg once
+            # at 1 deg noise, seed 6 drift:20@35 of the nonlinear plant); the segment
+            # then learns on from the compensated compass (_feed_segment).
+            b_old = self.bias
+            # the hinge's slope before the drift: the bias without the step's compass
+            b0, info0 = self._slope(self._S, self._Sp)
+            if p.comp_drift_bias_sd_dps > 0.0:  # known to no better than this
+                s_h = max(sigma, p.drift_sigma_min_deg)
+                info0 = min(info0, (s_h / p.comp_drift_bias_sd_dps) ** 2)
+            self._comp_prior = (-b0, info0)
+            self._Sf = [0.0, 0.0, 0.0, 0.0, 0.0]
+            for t_i, _, z_i in pts:
+                self._fit(self._Sf, self._lam, t_i, z_i, update_bias=False)
+            self._combine()
+            self.offset = mx + (b_old - self.bias) * (t_first - mt)
+            if self._hinge_c is not None:
+                self._hinge_c.clear()
+        else:
+            self._comp_ok = False  # not a level: dead reckoning for this fault
+        self._comp.clear()
 
     def _feed_segment(self, z: float, doubtful: bool) -> None:
         """The compensated compass (``z = y - sum r dt``, its outliers clipped) into the bias

@@ -28,8 +28,8 @@ from collections import deque
 from dataclasses import dataclass, field, fields
 from typing import Literal
 
-from fdi.gyro_witness import GyroWitness, WitnessParams
-from fdi.lms_fir import DetectorConfig, DualCriterionDetector, wrap180
+from fdi.gyro_witness import GyroWitness, WitnessParams, WitnessStep
+from fdi.lms_fir import DetectorConfig, DetectorStep, DualCriterionDetector, wrap180
 
 Source = Literal["sensor", "fir", "compensated", "fused", "gyro", "none"]
 State = Literal["normal", "suspect", "fault_fir", "fault_comp", "fault_gyro"]
@@ -189,9 +189,9 @@ class FtConfig:
         "ge": 0, "le": 50, "doc": "periods after a manoeuvre still carried by the gyro",
         "unit": "periods"})
     gyro_maneuver_sample_s: float = field(default=0.1, metadata={
-        "ge": 0.0, "le": 1.0, "unit": "s", "doc": "the yaw rate's sampling interval: a manoeuvre's "
+        "gt": 0.0, "le": 1.0, "unit": "s", "doc": "the yaw rate's sampling interval: a manoeuvre's "
         "integration error is bounded by half of it times each rate change (ArduSub's ATTITUDE "
-        "at 10 Hz: 0.1; 0: the period, floored at gyro_maneuver_deg)"})
+        "at 10 Hz: 0.1)"})
     gyro_maneuver_dead_deg: float = field(default=0.5, metadata={
         "ge": 0.0, "unit": "deg", "doc": "a manoeuvre's end takes into the headings only the "
         "innovation's change beyond this (within it, a ramp's increment between two kicks, it "
@@ -203,8 +203,6 @@ class FtConfig:
     gyro_maneuver_dead_raw_deg: float = field(default=1.5, metadata={
         "ge": 0.0, "unit": "deg", "doc": "for a raw compass (ArduSub heading = raw_compass: one "
         "sample's noise and the compass's lag are larger) both of the above are this"})
-    gyro_maneuver_into_bias: bool = field(default=True, metadata={
-        "doc": "what a manoeuvre's end takes goes into the bias fit's z too (one line)"})
     gyro_vote: bool = field(default=False, metadata={
         "doc": "the FIR's third vote may blame the gyro (off: it sided with slow drifts)"})
     gyro_vote_gate_deg: float = field(default=1.0, metadata={
@@ -346,22 +344,36 @@ class FaultTolerantHeading:
         self._y_raw = heading_meas
         y_prev = self._y
         self._y += dy
-        d_live = det.predict_deg()
-        event = ""
-        # Stuck reading: a run of identical values, snapshot of the weights when it began.
-        if self.cfg.stuck_samples and abs(dy) <= self.cfg.stuck_eps_deg:
-            if self._run == 0:
-                if det.suspect_open and det.stored:
-                    self._snap = list(det.stored)
-                else:
-                    self._snap = list(det.fir.C_avg if det.fir.avg_alpha else det.fir.C)
-                self._run_start_y = y_prev
-                self._run_pred = 0.0
-            self._run += 1
-            self._run_pred += d_live
-        else:
-            self._run = 0
+        self._stuck_run(dy, y_prev, det.predict_deg())
         r = det.step(dy, flagged)
+        event = self._fir_transition(r, y_prev)
+        stuck = self.cfg.stuck_samples and self._run >= self.cfg.stuck_samples
+        if stuck and self.state in ("normal", "suspect"):
+            event = self._fir_stuck()
+        return self._decide(self._y, r.d_deg, r.e2, r.snr, r.V, event, flagged)
+
+    def _stuck_run(self, dy: float, y_prev: float, d_live: float) -> None:
+        """Stuck reading: a run of identical values, with a snapshot of the weights when it
+        began (the stored ones while a suspect is open) and the live FIR's prediction since."""
+        det = self.det
+        if not (self.cfg.stuck_samples and abs(dy) <= self.cfg.stuck_eps_deg):
+            self._run = 0
+            return
+        if self._run == 0:
+            if det.suspect_open and det.stored:
+                self._snap = list(det.stored)
+            else:
+                self._snap = list(det.fir.C_avg if det.fir.avg_alpha else det.fir.C)
+            self._run_start_y = y_prev
+            self._run_pred = 0.0
+        self._run += 1
+        self._run_pred += d_live
+
+    def _fir_transition(self, r: DetectorStep, y_prev: float) -> str:
+        """The FIR path's state after the detector's step: normal -> suspect (criterion 1),
+        suspect -> confirmed (criterion 2, or the level held) or dismissed, a fault's own
+        step; the event's name ("" for none)."""
+        det = self.det
         if self.state == "normal":
             # Substitution starts from a smoothed heading, not from one noisy reading:
             # hf(k) = hf(k-1) + d(k) + L (y(k) - hf(k-1) - d(k)).
@@ -369,39 +381,41 @@ class FaultTolerantHeading:
             if r.suspect and r.exceed:
                 self.state = "suspect"
                 self._psi = pred
-                event = "suspect"
                 self._level_run = 0
                 self._level_held()
-            else:
-                self._hf = pred + self.cfg.smooth_gain * (self._y - pred)
-        elif self.state == "suspect":
+                return "suspect"
+            self._hf = pred + self.cfg.smooth_gain * (self._y - pred)
+            return ""
+        if self.state == "suspect":
             self._psi += r.d_deg if det.stored is None else self._stored_pred_deg()
             if r.confirmed or self._level_held():
                 if not r.confirmed:
                     det.close_suspect()
                 self._confirm("sensor")
-                event = "confirmed"
-            elif r.dismissed:
+                return "confirmed"
+            if r.dismissed:
                 self.state = "normal"
                 self._hf = self._psi
-                event = "dismissed"
-        else:
-            self._psi += r.d_deg  # frozen detector = stored model
-            event = self._fault_step(r.exceed, r.e2)
-        stuck = self.cfg.stuck_samples and self._run >= self.cfg.stuck_samples
-        if stuck and self.state in ("normal", "suspect"):
-            if det.suspect_open:
-                det.dismiss()
-            det.force_store(self._snap)
-            det.fir.set_weights(self._snap)
-            det.freeze()
-            self._psi = self._run_start_y + self._run_pred
-            self.state = "fault_fir"
-            self.kind = "stuck"
-            self._offset = []
-            self._ok = 0
-            event = "stuck"
-        return self._decide(self._y, r.d_deg, r.e2, r.snr, r.V, event, flagged)
+                return "dismissed"
+            return ""
+        self._psi += r.d_deg  # frozen detector = stored model
+        return self._fault_step(r.exceed, r.e2)
+
+    def _fir_stuck(self) -> str:
+        """A stuck run long enough: the FIR frozen on the snapshot, the substitute its dead
+        reckoning from where the run began."""
+        det = self.det
+        if det.suspect_open:
+            det.dismiss()
+        det.force_store(self._snap)
+        det.fir.set_weights(self._snap)
+        det.freeze()
+        self._psi = self._run_start_y + self._run_pred
+        self.state = "fault_fir"
+        self.kind = "stuck"
+        self._offset = []
+        self._ok = 0
+        return "stuck"
 
     # ------------------------------------------------------------------ with a yaw gyro
 
@@ -409,24 +423,54 @@ class FaultTolerantHeading:
         self, u_prev: float, heading_meas: float | None, rate: float, dt: float
     ) -> HeadingDecision:
         """The gyro witness decides; the FIR keeps learning and gives the third vote."""
-        det, w, cfg = self.det, self.witness, self.cfg
+        det, w = self.det, self.witness
         det.push_command(u_prev)
-        if not self._gyro_mode:  # first rate, or back after a loss: restart the witness
-            self._gyro_mode = True
-            if self._gyro_stale and w.ready:
-                w.fault = w.suspect = False
-                w.clear()
-                w.var.frozen = False
-                w.psi = None
-                self.state, self.kind = "normal", ""
-                det.recover()
-            self._gyro_stale = False
+        if not self._gyro_mode:
+            self._enter_gyro()
         w.propagate(rate, dt)
         if heading_meas is None or not math.isfinite(heading_meas):
             r = det.step(None)
             self._y_raw = None
             w.short.restart()
             return self._decide_gyro(None, r.d_deg, 0.0, 0.0, 0.0, "")
+        dy = self._follow_compass(heading_meas)
+        d_stored = self._stored_pred_deg_from(self._vote_C) if self._vote_C else 0.0
+        r = det.step(dy)
+        if det.suspect_open and (w.suspect or w.fault):
+            det.dismiss()  # the FIR's own criterion is not the judge here
+        was_suspect = w.suspect
+        ws = w.update(heading_meas, dt, repeating=self._run > 0)
+        if ws.suspect and not was_suspect:  # open the vote: weights and sums from here
+            self._vote_C = list(det.fir.C_avg if det.fir.avg_alpha else det.fir.C)
+            self._vote = [sum(self._nu_o) / len(self._nu_o) if self._nu_o else 0.0, 0.0, 0.0]
+            d_stored = 0.0
+        if w.suspect and dy is not None:
+            self._vote[1] += (rate - w.bias) * dt
+            self._vote[2] += d_stored
+        if w.psi is not None:
+            self._nu_o.append(wrap180(heading_meas - w.psi))
+        if ws.confirmed and self.cfg.gyro_vote and w.confirmed_fast and self._vote_blames_gyro():
+            return self._gyro_blamed(heading_meas, r.d_deg, r.e2, r.snr, r.V)
+        event = self._gyro_event(ws, was_suspect)
+        return self._decide_gyro(self._y, r.d_deg, r.e2, ws.score, r.V, event)
+
+    def _enter_gyro(self) -> None:
+        """The first rate, or the rate back after a loss: restart the witness."""
+        w = self.witness
+        self._gyro_mode = True
+        if self._gyro_stale and w.ready:
+            w.fault = w.suspect = False
+            w.clear()
+            w.var.frozen = False
+            w.psi = None
+            self.state, self.kind = "normal", ""
+            self.det.recover()
+        self._gyro_stale = False
+
+    def _follow_compass(self, heading_meas: float) -> float | None:
+        """The unwrapped reading and the run of repeated ones; its change since the last
+        reading (None after a gap)."""
+        w, cfg = self.witness, self.cfg
         dy: float | None = None
         if self._y_raw is not None:
             dy = wrap180(heading_meas - self._y_raw)
@@ -439,44 +483,32 @@ class FaultTolerantHeading:
             self._run += 1
         else:
             self._run = 0
-        d_stored = self._stored_pred_deg_from(self._vote_C) if self._vote_C else 0.0
-        r = det.step(dy)
-        if det.suspect_open and (w.suspect or w.fault):
-            det.dismiss()  # the FIR's own criterion is not the judge here
-        was_suspect = w.suspect
-        ws = w.update(heading_meas, dt, repeating=self._run > 0)
-        event = ""
-        if ws.suspect and not was_suspect:  # open the vote: weights and sums from here
-            self._vote_C = list(det.fir.C_avg if det.fir.avg_alpha else det.fir.C)
-            self._vote = [sum(self._nu_o) / len(self._nu_o) if self._nu_o else 0.0, 0.0, 0.0]
-            d_stored = 0.0
-        if w.suspect and dy is not None:
-            self._vote[1] += (rate - w.bias) * dt
-            self._vote[2] += d_stored
-        if w.psi is not None:
-            self._nu_o.append(wrap180(heading_meas - w.psi))
+        return dy
+
+    def _gyro_event(self, ws: WitnessStep, was_suspect: bool) -> str:
+        """The state after the witness's step, first that holds: confirmed, stuck (a run of
+        repeated readings), recovered, dismissed, suspect; the event's name ("" for none)."""
+        w, cfg, det = self.witness, self.cfg, self.det
         if ws.confirmed:
-            if cfg.gyro_vote and w.confirmed_fast and self._vote_blames_gyro():
-                return self._gyro_blamed(heading_meas, r.d_deg, r.e2, r.snr, r.V)
             self.state, self.kind = "fault_gyro", "sensor"
             det.freeze()
-            event = "confirmed"
-        elif cfg.stuck_samples and self._run >= cfg.stuck_samples and not w.fault:
+            return "confirmed"
+        if cfg.stuck_samples and self._run >= cfg.stuck_samples and not w.fault:
             w.force_fault(self._run)
             self.state, self.kind = "fault_gyro", "stuck"
             det.freeze()
-            event = "stuck"
-        elif ws.recovered:
+            return "stuck"
+        if ws.recovered:
             self.state, self.kind = "normal", ""
             det.recover()
-            event = "recovered"
-        elif ws.dismissed:
+            return "recovered"
+        if ws.dismissed:
             self.state = "normal"
-            event = "dismissed"
-        elif ws.suspect and not was_suspect:
+            return "dismissed"
+        if ws.suspect and not was_suspect:
             self.state = "suspect"
-            event = "suspect"
-        return self._decide_gyro(self._y, r.d_deg, r.e2, ws.score, r.V, event)
+            return "suspect"
+        return ""
 
     def _stored_pred_deg_from(self, C: list[float]) -> float:
         return self.det.fir.predict(C) * self.det.cfg.y_scale
