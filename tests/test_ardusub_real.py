@@ -65,7 +65,11 @@ def test_real_ardusub_captures_confirm_nothing(corpus: Path, tmp_path: Path, nam
     w = summary["witness"]
     if name == "att":
         assert w["warmup_restarts"] == 1  # the EKF's yaw alignment
-        assert abs(w["bias_dps"]) < 0.01  # ATTITUDE's rate is the EKF's, bias-corrected
+        # ATTITUDE's rate is the EKF's, bias-corrected: att-yaw.csv's own yaw against its
+        # rate integrated from 8 s on gives 0.0001 deg/s; from 20 s on 0.010-0.011, the 77 deg/s
+        # turn's sampling, which the witness's fit sees too (0.0104 by the trapezoid rule,
+        # 0.0095 by the period's mean)
+        assert abs(w["bias_dps"]) < 0.015
     assert w["maneuvers"] >= 1  # the first 160 deg turn at 77 deg/s
 
 

@@ -30,8 +30,10 @@ FDI judges; with ``raw_compass`` in the magnetometer, so the EKF's yaw takes it 
 
 ``fdi-bridge sim ardusub-harness [--seeds 1-10] [--duration 300] [--headings attitude,raw_compass]
 [--scenarios clean,drift,ramp,stuck,burst] [--json OUT]`` prints per heading source and scenario
-the worst seed of each measure, and for a fault the error its handling *adds* to the same
-seed's clean run (issue 14: at most 1.5 deg; clean runs are made first when not asked for).
+the worst seed of each measure, for a fault the error its handling *adds* to the same
+seed's clean run (issue 14: at most 1.5 deg; clean runs are made first when not asked for),
+and the substitute's own error: how far the heading steered on while substituting was from
+the true heading (settled turns).
 """
 
 from __future__ import annotations
@@ -217,6 +219,7 @@ class RunResult:
     #                          from the onset if none; not after a hand-back to the pilot)
     err_before_deg: float  # the same before the fault's onset (clean: = err_settled_deg)
     handbacks: int
+    sub_err_deg: float  # the worst |substitute - true heading| on settled turns while it steers
     steps: int
 
 
@@ -257,16 +260,21 @@ def run_one(heading: str, scenario: str, seed: int, duration_s: float = 300.0,
         after = [e for t, e in errs if t >= since]
         before = [e for t, e in errs if t < onset]
     false = sum(1 for t in confirms if onset is None or t < onset)
+    subs = [abs(_err(r["heading_used"], h)) for t, h, r in zip(ts, loop.true, recs, strict=True)
+            if settled(t) and r["ardusub"] == "steer" and r["source"] in ("gyro", "fir")
+            and r["heading_used"] is not None]
     return RunResult(heading, scenario, seed, len(confirms), false,
                      None if first is None or onset is None else round(first - onset, 2),
                      round(max(after, default=0.0), 3), round(max(before, default=0.0), 3),
-                     int(summary.get("handbacks", 0)), len(recs))
+                     int(summary.get("handbacks", 0)), round(max(subs, default=0.0), 3),
+                     len(recs))
 
 
 def worst(results: Sequence[RunResult]) -> dict[str, Any]:
     """The worst seed of each measure over ``results`` (one heading and scenario)."""
     w_err = max(results, key=lambda r: r.err_settled_deg)
     w_conf = max(results, key=lambda r: r.confirmations)
+    w_sub = max(results, key=lambda r: r.sub_err_deg)
     delays = [r for r in results if r.first_confirm_s is not None]
     w_delay = max(delays, key=lambda r: r.first_confirm_s or 0.0) if delays else None
     return {
@@ -279,6 +287,7 @@ def worst(results: Sequence[RunResult]) -> dict[str, Any]:
         "worst_err_deg": w_err.err_settled_deg, "worst_err_seed": w_err.seed,
         "worst_err_before_deg": max(r.err_before_deg for r in results),
         "handbacks": sum(r.handbacks for r in results),
+        "worst_sub_deg": w_sub.sub_err_deg, "worst_sub_seed": w_sub.seed,
     }
 
 
@@ -313,7 +322,8 @@ def run(args: argparse.Namespace) -> int:
     scenarios = ["clean", *[s for s in args.scenarios if s != "clean"]] if faulty else list(
         args.scenarios)
     print("heading      scenario  confirmed  false  max conf (seed)  worst delay s (seed)  "
-          "worst err deg (seed)  before onset  added deg (seed)  handbacks")
+          "worst err deg (seed)  before onset  added deg (seed)  handbacks  "
+          "substitute err deg (seed)")
     for heading in args.headings:
         clean: dict[int, float] = {}
         for scenario in scenarios:
@@ -337,7 +347,8 @@ def run(args: argparse.Namespace) -> int:
                   f"{w['false_runs']:3d}/{w['runs']:<3d}"
                   f"{w['max_confirmations']:6d} ({w['max_confirmations_seed']})      "
                   f"{delay:20} {w['worst_err_deg']:8.2f} ({w['worst_err_seed']})        "
-                  f"{w['worst_err_before_deg']:6.2f}  {add:16}  {w['handbacks']:6d}",
+                  f"{w['worst_err_before_deg']:6.2f}  {add:16}  {w['handbacks']:6d}     "
+                  f"{w['worst_sub_deg']:6.2f} ({w['worst_sub_seed']})",
                   flush=True)
     print(f"\n{len(runs)} runs of {args.duration:g} s in {time.perf_counter() - t0:.1f} s")
     if args.json:
