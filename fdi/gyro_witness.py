@@ -90,6 +90,11 @@ drift is the error of the gyro bias estimate. Per period (``dt`` s; degrees, deg
   Not while a fault is suspected: the innovation then holds
   the suspected fault (on ArduSub's MANUAL dead band the hold kicks every ~2 s, each kick a
   manoeuvre, and their ends took a 30 deg step into the headings before it was confirmed).
+  Nor during a fault, but for a step's offset compensation once its offset is known: the
+  compass minus the offset steers then as a healthy compass does, and a 57-77 deg/s turn's
+  ~0.8 deg of sampling error, left in the compensated innovation, was taken by the
+  compensation's slow CUSUM for a drift of the compass and ended it (ArduSub, 30 deg steps:
+  4 of 10 compensations ended, each handed back to the pilot 120 s later).
 * Warm-up's end: both headings aligned to the compass by the mean of its last 10
   innovations when beyond 3 sigma of that mean (the loops converge as a running mean, so
   a late turn's integration error was still in them and the test began on it).
@@ -435,9 +440,16 @@ class GyroWitness:
         nu_o = _wrap180(y_deg - self.psi)
         self._y_unw = self.psi + nu_o
         nu = _wrap180(y_deg - self.psi_t)
-        if not self.fault and self._maneuvering(dt):
+        # a step's compensation steers on the compass minus its offset as on a healthy
+        # compass, so a manoeuvre is carried and its end taken in as then: a 57-77 deg/s
+        # turn's sampling left ~0.8 deg in the compensated innovation, which its slow CUSUM
+        # took for a drift of the compass, ending the compensation
+        carried = not self.fault or self.offset is not None
+        if not carried:
+            self._man_bound, self._man_left = 0.0, 0
+        elif self._maneuvering(dt):
             return self._carry(nu)
-        if self._man_bound > 0.0 and not self.fault:
+        if self._man_bound > 0.0:
             nu_o, nu = self._maneuver_end(nu_o, nu)
         self._nu_pre = nu  # the last tested innovation before a manoeuvre
         if self.k < p.warmup_samples and self._warmup_step(nu_o, y_deg):
@@ -706,7 +718,7 @@ class GyroWitness:
         the dead band) into both headings; the innovations (output, test) after it."""
         p = self.p
         assert self.psi is not None
-        if self.suspect:
+        if self.suspect and self.offset is None:
             # the innovation holds the suspected fault, which the correction would take into
             # the headings (a limit cycle's manoeuvres every few seconds absorbed a 30 deg
             # step in 5 s)
