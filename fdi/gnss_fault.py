@@ -150,9 +150,9 @@ class GnssFaultMonitor:
         ``nu0``, ``s0``: the position innovation and its 3×3 covariance; ``a``: the receiver
         minus the uncorrected INS (:meth:`jump_statistic`), ``r`` the fix's noise variances,
         ``var_inc`` (per component) ``R_i`` plus the INS's increment variance over the window.
-        ``beyond_model``: the filter's estimate of the receiver's correlated error left its own
-        model (:meth:`fdi.insgnss.InsGnssFilter._wander_beyond_model`, a slow walk): an onset
-        whatever the step test says.
+        ``beyond_model``: the receiver walked away from its own model (the walk test of
+        :meth:`fdi.insgnss.InsGnssFilter._walk_step`, with the receiver's correlated error
+        modelled): an onset whatever the step test says.
         """
         onset = beyond_model
         can_coast = bool(np.all(np.diag(s0) - r <= self.params.max_prior_ratio * r))

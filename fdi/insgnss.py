@@ -1,5 +1,5 @@
 """Loosely coupled INS/GNSS: strapdown mechanisation and a 15-state error-state Kalman filter
-(18 with the receiver's correlated error, (G1)-(G4)) with the three-zone robust gate (Cai &
+(18 with the receiver's correlated error, (G1)-(G6)) with the three-zone robust gate (Cai &
 Shao) on the GNSS innovations.
 
 Frames and units
@@ -59,11 +59,21 @@ shaping filter of a correlated measurement error, e.g. Gelb, *Applied Optimal Es
 ``gnss_gm_sigma_up_m`` up; τ ``gnss_gm_tau_s``), its estimate decaying as ``ĝ e^(−Δt/τ)``;
 (G2) ``z = p + g + v``: a position row of ``H`` selects δp_i and g_i, ``R`` (``gnss_sigma_*``)
 is the white rest ``v``;
-(G3) a fault's onset also when ``Σ ĝ_i²/σ_gi² > χ²₃(1 − α_on)``: ``ĝ`` left its own model (a
-slow walk that ``g`` would follow, the INS absorbing part of it through ``P_pg``); ``ĝ`` then
-returns to its prior, the fault's bias holds the receiver's error;
+(G3) a fault's onset also when the receiver walks away from its own model (a walk at zero
+speed that ``g`` would follow and the INS absorb through ``P_pg``): with the model right the
+position innovations are white, ``u_i = ν_i/√S_ii ~ N(0, 1)``, and a walk shifts their mean;
+Page's CUSUM per axis and side, ``C⁺_i = max(0, C⁺_i + u_i − k)``,
+``C⁻_i = max(0, C⁻_i − u_i − k)`` (``k`` ``walk_k_sigma``), opens the fault above ``h``
+(``walk_h_sigma``); the run's start (the epoch after the CUSUM was last 0) dates the walk;
 (G4) the filter starts at a fix, ``p̂₀ = z₀``, ``ĝ₀ = 0``: ``δp₀ = −g₀ − v₀``, so
-``P_pp = R + σ_g²``, ``P_pg = −σ_g²`` (:meth:`InsGnssFilter._start_at_fix`).
+``P_pp = R + σ_g²``, ``P_pg = −σ_g²`` (:meth:`InsGnssFilter._start_at_fix`);
+(G5) at a walk's onset the fixes taken since its start (at most ``rollback_max_s``) are taken
+back out: ``p̂ −= Σ δp̂_k``, ``ĝ −= Σ δĝ_k`` (the position and wander corrections of those
+updates), ``P_pp`` back to at least its prior before the first of them; the INS then coasts
+from where it was before the walk (:meth:`InsGnssFilter._rollback`);
+(G6) while a fault is believed the fix is ``z = p + b + v``: the fault's bias holds the
+receiver's whole error, ``g`` is only predicted (``ĝ`` decays, ``P_gg`` grows back to ``σ_g²``),
+so that a walk goes into ``b`` and not, through ``g`` and ``P_pg``, into the position.
 
 Strategy ``fault_state`` (ours; :mod:`fdi.gnss_fault`): the gates only down-weight, and a
 :class:`~fdi.gnss_fault.GnssFaultMonitor` decides per epoch between a healthy receiver and a
@@ -72,7 +82,8 @@ walk) beside the 15 states, with the blocks ``P_xb`` and ``P_bb``: position rows
 ``H = [I 0 0 0 0 | I]`` (``z = p + b + v``), velocity rows as usual; ``b`` is opened with
 ``P_bb = σ_b0² I`` at the onset (the jump goes into ``b``, the INS coasts), reopened when the
 fault changes level, and marginalised out (its rows and columns dropped) when the receiver is
-healthy again. :meth:`InsGnssFilter.coast` is the reference the fault's error is bounded by.
+healthy again (with the receiver modelled, (G6): the position rows select ``δp`` and ``b``
+only). :meth:`InsGnssFilter.coast` is the reference the fault's error is bounded by.
 
 IMU rate: the rectangular rule integrates sampled rates, so it can only follow motion well
 below the sample rate. A rover's or small aircraft's manoeuvres (turns, bank changes) have
@@ -85,6 +96,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -92,7 +104,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from fdi.chi2 import chi2_ppf
 from fdi.errors import EstimatorError
 from fdi.gnss_fault import GnssFaultMonitor, Verdict
 from fdi.insgnss_params import (  # re-exported: the parameters live without numpy
@@ -473,9 +484,12 @@ class InsGnssFilter:
         self.gm_tau = params.gnss_gm_tau_s
         self.n = N_STATES + (3 if self.gm_sigma > 0.0 else 0)
         self.gnss_wander: FloatArray = np.zeros(self.n - N_STATES)  # ĝ, m (E, N, U)
-        self._r_white = np.array([params.gnss_sigma_h_m, params.gnss_sigma_h_m,
-                                  params.gnss_sigma_v_m]) ** 2
-        self._t_wander = chi2_ppf(1.0 - params.fault_state.alpha_onset, 3)  # (G3)
+        # (G3) the walk test's CUSUMs (rows C⁺, C⁻; columns E, N, U) and when each run
+        # started; (G5) the healthy updates' corrections (t, δp̂, δĝ, P⁻_pp diagonal)
+        self._walk_c: FloatArray = np.zeros((2, 3))
+        self._walk_t0: FloatArray = np.full((2, 3), self.t_s)
+        self._fix_log: deque[tuple[float, FloatArray, FloatArray, FloatArray]] = deque()
+        self.rollbacks = 0  # (G5) walks taken back out
 
     def _start_at_fix(self) -> None:
         """(G4) The filter starts at a fix, ``p̂₀ = z₀``, ``ĝ₀ = 0``: its position error is the
@@ -674,10 +688,24 @@ class InsGnssFilter:
         if keep:
             y = np.array([decisions[j].value - zhat[j] for j in keep])  # ν' with the gate's value
             Rm = np.diag([decisions[j].variance for j in keep])
+            p_prior, g_prior = np.array(self.nav.p), self.gnss_wander.copy()
             self._correct(P, H[keep], y, Rm)
+            self._log_fix(float(t_s), p_prior, g_prior, np.diag(P)[:3].copy())
         else:
             self.y, self.S = np.zeros(0), np.zeros((0, 0))
         return EpochReport(float(t_s), decisions, verdict)
+
+    def _log_fix(self, t_s: float, p_prior: FloatArray, g_prior: FloatArray,
+                 ppp_prior: FloatArray) -> None:
+        """(G5) Keep what this healthy update did to the position and the receiver's error
+        (and ``P⁻_pp``) for ``rollback_max_s``, with the receiver modelled."""
+        window = self.params.fault_state.rollback_max_s
+        if self.n == N_STATES or window <= 0.0:
+            return
+        log = self._fix_log
+        log.append((t_s, np.array(self.nav.p) - p_prior, self.gnss_wander - g_prior, ppp_prior))
+        while log and log[0][0] < t_s - window:
+            log.popleft()
 
     def _gate(self, z: list[float], nu: FloatArray, s_diag: FloatArray, r: list[float],
               rows: list[int]) -> tuple[GateDecision, ...]:
@@ -821,20 +849,24 @@ class InsGnssFilter:
             # the INS's own increment over the window: velocity error over T plus the white
             # accelerometer noise, P_vv T² + q_a T³/3, with T the window's length
             var_inc = rv + gm_inc + np.diag(self.P)[3:6] * t_w**2 + self._q[3:6] * t_w**3 / 3.0
-            beyond = self._wander_beyond_model()
-            verdict = mon.healthy_epoch(nu0, s0, a, rv + gm, var_inc, beyond_model=beyond)
+            walk = self._walk_step(nu0, s0)
+            verdict = mon.healthy_epoch(nu0, s0, a, rv + gm, var_inc, beyond_model=walk)
             if verdict is Verdict.ONSET:
+                if walk:  # (G5) the walk's fixes taken back out: the INS coasts from before it
+                    self._rollback()
+                self._walk_c[:] = 0.0
+                self._fix_log.clear()
                 # open b ~ N(0, σ_b0² I), uncorrelated: this epoch's update puts the jump in b
-                if beyond:  # ĝ followed the fault's start: the fault's bias holds it now
-                    self._reset_wander()
                 self.bias_active = True
                 self.gnss_bias = np.zeros(3)
                 self._Pxb = np.zeros((self.n, 3))
                 self._Pbb = np.eye(3) * self.params.fault_state.bias_sigma0_m**2
             return verdict
-        pxb = np.array([self._h_fix(k) for k in range(3)]) @ self._Pxb
-        nu1 = nu0 - self.gnss_bias  # ν1 = z − p̂ − ĝ − b̂
-        s1 = s0 + pxb + pxb.T + self._Pbb  # S1 = H1 P H1ᵀ + R, H1 = [H0 I]
+        h1 = np.eye(3, self.n)  # H1 = [I 0 … | I_b]: δp and b, (G6)
+        pxb = h1 @ self._Pxb
+        nu1 = nu0 + self._wander3() - self.gnss_bias  # ν1 = z − p̂ − b̂
+        s1_ins = s0 if self.n == N_STATES else h1 @ self.P @ h1.T + np.diag(r[:3])
+        s1 = s1_ins + pxb + pxb.T + self._Pbb  # S1 = H1 P H1ᵀ + R
         verdict = mon.faulted_epoch(nu0, s0, nu1, s1, a, rv + gm)
         if verdict is Verdict.RETURN:
             # b jumps back to 0: marginalise it out (its old estimate says nothing now)
@@ -846,27 +878,43 @@ class InsGnssFilter:
             self._Pbb = self._Pbb + np.eye(3) * self.params.fault_state.bias_sigma0_m**2
         return verdict
 
-    def _wander_beyond_model(self) -> bool:
-        """(G3) The estimate of the receiver's correlated error beyond its own model: its
-        ``ĝᵀ ĝ / σ_g² > χ²₂(1 − α_on)`` (about 3 σ_g); a slow walk the wander state would
-        otherwise follow (and the INS absorb through it) is a fault. ``σ_g²`` is the stationary
-        variance, an upper bound on the estimate's own (``σ_g² − P_gg``): the test is
-        conservative."""
+    def _wander3(self) -> FloatArray:
+        """``ĝ`` (E, N, U, m), zeros without the receiver's correlated error in the state."""
+        return self.gnss_wander if self.n > N_STATES else np.zeros(3)
+
+    def _walk_step(self, nu0: FloatArray, s0: FloatArray) -> bool:
+        """(G3) One epoch of the walk test (with the receiver modelled): Page's CUSUM of the
+        normalised position innovations per axis and side; True when one is above
+        ``walk_h_sigma``. A CUSUM at 0 before this epoch starts a run here (its start dates
+        the walk, (G5))."""
         if self.n == N_STATES:
             return False
-        var = np.maximum(self.gm_var - np.diag(self.P)[N_STATES:], self._r_white)
-        g2 = float(np.sum(self.gnss_wander**2 / var))
-        return g2 > self._t_wander
+        fs = self.params.fault_state
+        u = nu0 / np.sqrt(np.diag(s0))  # ν_i/√S_ii
+        c = self._walk_c
+        self._walk_t0[c <= 0.0] = self.t_s
+        c[0] = np.maximum(0.0, c[0] + u - fs.walk_k_sigma)  # C⁺
+        c[1] = np.maximum(0.0, c[1] - u - fs.walk_k_sigma)  # C⁻
+        return bool(c.max() > fs.walk_h_sigma)
 
-    def _reset_wander(self) -> None:
-        """The receiver's correlated error back to its prior: ``ĝ = 0``, ``P_gg = σ_g² I``,
-        uncorrelated (a fault's onset: the bias ``b`` holds the receiver's whole error)."""
-        if self.n == N_STATES:
+    def _rollback(self) -> None:
+        """(G5) The walk's fixes taken back out: the position and receiver-error corrections of
+        the healthy updates since the start of the CUSUM run that opened the fault (the
+        largest), and ``P_pp`` back to at least its prior before the first of them (its
+        diagonal raised: ``P`` stays positive definite)."""
+        c = self._walk_c
+        side, axis = np.unravel_index(int(np.argmax(c)), c.shape)
+        t_start = float(self._walk_t0[side, axis])
+        taken = [e for e in self._fix_log if e[0] >= t_start]
+        if not taken:
             return
-        self.gnss_wander = np.zeros(3)
-        self.P[N_STATES:, :] = 0.0
-        self.P[:, N_STATES:] = 0.0
-        self.P[N_STATES:, N_STATES:] = np.diag(self.gm_var)
+        dx = np.zeros(self.n)
+        dx[0:3] = -np.sum([e[1] for e in taken], axis=0)
+        dx[N_STATES:] = -np.sum([e[2] for e in taken], axis=0)
+        self._inject(dx)  # through the corrections' record too: p̂ − c_p is unchanged
+        idx = np.arange(3)
+        self.P[idx, idx] += np.maximum(0.0, taken[0][3] - np.diag(self.P)[:3])
+        self.rollbacks += 1
 
     def _update_biased(
         self, t_s: float, z: list[float], zhat: list[float], r: list[float], rows: list[int],
@@ -892,10 +940,10 @@ class InsGnssFilter:
                 zone = classify(dm, self.params.three_zone.t1, self.params.three_zone.t2)
                 decisions.append(GateDecision(zone, Action.REJECT, dm, z[j], math.inf))
                 h = np.zeros(n)
-                h[:m] = hk
+                h[k] = 1.0  # (G6) z = p + b + v: the bias holds the receiver's whole error
                 h[m + k] = 1.0
                 h_rows.append(h)
-                y.append(nu - float(self.gnss_bias[k]))
+                y.append(nu + float(self._wander3()[k]) - float(self.gnss_bias[k]))
                 rv.append(r[j])
                 continue
             d = self.gates[k].step(z[j], nu, float(self.P[k, k]) + r[j], r[j])

@@ -81,6 +81,18 @@ class FaultStateParams:
     max_prior_ratio: float = field(default=0.25, metadata={
         "gt": 0.0, "doc": "open a fault only while P⁻_ii ≤ ratio · R_ii (coasting on the INS "
                           "beats the fix)", "unit": "-"})
+    # With the receiver's correlated error modelled (gnss_gm_sigma_m > 0, fdi/insgnss.py (G3),
+    # (G5)): the walk test, Page's CUSUM of the normalised position innovations.
+    walk_k_sigma: float = field(default=0.5, metadata={
+        "ge": 0.0, "le": 10.0, "unit": "σ", "doc": "receiver modelled: the walk test's "
+        "allowance, per axis, in σ of the innovation (a walk shifts it by more)"})
+    walk_h_sigma: float = field(default=8.0, metadata={
+        "gt": 0.0, "le": 1000.0, "unit": "σ", "doc": "receiver modelled: the walk test's "
+        "threshold (its false-alarm interval ~e^(2kh)/(2k²) epochs per axis and side)"})
+    rollback_max_s: float = field(default=30.0, metadata={
+        "ge": 0.0, "le": 600.0, "unit": "s", "doc": "receiver modelled: at a walk's onset the "
+        "fixes since its estimated start, at most this long ago, are taken back out of the "
+        "position (0: off)"})
 
     @cached_property
     def t_onset(self) -> float:

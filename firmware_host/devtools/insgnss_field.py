@@ -115,13 +115,18 @@ def field_data(setup: InsGnssSetup, seed: int) -> sim.NavData:
 @dataclass(frozen=True)
 class FieldEpoch:
     """One epoch at rest: the INS's output error (None: no fix sent), the rover's (None: its
-    detector sent nothing), the coast's time and the accuracy sent (m)."""
+    detector sent nothing), the coast's time and the accuracy sent (m); the receiver's fix
+    less the truth (E, N m; None: no fix), whether :func:`field_faults` moved it, and whether
+    the INS drove the output (False: before its alignment)."""
 
     t: float
     ins_err_m: float | None
     rover_err_m: float | None
     coast_s: float | None
     acc_h_m: float | None
+    raw_en_m: tuple[float, float] | None = None
+    faulty: bool = False
+    aligned: bool = False
 
 
 @dataclass
@@ -133,6 +138,41 @@ class FieldRun:
         """(t, INS error − rover error) on every epoch both sent a position."""
         return [(e.t, e.ins_err_m - e.rover_err_m) for e in self.epochs
                 if e.ins_err_m is not None and e.rover_err_m is not None]
+
+    def oracle_excess(self) -> list[tuple[float, float]]:
+        """The bound's floor: (t, oracle error − rover error) on the epochs of :meth:`excess`.
+        The oracle is told which fixes are faulty and skips them; otherwise it is the
+        minimum-variance estimate of a point at rest from the simulated receiver's own model
+        (the position constant, its error g Gauss-Markov :data:`GM_SIGMA_M`, :data:`GM_TAU_S`,
+        white rest :data:`WHITE_SIGMA_M`; E and N apart), started at the first INS epoch's fix
+        as the filter is ((G4) of fdi/insgnss.py). What it loses against the rover is the
+        rover's luck (its fix or held prediction nearer the truth than the receiver's model
+        allows), not fault handling."""
+        sg, sw = GM_SIGMA_M[0], WHITE_SIGMA_M
+        phi = math.exp(-1.0 / GM_TAU_S)  # 1 Hz epochs
+        F = np.diag([1.0, phi])
+        Q = np.diag([0.0, (1.0 - phi * phi) * sg * sg])
+        H = np.array([1.0, 1.0])  # z = p + g + v
+        x: list[FloatArray] = []
+        P: list[FloatArray] = []
+        out: list[tuple[float, float]] = []
+        for e in self.epochs:
+            if not x:
+                if e.aligned and e.raw_en_m is not None:
+                    x = [np.array([e.raw_en_m[a], 0.0]) for a in range(2)]
+                    P = [np.array([[sg * sg + sw * sw, -sg * sg], [-sg * sg, sg * sg]])
+                         for _ in range(2)]
+                continue
+            for a in range(2):
+                x[a] = F @ x[a]
+                P[a] = F @ P[a] @ F.T + Q
+                if e.raw_en_m is not None and not e.faulty:
+                    k = P[a] @ H / (H @ P[a] @ H + sw * sw)
+                    x[a] = x[a] + k * (e.raw_en_m[a] - H @ x[a])
+                    P[a] = P[a] - np.outer(k, H @ P[a])
+            if e.ins_err_m is not None and e.rover_err_m is not None:
+                out.append((e.t, math.hypot(x[0][0], x[1][0]) - e.rover_err_m))
+        return out
 
 
 def compare_field(setup: InsGnssSetup, seed: int, out_dir: Path, *,
@@ -164,13 +204,21 @@ def compare_field(setup: InsGnssSetup, seed: int, out_dir: Path, *,
             rover_err = float(np.hypot(e - p[0], n - p[1]))
         if r.get("mode") != "ins":
             ins_err = rover_err  # before the alignment the rover's output is the vehicle's
-        out.append(FieldEpoch(t, ins_err, rover_err, coast, acc))
+        raw = None
+        if r.get("raw_lat") is not None:
+            e, n, _ = frame.to_enu(float(r["raw_lat"]), float(r["raw_lon"]), 0.0)
+            raw = (float(e - p[0]), float(n - p[1]))
+        k = min(int(np.searchsorted(data.gnss_t, t - 1e-6)), len(data.gnss_t) - 1)
+        faulty = bool(np.any(data.fault[k, :2] != 0.0))
+        out.append(FieldEpoch(t, ins_err, rover_err, coast, acc, raw, faulty,
+                              r.get("mode") == "ins"))
     return FieldRun(out, lr)
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m firmware_host.devtools.insgnss_field [--sigma R] [--white] [--seeds 1-8]``:
-    one line a seed (the table of docs/insgnss-live.md), and the worst over the seeds."""
+    """``python -m firmware_host.devtools.insgnss_field [--sigma R] [--white] [--seeds 1-8]
+    [--oracle]``: one line a seed (the table of docs/insgnss-live.md), and the worst over the
+    seeds."""
     import argparse
     import tempfile
 
@@ -181,9 +229,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--white", action="store_true",
                         help="the example's filter: the receiver's error taken as white")
     parser.add_argument("--seeds", default="1-8", help="first-last")
+    parser.add_argument("--oracle", action="store_true",
+                        help="also the floor: the excess of a filter told which fixes are "
+                             "faulty (FieldRun.oracle_excess)")
     args = parser.parse_args(argv)
     first, _, last = args.seeds.partition("-")
     worst_all = (-math.inf, 0)
+    oracle_all = (-math.inf, 0)
     for seed in range(int(first), int(last or first) + 1):
         with tempfile.TemporaryDirectory() as d:
             fr = compare_field(field_setup(args.sigma, model_receiver=not args.white), seed,
@@ -200,7 +252,15 @@ def main(argv: list[str] | None = None) -> int:
               f"{worst:.2f} m at t = {t:.0f} s; INS max {ins_max:.2f} m, rover max "
               f"{rover_max:.2f} m; coast error / accuracy at most {ratio:.2f} "
               f"({len(coast)} coast epochs sent)", flush=True)
+        if args.oracle:
+            t_o, worst_o = max(fr.oracle_excess(), key=lambda x: x[1])
+            oracle_all = max(oracle_all, (worst_o, seed))
+            print(f"  seed {seed}: a filter told the faults: worst excess {worst_o:.2f} m at "
+                  f"t = {t_o:.0f} s", flush=True)
     print(f"worst excess over the rover {worst_all[0]:.2f} m (seed {worst_all[1]})")
+    if args.oracle:
+        print(f"a filter told the faults: worst excess {oracle_all[0]:.2f} m "
+              f"(seed {oracle_all[1]})")
     return 0
 
 
