@@ -62,6 +62,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from fdi.chi2 import threshold
+from fdi.coast import ctrv, turn_fit, within
 from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
 from fdi.fielddoc import documented
 from fdi.grey import gm11_predict_shifted_enu
@@ -85,6 +86,7 @@ from fdi.rover_evidence import (
     FixInput,
     FixSignature,
     LastStep,
+    LiveFix,
     Mode,
     PassedReversal,
     RawFix,
@@ -261,6 +263,15 @@ _DOC: dict[str, dict[str, str]] = {
                  "(0: off)"},
     "max_gap_s": {"unit": "s", "doc": "a gap between fixes longer than this restarts the "
                   "filter (a clock step back beyond it: a time reset)"},
+    "frozen_turn_s": {"unit": "s", "doc": "a frozen receiver's coast (R25, fdi/coast.py): its "
+                      "speed and turn rate fitted to the live velocities of this long before "
+                      "it froze; longer: less noise, but a turn's start is seen later"},
+    "frozen_accel_mps2": {"unit": "m/s^2", "doc": "the largest change of the vehicle's speed "
+                          "or turn the coast does not model (C3: ½ a t² is its bound); "
+                          "larger: a shorter coast, never further off"},
+    "frozen_coast_m": {"unit": "m", "doc": "the coast is passed on while its bound is within "
+                       "this, then nothing under the alarm (C3); larger: a longer coast, "
+                       "further off (0: no coast, nothing while the receiver repeats)"},
 }
 
 
@@ -390,6 +401,18 @@ class RoverDetectorParams:
     max_hdop: float = field(default=0.0, metadata={"ge": 0.5, "le": 99.0, "off": 0.0})
     # Time.
     max_gap_s: float = field(default=5.0, metadata={"ge": 0.05, "le": 3600.0})
+    # A frozen receiver's coast (R25, fdi/coast.py; issue 42): while it repeats its whole fix,
+    # its speed and course are void, so the old track is not moved by them: the vehicle is
+    # carried on from the last live fix at the speed and turn rate fitted to the live
+    # velocities of the last frozen_turn_s (C1-C2), passed on while ½ frozen_accel_mps2 t² is
+    # within frozen_coast_m (C3), then nothing under the alarm. The defaults: a tractor's
+    # speed or turn changes by at most 0.5 m/s² (a stop from 2 m/s in 4 s; a turn's entry at
+    # 2 m/s into a 8 m radius), and 0.75 m of the bullet's 1 m for the model's error (the
+    # last live fix's speed and course noise, the anchor's level): a 1.7 s coast.
+    frozen_turn_s: float = field(default=2.0, metadata={"ge": 0.1, "le": 60.0})
+    frozen_accel_mps2: float = field(default=0.5, metadata={"ge": 0.01, "le": 100.0})
+    frozen_coast_m: float = field(default=0.75, metadata={"off": 0.0, "ge": 0.01,
+                                                            "le": 1000.0})
 
     @property
     def runs_drift_test(self) -> bool:
@@ -468,6 +491,11 @@ class RoverIsolator:
         # fixes (fdi/drift.py, D6); inf until seen.
         self._last_e = self._last_n = math.nan
         self._quant = [math.inf, math.inf]
+        # The last live fix with a Doppler (its whole fix not a repeat): its time, the Doppler
+        # displacement then and its velocity; and the live velocities (t, east, north) of the
+        # last frozen_turn_s: where a frozen receiver's coast starts from (R25, fdi/coast.py).
+        self._live: LiveFix | None = None
+        self._live_v: deque[tuple[float, float, float]] = deque()
 
     @staticmethod
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
@@ -509,6 +537,7 @@ class RoverIsolator:
         self._end_watch = None
         self._prev_b = None  # the displacement's origin moves
         self._last_step = None
+        self._forget_live()
         self._acc_hist.clear()
         lv = self._last_v or (0.0, 0.0)
         self._acc_hist.append(Accepted(z[0], z[1], 0.0, 0.0, lv[0], lv[1]))
@@ -715,6 +744,8 @@ class RoverIsolator:
         ev.have_doppler = v is not None and lv is not None
         self._last_v = v
         d = ev.d = self._disp
+        if ev.have_doppler and v is not None and self._stale_run == 0:
+            self._note_live(ev.t_s, d, v)
         if p.doppler_test and ev.have_doppler:
             self._doppler_residuals(ev)
         self._raw_hist.append(_new(RawFix, (z[0], z[1], d[0], d[1])))
@@ -738,9 +769,42 @@ class RoverIsolator:
         self._disp = [0.0, 0.0, 0.0]
         self._acc_hist.clear()
         self._raw_hist.clear()
+        self._forget_live()
         if self._drift is not None:
             self._drift.reset()
             self._steps.clear()
+
+    def _note_live(self, t_s: float, d: list[float], v: tuple[float, float]) -> None:
+        """A live fix with a Doppler: where a freeze's coast would start (R25)."""
+        self._live = _new(LiveFix, (t_s, d[0], d[1], v[0], v[1]))
+        lv = self._live_v
+        lv.append((t_s, v[0], v[1]))
+        oldest = t_s - self.p.frozen_turn_s - 1e-9
+        while lv[0][0] < oldest:
+            lv.popleft()
+
+    def _forget_live(self) -> None:
+        """The Doppler displacement restarts: the last live fix's no longer lines up."""
+        self._live = None
+        self._live_v.clear()
+
+    def _frozen_coast(self, t_s: float, anchor_b: tuple[float, float]
+                     ) -> tuple[float, float, float] | None:
+        """R25's output at ``t_s``: the old track at the last live fix (L1 with the Doppler
+        displacement then, from the hold's anchor ``anchor_b``) carried on at the speed and
+        turn rate fitted to the live velocities before it (fdi/coast.py, C1-C2; the course
+        moved on by the Doppler's lag); None past the coast's bound (C3) or with no live fix."""
+        p, live = self.p, self._live
+        if live is None or p.frozen_coast_m <= 0.0:
+            return None
+        tau = t_s - live.t
+        if not within(tau, p.frozen_accel_mps2, p.frozen_coast_m):
+            return None
+        speed, course, rate = turn_fit(self._live_v, live.t)
+        lag = p.drift_lag_s
+        de, dn = ctrv(speed, course + rate * lag, rate, tau)
+        return (anchor_b[0] + live.de + lag * live.ve + de,
+                anchor_b[1] + live.dn + lag * live.vn + dn, self._hold_up)
 
     def _doppler_residuals(self, ev: Evidence) -> None:
         p, z, d, v, t = self.p, ev.z, ev.d, ev.v, ev.stats
