@@ -4,8 +4,9 @@ and turn rate, for as long as what that model leaves out can be bounded.
 Beyond Zhou & Zhang (2010). A receiver that freezes repeats its whole fix, its speed and course
 too, so the old track the isolator holds (:mod:`fdi.level`, L1: the last trusted level moved by
 the Doppler) would be moved on a void Doppler: in a straight line at the frozen velocity, 7.7 m
-off after 10 s in a 6 m headland turn at 1 m/s. Instead, from the last live fix (time t_f, the
-old track x_f there, issue 42):
+off after 10 s in a 6 m headland turn at 1 m/s. Instead, from the last live fix (time t_f; x_f
+the fix, the receiver's position when it froze, if it was passed on as it was, else the old
+track then; issue 42):
 
     ψ(t) ≈ ψ_f + ω (t − t_f),  v(t) ≈ v_f        (C1: fitted to the last live courses/speeds)
     x(t_f + τ) = x_f + v_f/ω (cos ψ_f − cos(ψ_f + ωτ), sin(ψ_f + ωτ) − sin ψ_f)      (C2)

@@ -407,8 +407,9 @@ class RoverDetectorParams:
     # velocities of the last frozen_turn_s (C1-C2), passed on while ½ frozen_accel_mps2 t² is
     # within frozen_coast_m (C3), then nothing under the alarm. The defaults: a tractor's
     # speed or turn changes by at most 0.5 m/s² (a stop from 2 m/s in 4 s; a turn's entry at
-    # 2 m/s into a 8 m radius), and 0.75 m of the bullet's 1 m for the model's error (the
-    # last live fix's speed and course noise, the anchor's level): a 1.7 s coast.
+    # 2 m/s into a 8 m radius), and 0.75 m of the 1 m a coast may add to the receiver's
+    # error when it froze (issue 42), the rest for the last live speed's and course's noise:
+    # a 1.7 s coast.
     frozen_turn_s: float = field(default=2.0, metadata={"ge": 0.1, "le": 60.0})
     frozen_accel_mps2: float = field(default=0.5, metadata={"ge": 0.01, "le": 100.0})
     frozen_coast_m: float = field(default=0.75, metadata={"off": 0.0, "ge": 0.01,
@@ -496,6 +497,7 @@ class RoverIsolator:
         # last frozen_turn_s: where a frozen receiver's coast starts from (R25, fdi/coast.py).
         self._live: LiveFix | None = None
         self._live_v: deque[tuple[float, float, float]] = deque()
+        self._acc_t: float | None = None  # the time of the last fix passed on as it was
 
     @staticmethod
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
@@ -745,7 +747,7 @@ class RoverIsolator:
         self._last_v = v
         d = ev.d = self._disp
         if ev.have_doppler and v is not None and self._stale_run == 0:
-            self._note_live(ev.t_s, d, v)
+            self._note_live(ev.t_s, ev.z, d, v)
         if p.doppler_test and ev.have_doppler:
             self._doppler_residuals(ev)
         self._raw_hist.append(_new(RawFix, (z[0], z[1], d[0], d[1])))
@@ -774,9 +776,10 @@ class RoverIsolator:
             self._drift.reset()
             self._steps.clear()
 
-    def _note_live(self, t_s: float, d: list[float], v: tuple[float, float]) -> None:
+    def _note_live(self, t_s: float, z: tuple[float, float, float], d: list[float],
+                   v: tuple[float, float]) -> None:
         """A live fix with a Doppler: where a freeze's coast would start (R25)."""
-        self._live = _new(LiveFix, (t_s, d[0], d[1], v[0], v[1]))
+        self._live = _new(LiveFix, (t_s, z[0], z[1], d[0], d[1], v[0], v[1]))
         lv = self._live_v
         lv.append((t_s, v[0], v[1]))
         oldest = t_s - self.p.frozen_turn_s - 1e-9
@@ -790,10 +793,12 @@ class RoverIsolator:
 
     def _frozen_coast(self, t_s: float, anchor_b: tuple[float, float]
                      ) -> tuple[float, float, float] | None:
-        """R25's output at ``t_s``: the old track at the last live fix (L1 with the Doppler
-        displacement then, from the hold's anchor ``anchor_b``) carried on at the speed and
-        turn rate fitted to the live velocities before it (fdi/coast.py, C1-C2; the course
-        moved on by the Doppler's lag); None past the coast's bound (C3) or with no live fix."""
+        """R25's output at ``t_s``: from the last live fix, the fix itself if it was passed on
+        as it was (the receiver's position when it froze), else the old track then (L1 with
+        the Doppler displacement then, from the hold's anchor ``anchor_b``), carried on at the
+        speed and turn rate fitted to the live velocities before it (fdi/coast.py, C1-C2; the
+        course moved on by the Doppler's lag); None past the coast's bound (C3) or with no
+        live fix."""
         p, live = self.p, self._live
         if live is None or p.frozen_coast_m <= 0.0:
             return None
@@ -803,6 +808,8 @@ class RoverIsolator:
         speed, course, rate = turn_fit(self._live_v, live.t)
         lag = p.drift_lag_s
         de, dn = ctrv(speed, course + rate * lag, rate, tau)
+        if live.t == self._acc_t:
+            return live.e + de, live.n + dn, self._hold_up
         return (anchor_b[0] + live.de + lag * live.ve + de,
                 anchor_b[1] + live.dn + lag * live.vn + dn, self._hold_up)
 
@@ -1397,6 +1404,7 @@ class RoverIsolator:
     ) -> Decision:
         """The receiver's fix is passed on (withheld while the alarm is latched; the alarm
         ends after ``recover_epochs`` of them in a row)."""
+        self._acc_t = self._last_t
         if self._alarm:
             self._good_run += 1
             if self._good_run >= self.p.recover_epochs:

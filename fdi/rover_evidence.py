@@ -76,6 +76,8 @@ class LiveFix(NamedTuple):
     receiver's coast starts (R25, fdi/coast.py)."""
 
     t: float
+    e: float  # the fix (east, north)
+    n: float
     de: float  # the Doppler displacement then (east, north)
     dn: float
     ve: float  # its Doppler velocity

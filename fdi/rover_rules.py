@@ -153,8 +153,9 @@ RULES: tuple[Rule, ...] = (
     Rule("R25", "frozen_coast", (Mode.HOLD,),
          "not decided while the receiver repeats its whole fix (its speed and course void)",
          Source.OLD_TRACK, "HOLD; past the coast's bound or hold_output_s: alarm, NONE",
-         "C1-C3 (fdi/coast.py): the old track at the last live fix carried on at its speed "
-         "and the turn rate fitted to the courses before it, while ½ a τ² <= frozen_coast_m",
+         "C1-C3 (fdi/coast.py): the last live fix (the old track then if it was not passed "
+         "on) carried on at its speed and the turn rate fitted to the courses before it, "
+         "while ½ a τ² <= frozen_coast_m",
          ("frozen_turn_s", "frozen_accel_mps2", "frozen_coast_m", "hold_output_s"),
          "...+frozen_coast"),
 )
@@ -452,8 +453,8 @@ def r_frozen_coast(iso: RoverIsolator, ev: Evidence, hold: LevelHold,
                    hs: HoldStep) -> Decision | None:
     """R25: not decided while the receiver repeats its whole fix: its speed and course are
     void, so the old track moved by them is not passed on (in a turn it runs straight off).
-    The vehicle carried on from the last live fix at its speed and turn rate (fdi/coast.py,
-    C1-C2) is, while the coast's bound is within frozen_coast_m (C3) and the hold within
+    The vehicle carried on from the last live fix (the fix if it was passed on as it was,
+    else the old track then) at its speed and turn rate (fdi/coast.py, C1-C2) is, while the coast's bound is within frozen_coast_m (C3) and the hold within
     hold_output_s; then nothing, under the alarm (no output rather than a worse one)."""
     if not ev.stale or hs.action not in ("track", "alarm"):
         return None

@@ -289,6 +289,18 @@ def test_r25_a_frozen_receiver_in_a_turn_coasts_on_its_turn_then_nothing() -> No
     assert all(d.out_enu is None and d.alarm for tau, d in out if tau > limit)
 
 
+def test_r25_a_receiver_that_froze_on_a_jump_coasts_from_the_old_track() -> None:
+    # The fix it repeats was 3 m off (replaced, R7): the coast starts from the old track at
+    # the last live fix, not from the fix (10 Hz, straight east).
+    fixes = drive(40, 10.0, offset=step_at(30.0, 30.05, 0.0, 3.0))
+    fixes = [fixes[300]._replace(t_s=f.t_s) if f.t_s >= 30.0 else f for f in fixes]
+    _, decs = run(CAL, fixes)
+    assert decs[300].rule == "R7"
+    coasted = [(k, d.out_enu) for k, d in enumerate(decs) if d.rule == "R25" and d.out_enu]
+    assert len(coasted) >= 15
+    assert all(math.dist(out[:2], (SPEED * k / 10.0, 0.0)) < 0.01 for k, out in coasted)
+
+
 def test_r21_r18_a_receiver_live_again_is_passed_on_then_the_hold_ends() -> None:
     # A freeze shorter than the coast (10 Hz): the hold passes the live receiver on at once.
     fixes = drive(40, 10.0)

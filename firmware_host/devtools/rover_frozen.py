@@ -61,8 +61,9 @@ from firmware_host.runtime.config import BridgeConfig, load_config
 MODELS: tuple[str, ...] = ("dgps", "coarse")
 RATES: tuple[float, ...] = (1.0, 5.0, 10.0)
 EXCESS_M = 1.0  # the bullet: no output more than this further from the truth than e0
-# The RNG streams of a run (seed, stream): the path, the receiver's noise, the freezes.
-_PATH, _NOISE, _FREEZE = 71, 72, 73
+# The RNG streams of a run (seed, stream): the path, the receiver's noise, the freezes, the
+# stops (each its own, so that a longer run is the same run, longer).
+_PATH, _NOISE, _FREEZE, _STOPS = 71, 72, 73, 74
 
 
 @dataclass(frozen=True)
@@ -175,7 +176,7 @@ def generate_curves(sc: CurveScenario) -> Iterator[tuple[float, bytes, dict[str,
             [sc.seed, _FREEZE]))):
         for k in range(start, start + length):
             freeze_at[k] = i
-    stops = _stops(sc.duration_s, path_rng)
+    stops = _stops(sc.duration_s, np.random.default_rng([sc.seed, _STOPS]))
     segs = _segments(sc, path_rng)
     seg = next(segs)
     procs = []
