@@ -454,8 +454,9 @@ def r_frozen_coast(iso: RoverIsolator, ev: Evidence, hold: LevelHold,
     """R25: not decided while the receiver repeats its whole fix: its speed and course are
     void, so the old track moved by them is not passed on (in a turn it runs straight off).
     The vehicle carried on from the last live fix (the fix if it was passed on as it was,
-    else the old track then) at its speed and turn rate (fdi/coast.py, C1-C2) is, while the coast's bound is within frozen_coast_m (C3) and the hold within
-    hold_output_s; then nothing, under the alarm (no output rather than a worse one)."""
+    else the old track then) at its speed and turn rate (fdi/coast.py, C1-C2) is, while the
+    coast's bound is within frozen_coast_m (C3) and the hold within hold_output_s; then
+    nothing, under the alarm (no output rather than a worse one)."""
     if not ev.stale or hs.action not in ("track", "alarm"):
         return None
     iso._carry_track(ev, hs)
