@@ -267,8 +267,9 @@ _DOC: dict[str, dict[str, str]] = {
                       "speed and turn rate fitted to the live velocities of this long before "
                       "it froze; longer: less noise, but a turn's start is seen later"},
     "frozen_accel_mps2": {"unit": "m/s^2", "doc": "the largest change of the vehicle's speed "
-                          "or turn the coast does not model (C3: ½ a t² is its bound); "
-                          "larger: a shorter coast, never further off"},
+                          "or turn the coast does not model (C3: ½ a t² + a (drift_lag_s + "
+                          "drift_lag_sd_s) t is its bound); larger: a shorter coast, never "
+                          "further off"},
     "frozen_coast_m": {"unit": "m", "doc": "the coast is passed on while its bound is within "
                        "this, then nothing under the alarm (C3); larger: a longer coast, "
                        "further off (0: no coast, nothing while the receiver repeats)"},
@@ -404,12 +405,13 @@ class RoverDetectorParams:
     # A frozen receiver's coast (R25, fdi/coast.py; issue 42): while it repeats its whole fix,
     # its speed and course are void, so the old track is not moved by them: the vehicle is
     # carried on from the last live fix at the speed and turn rate fitted to the live
-    # velocities of the last frozen_turn_s (C1-C2), passed on while ½ frozen_accel_mps2 t² is
-    # within frozen_coast_m (C3), then nothing under the alarm. The defaults: a tractor's
-    # speed or turn changes by at most 0.5 m/s² (a stop from 2 m/s in 4 s; a turn's entry at
-    # 2 m/s into a 8 m radius), and 0.75 m of the 1 m a coast may add to the receiver's
-    # error when it froze (issue 42), the rest for the last live speed's and course's noise:
-    # a 1.7 s coast.
+    # velocities of the last frozen_turn_s (C1-C2), passed on while its bound, ½ a t² + a
+    # (drift_lag_s + drift_lag_sd_s) t with a = frozen_accel_mps2 (the last live speed is
+    # the vehicle's of the Doppler's lag before), is within frozen_coast_m (C3), then nothing
+    # under the alarm. The defaults: a tractor's speed or turn changes by at most 0.5 m/s²
+    # (a stop from 2 m/s in 4 s; a turn's entry at 2 m/s into a 8 m radius), and 0.75 m of
+    # the 1 m a coast may add to the receiver's error when it froze (issue 42), the rest for
+    # the last live speed's and course's noise: a 1.46 s coast.
     frozen_turn_s: float = field(default=2.0, metadata={"ge": 0.1, "le": 60.0})
     frozen_accel_mps2: float = field(default=0.5, metadata={"ge": 0.01, "le": 100.0})
     frozen_coast_m: float = field(default=0.75, metadata={"off": 0.0, "ge": 0.01,
@@ -803,7 +805,8 @@ class RoverIsolator:
         if live is None or p.frozen_coast_m <= 0.0:
             return None
         tau = t_s - live.t
-        if not within(tau, p.frozen_accel_mps2, p.frozen_coast_m):
+        if not within(tau, p.frozen_accel_mps2, p.drift_lag_s + p.drift_lag_sd_s,
+                      p.frozen_coast_m):
             return None
         speed, course, rate = turn_fit(self._live_v, live.t)
         lag = p.drift_lag_s

@@ -155,8 +155,9 @@ RULES: tuple[Rule, ...] = (
          Source.OLD_TRACK, "HOLD; past the coast's bound or hold_output_s: alarm, NONE",
          "C1-C3 (fdi/coast.py): the last live fix (the old track then if it was not passed "
          "on) carried on at its speed and the turn rate fitted to the courses before it, "
-         "while ½ a τ² <= frozen_coast_m",
-         ("frozen_turn_s", "frozen_accel_mps2", "frozen_coast_m", "hold_output_s"),
+         "while ½ a τ² + a (δ + σ_δ) τ <= frozen_coast_m",
+         ("frozen_turn_s", "frozen_accel_mps2", "frozen_coast_m", "drift_lag_s",
+          "drift_lag_sd_s", "hold_output_s"),
          "...+frozen_coast"),
 )
 

@@ -52,6 +52,23 @@ def test_ctrv_is_the_circle_and_the_straight_line() -> None:
     assert ctrv(v, math.pi / 2, 1e-9, 3.0) == pytest.approx((6.0, 0.0))
 
 
-def test_within_is_half_a_tau_squared() -> None:
-    assert within(math.sqrt(3.0) - 1e-9, 0.5, 0.75)
-    assert not within(math.sqrt(3.0) + 1e-6, 0.5, 0.75)
+def test_within_is_half_a_tau_squared_and_the_lag() -> None:
+    assert within(math.sqrt(3.0) - 1e-9, 0.5, 0.0, 0.75)
+    assert not within(math.sqrt(3.0) + 1e-6, 0.5, 0.0, 0.75)
+    tau = (-0.15 + math.sqrt(0.15**2 + 0.75)) / 0.5  # 0.25 τ² + 0.15 τ = 0.75
+    assert within(tau - 1e-9, 0.5, 0.3, 0.75) and not within(tau + 1e-6, 0.5, 0.3, 0.75)
+
+
+def test_turn_fit_ignores_the_random_courses_of_a_stop() -> None:
+    # Standing still (courses anywhere, 0.05 m/s of noise), then driving off north at
+    # 0.5 m/s^2: the course at the end is north, not a sum of the stop's turns (unwrapped
+    # one by one, this sequence's courses ended 13.16 rad, turning at 3.2 rad/s).
+    rng = np.random.default_rng(5)
+    samples = []
+    for k in range(21):
+        t = k / 10.0
+        v = max(0.0, 0.5 * (t - 1.0))
+        ne, nn = rng.normal(0.0, 0.05, 2)
+        samples.append((t, ne, v + nn))
+    _, course, rate = turn_fit(samples, 2.0)
+    assert abs(math.remainder(course, 2 * math.pi)) < 0.25 and abs(rate) < 0.3
