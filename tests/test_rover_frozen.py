@@ -7,7 +7,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import pytest
+
 from fdi.geodesy import LocalFrame
+from firmware_host import cli
 from firmware_host.devtools.rover_frozen import (
     CurveScenario,
     generate_curves,
@@ -71,3 +74,13 @@ def test_the_default_preset_meets_the_bullet_on_a_seed() -> None:
     assert len(events) >= 12 and sum(e.max_turn_dps >= 3.0 for e in events) >= 6
     assert all(e.over == 0 and e.worst_excess_m <= 1.0 for e in events)
     assert all(e.none > 0 for e in events if e.duration_s > 2.0)  # past the coast: nothing
+
+
+def test_the_command_prints_its_table_and_refuses_a_model_without_a_curved_drive(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["sim", "rover-frozen", "--seeds", "1", "--rates", "1", "--duration",
+                     "120", "--models", "dgps"]) == 0
+    out = capsys.readouterr().out
+    assert "worst excess m (seed)" in out and "dgps" in out
+    assert cli.main(["sim", "rover-frozen", "--seeds", "1", "--models", "gm"]) == 2
+    assert "--models: gm" in capsys.readouterr().err

@@ -20,8 +20,10 @@ the issue's bullet:
 * the 10 s after the event (the rover harness's measure): the output's RMS against the raw
   receiver's.
 
-The WORST seed of each number is reported. The path, the receiver and the freezes are drawn
-from ``--seed`` only (their own streams): no detector parameter was chosen on these runs.
+The WORST seed of each number is reported. The path, the receiver, the stops and the
+freezes are drawn from ``--seed`` only (their own streams). ``--harness`` scores the frozen
+events of ``sim rover-harness``'s runs the same way (straight passes and 6 m headland turns;
+its ``gm`` model freezes the position only, its field models the whole fix).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from fdi.errors import UsageError
 from fdi.geodesy import LocalFrame
 from firmware_host.commands import tables
 from firmware_host.commands.checks import (
@@ -49,11 +52,14 @@ from firmware_host.commands.checks import (
 )
 from firmware_host.devtools.progress import Progress
 from firmware_host.devtools.rover_harness import AFTER_S, _clean, measure
+from firmware_host.devtools.rover_harness import scenario as harness_scenario
 from firmware_host.devtools.rover_sim import (
+    ERROR_MODELS,
     RoverScenario,
     _nmea_epoch,
     _quantise_deg,
     draw_field_model,
+    generate,
 )
 from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
@@ -312,7 +318,7 @@ def score(epochs: Sequence[dict[str, Any]], truth: Sequence[dict[str, Any]]
 
     spans: dict[int, list[dict[str, Any]]] = {}
     for tr in truth:
-        if tr["fault"]:
+        if tr["fault_kind"] == "frozen":
             spans.setdefault(tr["fault_event"], []).append(tr)
     harness = {round(ev.start_s, 3): ev for ev in measure(epochs, truth).events}
     out: list[FrozenEvent] = []
@@ -336,7 +342,8 @@ def score(epochs: Sequence[dict[str, Any]], truth: Sequence[dict[str, Any]]
         h = harness[round(trs[0]["utc"], 3)]
         out.append(FrozenEvent(
             trs[0]["utc"], trs[-1]["utc"] - trs[0]["utc"],
-            max(abs(tr["turn_rate_dps"]) for tr in trs), trs[0]["speed_true"], e0,
+            max(abs(tr.get("turn_rate_dps", math.nan)) for tr in trs),
+            trs[0].get("speed_true", math.nan), e0,
             worst if outputs else math.nan, over, raw_worst, outputs, none, last,
             h.after_out_rms_m, h.after_raw_rms_m))
     return out
@@ -352,13 +359,19 @@ class FrozenRun:
 
 def run_matrix(cfg: BridgeConfig, models: Sequence[str], seeds: Sequence[int],
                rates: Sequence[float], duration_s: float,
-               step: Any = None) -> list[FrozenRun]:
+               step: Any = None, harness: bool = False) -> list[FrozenRun]:
+    """Every (model, rate, seed) run scored; ``harness``: the rover harness's runs instead
+    (``sim rover-harness``: its frozen events, the other kinds between them)."""
     runs = []
     for model in models:
         for rate in rates:
             for seed in seeds:
-                sc = CurveScenario(rate_hz=rate, duration_s=duration_s, seed=seed, model=model)
-                epochs, truth = replay_stream(cfg, generate_curves(sc))
+                if harness:
+                    stream = generate(harness_scenario(model, seed, rate, duration_s))
+                else:
+                    stream = generate_curves(CurveScenario(rate_hz=rate, duration_s=duration_s,
+                                                           seed=seed, model=model))
+                epochs, truth = replay_stream(cfg, stream)
                 runs.append(FrozenRun(model, seed, rate, score(epochs, truth)))
                 if step is not None:
                     step(f"{model} {rate:g} Hz seed {seed}")
@@ -386,7 +399,9 @@ def summarise(runs: Sequence[FrozenRun], turning_dps: float = 3.0) -> list[dict[
         after = [e for e in evs if not math.isnan(e.after_raw_rms_m)]
         rows.append({
             "model": model, "rate_hz": rate, "seeds": [r.seed for r in rs],
-            "events": len(evs), "in_turns": sum(e.max_turn_dps >= turning_dps for e in evs),
+            "events": len(evs),
+            "in_turns": sum(e.max_turn_dps >= turning_dps for e in evs) if any(
+                not math.isnan(e.max_turn_dps) for e in evs) else None,
             "worst_excess_m": worst, "worst_seed": wseed,
             "events_over": sum(e.over > 0 for e in evs), "epochs_over": sum(e.over for e in evs),
             "raw_worst_excess_m": raw,
@@ -404,7 +419,8 @@ def console_table(rows: Sequence[dict[str, Any]]) -> str:
                       "freezes > 1 m (epochs)", "raw frozen worst excess m",
                       "frozen epochs out / none", "last output s", "10 s after: > raw + 0.25"])
     for r in rows:
-        t.add(r["model"], f"{r['rate_hz']:g}", f"{r['events']} ({r['in_turns']})",
+        turns = "–" if r["in_turns"] is None else r["in_turns"]
+        t.add(r["model"], f"{r['rate_hz']:g}", f"{r['events']} ({turns})",
               f"{r['worst_excess_m']:.2f} ({r['worst_seed']})",
               f"{r['events_over']} ({r['epochs_over']})", f"{r['raw_worst_excess_m']:.2f}",
               f"{r['outputs']} / {r['none']}", f"{r['longest_output_s']:.1f}",
@@ -418,24 +434,34 @@ def console_table(rows: Sequence[dict[str, Any]]) -> str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default="rover", help="config file or preset name")
     parser.add_argument("--seeds", type=seed_list, default="1-5", help="seeds, like 1-5 or 1,3")
-    parser.add_argument("--models", type=choice_list(MODELS, "models"),
-                        default=",".join(MODELS), help="receiver models, comma separated")
+    parser.add_argument("--models", type=choice_list(ERROR_MODELS, "models"), default=None,
+                        help="receiver models, comma separated (default: dgps,coarse; with "
+                             "--harness: gm,dgps,multipath,coarse)")
     parser.add_argument("--rates", type=positive_float_list, default="1,5,10",
                         help="fix rates in Hz, comma separated")
     parser.add_argument("--duration", type=positive_float, default=900.0,
                         help="seconds per run")
     parser.add_argument("--json", default=None, type=output_file_arg,
                         help="also write every event's numbers to this JSON file")
+    parser.add_argument("--harness", action="store_true",
+                        help="score the frozen events of the rover harness's runs instead "
+                             "(sim rover-harness: straight passes and 6 m headland turns; "
+                             "the gm model freezes the position only)")
 
 
 def run(args: argparse.Namespace) -> int:
     logging.getLogger("fdi_bridge.rover").setLevel(logging.ERROR)
     cfg = load_config(args.config)
+    models = args.models or list(ERROR_MODELS if args.harness else MODELS)
+    bad = [m for m in models if m not in MODELS and not args.harness]
+    if bad:
+        raise UsageError(f"--models: {', '.join(bad)}: a curved drive's receiver is one of "
+                         f"{', '.join(MODELS)} (the others with --harness)")
     t0 = time.perf_counter()
-    n = len(args.models) * len(args.seeds) * len(args.rates)
+    n = len(models) * len(args.seeds) * len(args.rates)
     with Progress(n, "rover frozen", unit="run") as bar:
-        runs = run_matrix(cfg, args.models, args.seeds, args.rates, args.duration,
-                          step=bar.step)
+        runs = run_matrix(cfg, models, args.seeds, args.rates, args.duration,
+                          step=bar.step, harness=args.harness)
     rows = summarise(runs)
     print(console_table(rows))
     print(f"\n{len(runs)} runs in {time.perf_counter() - t0:.1f} s (config {cfg.name}); "
