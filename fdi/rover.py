@@ -1090,7 +1090,7 @@ class RoverIsolator:
         assert hold is not None and ev.b is not None and ev.v is not None
         d = ev.d
         hs = hold.step(ev.t_s, ev.b, ev.v, (d[0], d[1]), ev.stale, ev.dt, self._stale_run == 0,
-                       self._last_step)
+                       self._last_step, ev.frozen)
         ev.stats.drift = hs.g
         for rule in HOLD_RULES:
             dec = rule(self, ev, hold, hs)

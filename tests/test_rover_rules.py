@@ -315,6 +315,24 @@ def test_r21_r18_a_receiver_live_again_is_passed_on_then_the_hold_ends() -> None
     assert decs[k18].out_enu == fixes[k18].enu and decs[k18].action == "accept"
 
 
+def test_r21_r18_a_position_frozen_under_a_live_doppler_is_never_passed_on() -> None:
+    # 0.5 m/s at 10 Hz, the drift test's wide configured sigma: the position repeats from
+    # 30 s while speed and course stay live. Within 3 sigma of the old track for seconds, the
+    # frozen fix was passed on (R21) and even resumed on (R18), 1.5 m behind after 3 s; the
+    # old track, moved by the live Doppler, is right (R22), then the alarm (R23).
+    params = RoverDetectorParams(drift_calibrate_s=0.0, drift_precal_s=0.0)
+    v = 0.5
+    fixes = [FixInput(k / 10, (v * k / 10, 0.0, 10.0), v + 0.01 * (k % 2), 90.0, None, 10, 0.9)
+             for k in range(450)]
+    fixes = [f._replace(enu=fixes[300].enu) if f.t_s >= 30.0 else f for f in fixes]
+    _, decs = run(params, fixes)
+    held = [(f.t_s, d) for f, d in zip(fixes, decs, strict=True) if f.t_s >= 30.3]
+    assert not {"R21", "R18"} & {d.rule for _, d in held}
+    out = [(t, d.out_enu) for t, d in held if d.out_enu is not None]
+    assert len(out) >= 90 and all(abs(o[0] - v * t) < 0.1 for t, o in out)
+    assert held[-1][1].rule == "R23" and held[-1][1].out_enu is None
+
+
 def test_r17_a_doppler_chain_broken_in_a_hold_raises_the_alarm() -> None:
     fixes = _frozen(35)
     fixes.append(drive(36)[-1]._replace(speed_mps=None, course_deg=None))
