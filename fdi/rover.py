@@ -494,11 +494,10 @@ class RoverIsolator:
         # fixes (fdi/drift.py, D6); inf until seen.
         self._last_e = self._last_n = math.nan
         self._quant = [math.inf, math.inf]
-        # The last live fix with a Doppler (its whole fix not a repeat): its time, the Doppler
-        # displacement then and its velocity; and the live velocities (t, east, north) of the
-        # last frozen_turn_s: where a frozen receiver's coast starts from (R25, fdi/coast.py).
-        self._live: LiveFix | None = None
-        self._live_v: deque[tuple[float, float, float]] = deque()
+        # The live fixes with a Doppler (their whole fix not a repeat) of the last
+        # frozen_turn_s, newest last: where a frozen receiver's coast starts from and the
+        # velocities its turn is fitted to (R25, fdi/coast.py).
+        self._live_v: deque[LiveFix] = deque()
         self._acc_t: float | None = None  # the time of the last fix passed on as it was
 
     @staticmethod
@@ -781,16 +780,14 @@ class RoverIsolator:
     def _note_live(self, t_s: float, z: tuple[float, float, float], d: list[float],
                    v: tuple[float, float]) -> None:
         """A live fix with a Doppler: where a freeze's coast would start (R25)."""
-        self._live = _new(LiveFix, (t_s, z[0], z[1], d[0], d[1], v[0], v[1]))
         lv = self._live_v
-        lv.append((t_s, v[0], v[1]))
+        lv.append(_new(LiveFix, (t_s, z[0], z[1], d[0], d[1], v[0], v[1])))
         oldest = t_s - self.p.frozen_turn_s - 1e-9
-        while lv[0][0] < oldest:
+        while lv[0].t < oldest:
             lv.popleft()
 
     def _forget_live(self) -> None:
         """The Doppler displacement restarts: the last live fix's no longer lines up."""
-        self._live = None
         self._live_v.clear()
 
     def _frozen_coast(self, t_s: float, anchor_b: tuple[float, float]
@@ -801,14 +798,15 @@ class RoverIsolator:
         speed and turn rate fitted to the live velocities before it (fdi/coast.py, C1-C2; the
         course moved on by the Doppler's lag); None past the coast's bound (C3) or with no
         live fix."""
-        p, live = self.p, self._live
-        if live is None or p.frozen_coast_m <= 0.0:
+        p, lv = self.p, self._live_v
+        if not lv or p.frozen_coast_m <= 0.0:
             return None
+        live = lv[-1]
         tau = t_s - live.t
         if not within(tau, p.frozen_accel_mps2, p.drift_lag_s + p.drift_lag_sd_s,
                       p.frozen_coast_m):
             return None
-        speed, course, rate = turn_fit(self._live_v, live.t)
+        speed, course, rate = turn_fit([(f.t, f.ve, f.vn) for f in lv], live.t)
         lag = p.drift_lag_s
         de, dn = ctrv(speed, course + rate * lag, rate, tau)
         if live.t == self._acc_t:
