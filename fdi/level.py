@@ -178,12 +178,15 @@ class LevelHold:
 
     def step(self, t: float, b: tuple[float, float], v: tuple[float, float],
              d: tuple[float, float], stale: bool, dt: float, fresh: bool = False,
-             last_step: tuple[float, float] | None = None) -> HoldStep:
+             last_step: tuple[float, float] | None = None, held: bool = False) -> HoldStep:
         """The receiver's Doppler-free value ``b`` at ``t``, its Doppler ``v`` and the
         integrated displacement ``d``; ``stale``: the receiver repeats its whole fix;
         ``fresh``: this fix differs from the previous one (position, speed or course);
-        ``last_step``: the caller's last step of b between two epochs, (t, m)."""
-        ep = self._evidence(t, b, v, d, stale, dt)
+        ``last_step``: the caller's last step of b between two epochs, (t, m); ``held``:
+        the receiver's position repeats while its own speed says it moved (its frozen test):
+        as with ``stale``, its fix is no evidence (no exit, end or new level) and is not
+        passed on (``raw``), though its Doppler still moves the old track."""
+        ep = self._evidence(t, b, v, d, stale, dt, held)
         if self._agreed(ep):
             return HoldStep("exit", ep.track, ep.g)
         across = self._across(ep, last_step)
@@ -199,7 +202,7 @@ class LevelHold:
         p = self.p
         if t - self.t0 > (p.max_s if self.slow else p.output_s):
             return HoldStep("give_up", ep.track, ep.g)
-        if not stale and (ep.g <= p.exit_sigmas or not math.isnan(ep.at_old) or across
+        if not ep.stale and (ep.g <= p.exit_sigmas or not math.isnan(ep.at_old) or across
                           or (self.frozen and fresh)
                           or ((self.prefer_raw or self.was_raw) and ep.self_ok)):
             self.was_raw = True
@@ -210,7 +213,8 @@ class LevelHold:
         return HoldStep("alarm", ep.track, ep.g)
 
     def _evidence(self, t: float, b: tuple[float, float], v: tuple[float, float],
-                  d: tuple[float, float], stale: bool, dt: float) -> _Epoch:
+                  d: tuple[float, float], stale: bool, dt: float, held: bool = False
+                  ) -> _Epoch:
         """The old track (L1), the new fix against it in σ (g), and the receiver against its
         own Doppler over the fixed lag."""
         p = self.p
@@ -234,7 +238,7 @@ class LevelHold:
         first = rec[0]
         self_ok = math.hypot(b[0] - first.e, b[1] - first.n) <= p.exit_sigmas * sigma_at(
             max(t - first.t, 1e-3), p.horizons_s, p.sigma_m)
-        return _Epoch(t, b, stale, track, g, re, rn, self_ok)
+        return _Epoch(t, b, stale or held, track, g, re, rn, self_ok)
 
     def _agreed(self, ep: _Epoch) -> bool:
         """``exit``: the new fixes have agreed with the old track within ``exit_sigmas`` for

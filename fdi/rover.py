@@ -62,6 +62,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from fdi.chi2 import threshold
+from fdi.coast import ctrv, turn_fit, within
 from fdi.drift import LEVEL_KEEP_S, DriftResult, DriftTest, sigma_at
 from fdi.fielddoc import documented
 from fdi.grey import gm11_predict_shifted_enu
@@ -85,6 +86,7 @@ from fdi.rover_evidence import (
     FixInput,
     FixSignature,
     LastStep,
+    LiveFix,
     Mode,
     PassedReversal,
     RawFix,
@@ -261,6 +263,16 @@ _DOC: dict[str, dict[str, str]] = {
                  "(0: off)"},
     "max_gap_s": {"unit": "s", "doc": "a gap between fixes longer than this restarts the "
                   "filter (a clock step back beyond it: a time reset)"},
+    "frozen_turn_s": {"unit": "s", "doc": "a frozen receiver's coast (R25, fdi/coast.py): its "
+                      "speed and turn rate fitted to the live velocities of this long before "
+                      "it froze; longer: less noise, but a turn's start is seen later"},
+    "frozen_accel_mps2": {"unit": "m/s^2", "doc": "the largest change of the vehicle's speed "
+                          "or turn the coast does not model (C3: ½ a t² + a (drift_lag_s + "
+                          "drift_lag_sd_s) t is its bound); larger: a shorter coast, never "
+                          "further off"},
+    "frozen_coast_m": {"unit": "m", "doc": "the coast is passed on while its bound is within "
+                       "this, then nothing under the alarm (C3); larger: a longer coast, "
+                       "further off (0: no coast, nothing while the receiver repeats)"},
 }
 
 
@@ -390,6 +402,20 @@ class RoverDetectorParams:
     max_hdop: float = field(default=0.0, metadata={"ge": 0.5, "le": 99.0, "off": 0.0})
     # Time.
     max_gap_s: float = field(default=5.0, metadata={"ge": 0.05, "le": 3600.0})
+    # A frozen receiver's coast (R25, fdi/coast.py; issue 42): while it repeats its whole fix,
+    # its speed and course are void, so the old track is not moved by them: the vehicle is
+    # carried on from the last live fix at the speed and turn rate fitted to the live
+    # velocities of the last frozen_turn_s (C1-C2), passed on while its bound, ½ a t² + a
+    # (drift_lag_s + drift_lag_sd_s) t with a = frozen_accel_mps2 (the last live speed is
+    # the vehicle's of the Doppler's lag before), is within frozen_coast_m (C3), then nothing
+    # under the alarm. The defaults: a tractor's speed or turn changes by at most 0.5 m/s²
+    # (a stop from 2 m/s in 4 s; a turn's entry at 2 m/s into a 8 m radius), and 0.75 m of
+    # the 1 m a coast may add to the receiver's error when it froze (issue 42), the rest for
+    # the last live speed's and course's noise: a 1.46 s coast.
+    frozen_turn_s: float = field(default=2.0, metadata={"ge": 0.1, "le": 60.0})
+    frozen_accel_mps2: float = field(default=0.5, metadata={"ge": 0.01, "le": 100.0})
+    frozen_coast_m: float = field(default=0.75, metadata={"off": 0.0, "ge": 0.01,
+                                                            "le": 1000.0})
 
     @property
     def runs_drift_test(self) -> bool:
@@ -468,6 +494,11 @@ class RoverIsolator:
         # fixes (fdi/drift.py, D6); inf until seen.
         self._last_e = self._last_n = math.nan
         self._quant = [math.inf, math.inf]
+        # The live fixes with a Doppler (their whole fix not a repeat) of the last
+        # frozen_turn_s, newest last: where a frozen receiver's coast starts from and the
+        # velocities its turn is fitted to (R25, fdi/coast.py).
+        self._live_v: deque[LiveFix] = deque()
+        self._acc_t: float | None = None  # the time of the last fix passed on as it was
 
     @staticmethod
     def _hold_params(p: RoverDetectorParams, sigma_m: tuple[float, ...]) -> HoldParams:
@@ -509,6 +540,7 @@ class RoverIsolator:
         self._end_watch = None
         self._prev_b = None  # the displacement's origin moves
         self._last_step = None
+        self._forget_live()
         self._acc_hist.clear()
         lv = self._last_v or (0.0, 0.0)
         self._acc_hist.append(Accepted(z[0], z[1], 0.0, 0.0, lv[0], lv[1]))
@@ -715,6 +747,8 @@ class RoverIsolator:
         ev.have_doppler = v is not None and lv is not None
         self._last_v = v
         d = ev.d = self._disp
+        if ev.have_doppler and v is not None and self._stale_run == 0:
+            self._note_live(ev.t_s, ev.z, d, v)
         if p.doppler_test and ev.have_doppler:
             self._doppler_residuals(ev)
         self._raw_hist.append(_new(RawFix, (z[0], z[1], d[0], d[1])))
@@ -738,9 +772,47 @@ class RoverIsolator:
         self._disp = [0.0, 0.0, 0.0]
         self._acc_hist.clear()
         self._raw_hist.clear()
+        self._forget_live()
         if self._drift is not None:
             self._drift.reset()
             self._steps.clear()
+
+    def _note_live(self, t_s: float, z: tuple[float, float, float], d: list[float],
+                   v: tuple[float, float]) -> None:
+        """A live fix with a Doppler: where a freeze's coast would start (R25)."""
+        lv = self._live_v
+        lv.append(_new(LiveFix, (t_s, z[0], z[1], d[0], d[1], v[0], v[1])))
+        oldest = t_s - self.p.frozen_turn_s - 1e-9
+        while lv[0].t < oldest:
+            lv.popleft()
+
+    def _forget_live(self) -> None:
+        """The Doppler displacement restarts: the last live fix's no longer lines up."""
+        self._live_v.clear()
+
+    def _frozen_coast(self, t_s: float, anchor_b: tuple[float, float]
+                     ) -> tuple[float, float, float] | None:
+        """R25's output at ``t_s``: from the last live fix, the fix itself if it was passed on
+        as it was (the receiver's position when it froze), else the old track then (L1 with
+        the Doppler displacement then, from the hold's anchor ``anchor_b``), carried on at the
+        speed and turn rate fitted to the live velocities before it (fdi/coast.py, C1-C2; the
+        course moved on by the Doppler's lag); None past the coast's bound (C3) or with no
+        live fix."""
+        p, lv = self.p, self._live_v
+        if not lv or p.frozen_coast_m <= 0.0:
+            return None
+        live = lv[-1]
+        tau = t_s - live.t
+        if not within(tau, p.frozen_accel_mps2, p.drift_lag_s + p.drift_lag_sd_s,
+                      p.frozen_coast_m):
+            return None
+        speed, course, rate = turn_fit([(f.t, f.ve, f.vn) for f in lv], live.t)
+        lag = p.drift_lag_s
+        de, dn = ctrv(speed, course + rate * lag, rate, tau)
+        if live.t == self._acc_t:
+            return live.e + de, live.n + dn, self._hold_up
+        return (anchor_b[0] + live.de + lag * live.ve + de,
+                anchor_b[1] + live.dn + lag * live.vn + dn, self._hold_up)
 
     def _doppler_residuals(self, ev: Evidence) -> None:
         p, z, d, v, t = self.p, ev.z, ev.d, ev.v, ev.stats
@@ -1016,7 +1088,7 @@ class RoverIsolator:
         assert hold is not None and ev.b is not None and ev.v is not None
         d = ev.d
         hs = hold.step(ev.t_s, ev.b, ev.v, (d[0], d[1]), ev.stale, ev.dt, self._stale_run == 0,
-                       self._last_step)
+                       self._last_step, ev.frozen)
         ev.stats.drift = hs.g
         for rule in HOLD_RULES:
             dec = rule(self, ev, hold, hs)
@@ -1333,6 +1405,7 @@ class RoverIsolator:
     ) -> Decision:
         """The receiver's fix is passed on (withheld while the alarm is latched; the alarm
         ends after ``recover_epochs`` of them in a row)."""
+        self._acc_t = self._last_t
         if self._alarm:
             self._good_run += 1
             if self._good_run >= self.p.recover_epochs:

@@ -71,6 +71,19 @@ class Stats:
     drift: float | None = None
 
 
+class LiveFix(NamedTuple):
+    """The last live fix with a Doppler (not a repeat of the one before): where a frozen
+    receiver's coast starts (R25, fdi/coast.py)."""
+
+    t: float
+    e: float  # the fix (east, north)
+    n: float
+    de: float  # the Doppler displacement then (east, north)
+    dn: float
+    ve: float  # its Doppler velocity
+    vn: float
+
+
 @dataclass(slots=True)
 class Evidence:
     """Everything the rules of :mod:`fdi.rover_rules` decide on, computed once an epoch."""

@@ -103,7 +103,7 @@ RULES: tuple[Rule, ...] = (
          ("step_pair_s", "hold_exit_s", "hold_exit_sigmas"), "step_end"),
     Rule("R12", "hold", NOT_HOLD,
          "frozen, or a slow drift fault, or max_consecutive replacements; a reference exists",
-         Source.OLD_TRACK, "HOLD", "L1: x_track = b_a + D(t) + δ·v(t); then R17-R23",
+         Source.OLD_TRACK, "HOLD", "L1: x_track = b_a + D(t) + δ·v(t); then R17-R23, R25",
          ("drift_sigmas", "max_consecutive", "stale_s", "stale_p"), "the failed tests"),
     Rule("R13", "grey_fed", (Mode.REPLACE,),
          "only the grey test fails after 2+ replacements fed the window; g <= grey_fed_sigmas",
@@ -126,7 +126,8 @@ RULES: tuple[Rule, ...] = (
     Rule("R17", "hold_no_doppler", (Mode.HOLD,), "the Doppler chain broke during a hold",
          Source.NONE, "TRACK, alarm", "no old track to hold", (), "...+no_doppler"),
     Rule("R18", "hold_resume", (Mode.HOLD,),
-         "the hold's evidence: exit, ended, new_level or consistent (fdi/level.py)",
+         "the hold's evidence: exit, ended, new_level or consistent (fdi/level.py); none "
+         "from a fix whose frozen test holds",
          Source.RAW, "TRACK", "the receiver is right again", ("hold_exit_s",
          "hold_exit_sigmas", "hold_side_sigmas", "hold_level_s"),
          "hold_exit / hold_ended / hold_new_level / hold_consistent"),
@@ -139,7 +140,8 @@ RULES: tuple[Rule, ...] = (
          "section 2.2: no lock-in, restart on the receiver", ("hold_output_s", "hold_max_s"),
          "...+hold_timeout"),
     Rule("R21", "hold_raw", (Mode.HOLD,),
-         "not decided, the evidence points to the receiver", Source.RAW, "HOLD",
+         "not decided, the evidence points to the receiver, its frozen test does not hold",
+         Source.RAW, "HOLD",
          "passed on flagged: never worse than doing nothing", (), "...+hold_raw"),
     Rule("R22", "hold_track", (Mode.HOLD,), "not decided, within hold_output_s",
          Source.OLD_TRACK, "HOLD", "L1", ("hold_output_s",), "...+hold"),
@@ -150,6 +152,15 @@ RULES: tuple[Rule, ...] = (
          Source.PREDICTION, "REPLACE / TRACK / alarm",
          "Cai & Shao eq. 7-8 per axis: DM = D_i²/S_ii against T1, T2",
          ("strategy", "three_zone"), "over_limit / deviation"),
+    Rule("R25", "frozen_coast", (Mode.HOLD,),
+         "not decided while the receiver repeats its whole fix (its speed and course void)",
+         Source.OLD_TRACK, "HOLD; past the coast's bound or hold_output_s: alarm, NONE",
+         "C1-C3 (fdi/coast.py): the last live fix (the old track then if it was not passed "
+         "on) carried on at its speed and the turn rate fitted to the courses before it, "
+         "while ½ a τ² + a (δ + σ_δ) τ <= frozen_coast_m",
+         ("frozen_turn_s", "frozen_accel_mps2", "frozen_coast_m", "drift_lag_s",
+          "drift_lag_sd_s", "hold_output_s"),
+         "...+frozen_coast"),
 )
 
 RULE_BY_NAME: dict[str, Rule] = {r.name: r for r in RULES}
@@ -441,6 +452,25 @@ def r_hold_raw(iso: RoverIsolator, ev: Evidence, hold: LevelHold,
                         source=Source.RAW)
 
 
+def r_frozen_coast(iso: RoverIsolator, ev: Evidence, hold: LevelHold,
+                   hs: HoldStep) -> Decision | None:
+    """R25: not decided while the receiver repeats its whole fix: its speed and course are
+    void, so the old track moved by them is not passed on (in a turn it runs straight off).
+    The vehicle carried on from the last live fix (the fix if it was passed on as it was,
+    else the old track then) at its speed and turn rate (fdi/coast.py, C1-C2) is, while the
+    coast's bound is within frozen_coast_m (C3) and the hold within hold_output_s; then
+    nothing, under the alarm (no output rather than a worse one)."""
+    if not ev.stale or hs.action not in ("track", "alarm"):
+        return None
+    iso._carry_track(ev, hs)
+    out = iso._frozen_coast(ev.t_s, hold.anchor_b) if hs.action == "track" else None
+    reason = iso._hold_reason + "+frozen_coast"
+    if out is None:
+        return iso._coast(ev.stats, reason, rule="R25", source=Source.NONE)
+    ev.stats.pred = out
+    return iso._replace(out, ev.stats, reason, rule="R25", source=Source.OLD_TRACK)
+
+
 def r_hold_track(iso: RoverIsolator, ev: Evidence, hold: LevelHold,
                  hs: HoldStep) -> Decision | None:
     """R22: not decided: the old track (L1) is passed on, flagged."""
@@ -460,7 +490,7 @@ def r_hold_alarm(iso: RoverIsolator, ev: Evidence, hold: LevelHold,
 
 
 HOLD_RULES: tuple[HoldRule, ...] = (r_hold_resume, r_hold_kept, r_hold_timeout, r_hold_raw,
-                                    r_hold_track, r_hold_alarm)
+                                    r_frozen_coast, r_hold_track, r_hold_alarm)
 
 
 # ----------------------------------------------------------------------- the reference page
@@ -480,7 +510,8 @@ def markdown(defaults: Any) -> str:
         "Each epoch's evidence is computed once (`fdi/rover_evidence.py`: F(k) against T_d,",
         "the grey residual, the Doppler residual, the drift statistic g, the frozen test,",
         "the quality screens); the rules are then asked in the order below (screens R1-R3,",
-        "restarts R4-R5, the hold R17-R23 in mode HOLD, otherwise R24 for the zone",
+        "restarts R4-R5, the hold R17-R23 in mode HOLD (R25 between R21 and R22),",
+        "otherwise R24 for the zone",
         "strategies, R11 R9 R10 R6 when no test fails, and R11 R12 R13 R14 R7 R15 R16 R8",
         "when one does). The first whose guard holds decides; its id is `Decision.rule`,",
         "and `Decision.source` says where the estimate comes from (under the alarm it is",

@@ -118,6 +118,10 @@ SIM_COMMANDS: dict[str, tuple[str, str]] = {
         "firmware_host.devtools.rover_harness",
         "rover done-means: a preset over every error model x seed x rate (issue 13)",
     ),
+    "rover-frozen": (
+        "firmware_host.devtools.rover_frozen",
+        "rover: a frozen receiver on a curved path, the output against the truth (issue 42)",
+    ),
     "ramp-oracle": (
         "firmware_host.devtools.ramp_oracle",
         "rover: the most any detector can find of a slow ramp in time, per receiver",
@@ -184,6 +188,7 @@ EXAMPLES: dict[str, str] = {
     "sim": "fdi-bridge sim rover --duration 60 --out run",
     "sim rover": "fdi-bridge sim rover --duration 60 --kinds jump,ramp --out run",
     "sim rover-harness": "fdi-bridge sim rover-harness --seeds 1,2 --rates 10 --duration 600",
+    "sim rover-frozen": "fdi-bridge sim rover-frozen --seeds 1-3 --rates 1,10",
     "sim ramp-oracle": "fdi-bridge sim ramp-oracle --seeds 1-3 --models gm,coarse",
     "sim rov": "fdi-bridge sim rov --fault drift:30@70 --out rov-run",
     "sim rov-harness": "fdi-bridge sim rov-harness --seeds 1-3 --scenarios step,burst",

@@ -34,9 +34,11 @@ CONFIGS = [None, "rover-paper", "rover-three-zone-paper", "rover-combined-paper"
 
 
 def _cli(tree: Path, *args: str) -> subprocess.CompletedProcess[bytes]:
+    # Run in the tree: ``python -m`` puts the working directory first on sys.path, before
+    # PYTHONPATH, so run from another checkout both "trees" imported that checkout's code.
     env = dict(os.environ, PYTHONPATH=str(tree))
     return subprocess.run([sys.executable, "-m", "firmware_host.cli", *args], env=env,
-                          capture_output=True, check=False)
+                          cwd=tree, capture_output=True, check=False)
 
 
 def _first_diff(a: bytes, b: bytes) -> str:
@@ -55,7 +57,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tree", type=Path, default=ROOT,
                     help="the tree to check (default: this one)")
     args = ap.parse_args(argv)
-    work = args.keep or Path(tempfile.mkdtemp(prefix="replay-identity-"))
+    work = (args.keep or Path(tempfile.mkdtemp(prefix="replay-identity-"))).resolve()
+    args.tree, args.corpus = args.tree.resolve(), args.corpus.resolve()
     ref = work / "ref-tree"
     ref.mkdir(parents=True, exist_ok=True)
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", args.ref], check=True,
