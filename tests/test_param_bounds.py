@@ -47,7 +47,7 @@ OFF_AT_ZERO = {
     "min_sats", "max_coast_s", "drift_calibrate_s", "drift_precal_s", "drift_floor_frac",
     "drift_cal_k", "drift_cal_min_h", "ramp_window_s", "drift_lag_s", "drift_lag_sd_s",
     "stale_move_m", "stale_move_quanta", "hold_exit_s", "hold_level_s", "hold_output_s",
-    "step_pair_s",
+    "step_pair_s", "frozen_coast_m",
 }
 
 
@@ -80,7 +80,7 @@ def test_a_parameter_takes_exactly_what_a_config_file_takes() -> None:
     """One validation: for every parameter of the table, at its bounds, just outside them and at
     the values a fuzzer tries, PARAM_SET accepts exactly what the loader accepts."""
     store, names = _table()
-    assert len(names) == 45  # every int/float of RoverDetectorParams (test_param_names.py)
+    assert len(names) == 48  # every int/float of RoverDetectorParams (test_param_names.py)
     checked = 0
     for key, name in names.items():
         spec = store.spec(name)
