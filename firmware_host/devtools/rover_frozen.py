@@ -29,12 +29,11 @@ its ``gm`` model freezes the position only, its field models the whole fix).
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import logging
 import math
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,17 +50,17 @@ from firmware_host.commands.checks import (
     seed_list,
 )
 from firmware_host.devtools.progress import Progress
-from firmware_host.devtools.rover_harness import AFTER_S, _clean, measure
+from firmware_host.devtools.rover_harness import AFTER_S, _clean, measure, replay_stream
 from firmware_host.devtools.rover_harness import scenario as harness_scenario
 from firmware_host.devtools.rover_sim import (
     ERROR_MODELS,
+    ReceiverError,
     RoverScenario,
     _nmea_epoch,
     _quantise_deg,
     draw_field_model,
     generate,
 )
-from firmware_host.rover.pipeline import RoverPipeline
 from firmware_host.runtime.config import BridgeConfig, load_config
 
 MODELS: tuple[str, ...] = ("dgps", "coarse")
@@ -185,15 +184,7 @@ def generate_curves(sc: CurveScenario) -> Iterator[tuple[float, bytes, dict[str,
     stops = _stops(sc.duration_s, np.random.default_rng([sc.seed, _STOPS]))
     segs = _segments(sc, path_rng)
     seg = next(segs)
-    procs = []
-    for sig, tau in fm.gm_h:
-        phi = math.exp(-dt / tau)
-        procs.append([phi, sig * math.sqrt(1 - phi * phi), float(rng.normal(0, sig)),
-                      float(rng.normal(0, sig))])
-    sv, tv = fm.gm_v
-    phi_v = math.exp(-dt / tv)
-    q_v = sv * math.sqrt(1 - phi_v * phi_v)
-    err_u = float(rng.normal(0, sv))
+    err = ReceiverError(fm, dt, rng)
     car = _Tractor()
     sub = 10
     hdop, sats = 0.9, 9
@@ -205,8 +196,7 @@ def generate_curves(sc: CurveScenario) -> Iterator[tuple[float, bytes, dict[str,
         lve, lvn = _lagged(car.hist, t_rel - fm.lag_s)
         vne = lve + float(rng.normal(0, fm.vel_noise_mps))
         vnn = lvn + float(rng.normal(0, fm.vel_noise_mps))
-        err_e = sum(p[2] for p in procs)
-        err_n = sum(p[3] for p in procs)
+        err_e, err_n, err_u = err.e, err.n, err.u
         we, wn, wu = (float(x) for x in rng.normal(0, fm.white_m, 3))
         lat, lon, h = frame.to_lla(car.e + err_e + we, car.n + err_n + wn, err_u + wu)
         lat = _quantise_deg(lat, fm.minute_decimals)
@@ -248,10 +238,7 @@ def generate_curves(sc: CurveScenario) -> Iterator[tuple[float, bytes, dict[str,
             car.advance(seg, any(a <= t_sub < b for a, b in stops), dt / sub, sc)
             car.hist.append((t_sub + dt / sub, car.v * math.sin(car.psi),
                              car.v * math.cos(car.psi)))
-        for p in procs:
-            p[2] = p[0] * p[2] + float(rng.normal(0, p[1]))
-            p[3] = p[0] * p[3] + float(rng.normal(0, p[1]))
-        err_u = phi_v * err_u + float(rng.normal(0, q_v))
+        err.step(rng)
 
 
 def _lagged(hist: list[tuple[float, float, float]], t_lag: float) -> tuple[float, float]:
@@ -264,21 +251,6 @@ def _lagged(hist: list[tuple[float, float, float]], t_lag: float) -> tuple[float
     (t0, e0, n0), (t1, e1, n1) = hist[0], hist[1]
     w = (t_lag - t0) / (t1 - t0)
     return e0 + w * (e1 - e0), n0 + w * (n1 - n0)
-
-
-def replay_stream(cfg: BridgeConfig, stream: Iterable[tuple[float, bytes, dict[str, Any]]]
-                  ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """Run the pipeline on a generated stream: (epoch records, truth records)."""
-    data: list[bytes] = []
-    truth: list[dict[str, Any]] = []
-    for _, d, tr in stream:
-        data.append(d)
-        truth.append(tr)
-    buf = io.StringIO()
-    pipe = RoverPipeline(cfg.rover, jsonl=buf)
-    pipe.feed(b"".join(data))
-    pipe.finish()
-    return [json.loads(line) for line in buf.getvalue().splitlines()], truth
 
 
 # --------------------------------------------------------------------------- the score

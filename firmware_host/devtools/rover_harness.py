@@ -34,7 +34,7 @@ import logging
 import math
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -84,9 +84,15 @@ def scenario(model: str, seed: int, rate_hz: float, duration_s: float = 1200.0
 def replay(cfg: BridgeConfig, sc: RoverScenario
            ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """Generate ``sc`` and run the pipeline on it: (epoch records, truth records)."""
+    return replay_stream(cfg, generate(sc))
+
+
+def replay_stream(cfg: BridgeConfig, stream: Iterable[tuple[float, bytes, dict[str, Any]]]
+                  ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Run the pipeline on a generated stream: (epoch records, truth records)."""
     data: list[bytes] = []
     truth: list[dict[str, Any]] = []
-    for _, d, tr in generate(sc):
+    for _, d, tr in stream:
         data.append(d)
         truth.append(tr)
     buf = io.StringIO()

@@ -400,6 +400,38 @@ def _quantise_deg(x: float, decimals: int) -> float:
     return math.copysign(d + m / 60.0, x)
 
 
+class ReceiverError:
+    """A field model's error processes, first-order Gauss-Markov: each horizontal one
+    (phi, q, state e, state n), summed, and the vertical one; drawn from ``rng`` in one order
+    (the generators' streams depend on it)."""
+
+    def __init__(self, fm: FieldModel, dt: float, rng: np.random.Generator) -> None:
+        self.procs: list[list[float]] = []
+        for sig, tau in fm.gm_h:
+            phi = math.exp(-dt / tau)
+            self.procs.append([phi, sig * math.sqrt(1 - phi * phi), float(rng.normal(0, sig)),
+                               float(rng.normal(0, sig))])
+        sv, tv = fm.gm_v
+        self.phi_v = math.exp(-dt / tv)
+        self.q_v = sv * math.sqrt(1 - self.phi_v * self.phi_v)
+        self.u = float(rng.normal(0, sv))
+
+    @property
+    def e(self) -> float:
+        return sum(p[2] for p in self.procs)
+
+    @property
+    def n(self) -> float:
+        return sum(p[3] for p in self.procs)
+
+    def step(self, rng: np.random.Generator) -> None:
+        """One epoch on."""
+        for p in self.procs:
+            p[2] = p[0] * p[2] + float(rng.normal(0, p[1]))
+            p[3] = p[0] * p[3] + float(rng.normal(0, p[1]))
+        self.u = self.phi_v * self.u + float(rng.normal(0, self.q_v))
+
+
 def generate_field(sc: RoverScenario) -> Iterator[tuple[float, bytes, dict[str, object]]]:
     """The field models' generator: ``(time_s, nmea_bytes, truth_record)`` per epoch."""
     fm = draw_field_model(sc.error_model, sc.seed if sc.receiver_seed is None
@@ -421,16 +453,7 @@ def generate_field(sc: RoverScenario) -> Iterator[tuple[float, bytes, dict[str, 
     while ts < sc.duration_s:
         ts += float(rng.uniform(60.0, 180.0))
         stops.append((ts, ts + float(rng.uniform(5.0, 30.0))))
-    # Error processes: per horizontal process (phi, q, state e, state n); vertical one.
-    procs = []
-    for sig, tau in fm.gm_h:
-        phi = math.exp(-dt / tau)
-        procs.append([phi, sig * math.sqrt(1 - phi * phi), float(rng.normal(0, sig)),
-                      float(rng.normal(0, sig))])
-    sv, tv = fm.gm_v
-    phi_v = math.exp(-dt / tv)
-    q_v = sv * math.sqrt(1 - phi_v * phi_v)
-    err_u = float(rng.normal(0, sv))
+    err = ReceiverError(fm, dt, rng)
     s = 0.0
     v = 0.0
     sub = 10
@@ -455,8 +478,7 @@ def generate_field(sc: RoverScenario) -> Iterator[tuple[float, bytes, dict[str, 
             lve, lvn = e0 + w * (e1 - e0), n0 + w * (n1 - n0)
         vne = lve + float(rng.normal(0, fm.vel_noise_mps))
         vnn = lvn + float(rng.normal(0, fm.vel_noise_mps))
-        err_e = sum(p[2] for p in procs)
-        err_n = sum(p[3] for p in procs)
+        err_e, err_n, err_u = err.e, err.n, err.u
         we, wn, wu = (float(x) for x in rng.normal(0, fm.white_m, 3))
         ev = fault_at.get(k)
         off = (0.0, 0.0)
@@ -535,10 +557,7 @@ def generate_field(sc: RoverScenario) -> Iterator[tuple[float, bytes, dict[str, 
             t_rel += dt / sub
             _, _, hd, _ = path.pose(s)
             hist.append((t_rel, v * math.sin(hd), v * math.cos(hd)))
-        for p in procs:
-            p[2] = p[0] * p[2] + float(rng.normal(0, p[1]))
-            p[3] = p[0] * p[3] + float(rng.normal(0, p[1]))
-        err_u = phi_v * err_u + float(rng.normal(0, q_v))
+        err.step(rng)
 
 
 def _nmea_epoch(
