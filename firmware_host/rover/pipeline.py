@@ -302,8 +302,8 @@ class RoverPipeline:
         once an epoch), which also says whether they are plain."""
         enu_v = None
         if enu:
-            e_, n_, u = enu
-            enu_v = (e_, n_, None if u != u else u)  # a 2D fix's NaN height: null
+            ee, nn, u = enu
+            enu_v = (ee, nn, None if u != u else u)  # a 2D fix's NaN height: null
         pred, kf = d.pred_enu, d.kf_enu
         (e_, n_, u_, pe, pn, pu, ke, kn, ku, speed, rh, ru, dr, chi2, gh, gu, dg, ct
          ), plain = round4_all((*(enu_v or _NONE3), *(pred or _NONE3), *(kf or _NONE3),

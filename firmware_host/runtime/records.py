@@ -159,7 +159,7 @@ def round4_all(values: Iterable[float | None]) -> tuple[list[float | None], bool
         elif x is None:
             add(None)
             continue
-        v = round(x, 4)  # type: ignore[arg-type]
+        v = round(x, 4)
         add(v)
         if plain and not (1e-4 <= v < 1e16 or -1e16 < v <= -1e-4 or v == 0.0):
             plain = False
