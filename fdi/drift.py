@@ -409,7 +409,11 @@ class DriftTest:
         # one whose statistic is within 0.6 of it: a slow fault is seen about as strongly at
         # every horizon longer than its age, and the oldest such reference is the one most
         # likely from before it began (the isolator anchors its hold there).
-        _, h, i = next(r for r in reversed(found) if r[0] >= 0.6 * g_max)
+        near = 0.6 * g_max
+        for k in range(len(found) - 1, -1, -1):  # the oldest: from the longest horizon down
+            g, h, i = found[k]
+            if g >= near:
+                break
         return _new(DriftResult, (g_max, h, ts[i], (b_e[i], b_n[i]), (v_e[i], v_n[i]),
                                   g_watch))
 
