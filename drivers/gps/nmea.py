@@ -529,11 +529,6 @@ def parse_sentence(line: bytes) -> NmeaMessage:
             raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
         fields = text[comma + 1 : star].split(",") if comma > 0 else []
         return decoder(talker, fields + _PAD, len(fields))
-    fast = _FAST.get(kind)
-    if fast is not None and comma > 0:
-        msg = _fast_usual(fast, talker, line, text, comma, star)
-        if msg is not None:
-            return msg
     data = _split_usual(line, text, comma, star)
     if data is None:
         data = _split_pynmea2(line, text, star)
@@ -557,94 +552,6 @@ def _split_usual(line: bytes, text: str, comma: int, star: int) -> list[str] | N
                 raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
             return text[comma + 1 : star].split(",")
     return None
-
-
-# The usual GGA and RMC, whole (:func:`_fast_usual`; VTG's split costs no more): each field
-# in the one form the decoder's own fast path takes (``re.ASCII``: ``\d`` is 0-9, as
-# ``str.isdigit`` on ASCII), the time, latitude and longitude in the pieces :func:`_time` and
-# :func:`_position` convert.
-_TIME_P = r"(\d\d)(\d\d)(\d\d(?:\.\d*)?)"  # hh mm ss[.s]
-_POS_P = r"(\d\d)(\d\d\.\d+),([NS]),(\d\d\d)(\d\d\.\d+),([EW])"  # dd mm.m,N,ddd mm.m,E
-_NUM_P = r"(\d+(?:\.\d*)?)"  # a number without sign or exponent
-_SNUM_P = r"(-?\d+(?:\.\d*)?)"
-_GGA_RE = re.compile(f"{_TIME_P},{_POS_P},(\\d),(\\d\\d?),{_NUM_P},{_SNUM_P},M,{_SNUM_P},M,"
-                     f"{_NUM_P}?,(\\d{{0,4}})", re.ASCII)
-_RMC_RE = re.compile(f"{_TIME_P},A,{_POS_P},{_NUM_P},{_NUM_P},(\\d{{6}}),{_NUM_P}?,[EW]?,"
-                     "([A-MO-Z])", re.ASCII)
-
-
-def _fast_usual(fast: tuple[re.Pattern[str], Callable[..., NmeaMessage | None]], talker: str,
-                line: bytes, text: str, comma: int, star: int) -> NmeaMessage | None:
-    """The usual GGA or RMC decoded from one match of its whole field text, or None
-    (the split and the decoder then, as for any sentence): the same message as they make.
-
-    Taken only where :func:`_split_usual` would split (the same checks, its bad checksum
-    raised here) and the fields match the pattern, a subset of what the decoder's fast path
-    takes; the builder converts the fields with the same operations and ranges (their
-    values, to the bit) and returns None where any of them would not pass."""
-    if text[0] == "$" and text[1] not in "pP" and text.find("*", comma, star) < 0:
-        given = _HEX_PAIRS.get(text[star + 1 :])
-        if given is not None:
-            body = line[1:star]
-            if (_xor128(body) if len(body) <= 128 else checksum(body)) != given:
-                raise DecodeError("bad_checksum", line[:20].decode("ascii", "replace"))
-            m = fast[0].fullmatch(text, comma + 1, star)
-            if m is not None:
-                return fast[1](talker, *m.groups())
-    return None
-
-
-def _fast_time_pos(hh: str, mm: str, ss: str, lat_d: str, lat_m: str, ns: str, lon_d: str,
-                   lon_m: str, ew: str) -> tuple[float, float, float] | None:
-    """:func:`_time` and :func:`_position` of matched pieces (their operations), or None
-    where either would refuse them or go its checked way."""
-    h, m, sec = int(hh), int(mm), float(ss)
-    lat_min, lon_min = float(lat_m), float(lon_m)
-    if h > 23 or m > 59 or not 0.0 <= sec < 61.0 or not (
-            0.0 <= lat_min < 60.0 and 0.0 <= lon_min < 60.0):
-        return None
-    la = int(lat_d) + lat_min / 60.0
-    lo = int(lon_d) + lon_min / 60.0
-    if la <= 90 and lo <= 180:
-        return h * 3600 + m * 60 + sec, -la if ns == "S" else la, -lo if ew == "W" else lo
-    return None
-
-
-def _fast_gga(talker: str, hh: str, mm: str, ss: str, lat_d: str, lat_m: str, ns: str,
-              lon_d: str, lon_m: str, ew: str, q: str, s: str, h: str, a: str, g: str,
-              age: str | None, st: str) -> Gga | None:
-    """:func:`_gga`'s fast path on :data:`_GGA_RE`'s groups (quality one digit, satellites
-    one or two: in range as matched)."""
-    hdop = float(h) + 0.0
-    alt = float(a)
-    sep = float(g)
-    dage = float(age) + 0.0 if age else None
-    tp = _fast_time_pos(hh, mm, ss, lat_d, lat_m, ns, lon_d, lon_m, ew)
-    if (tp is None or hdop > MAX_DOP or not ALT_MIN_M <= alt <= ALT_MAX_M
-            or not -MAX_GEOID_SEP_M <= sep <= MAX_GEOID_SEP_M
-            or (dage is not None and dage > MAX_DGPS_AGE_S)
-            or (len(st) == 4 and st > "1023")):
-        return None
-    return _new(Gga, (talker, tp[0], tp[1], tp[2], int(q), int(s), hdop, alt, sep, dage,
-                      st or None))
-
-
-def _fast_rmc(talker: str, hh: str, mm: str, ss: str, lat_d: str, lat_m: str, ns: str,
-              lon_d: str, lon_m: str, ew: str, sp: str, co: str, date: str, mv: str | None,
-              mode: str) -> Rmc | None:
-    """:func:`_rmc`'s fast path on :data:`_RMC_RE`'s groups (status A, a mode other than N:
-    valid; the magnetic variation a number or empty, as its form check asks)."""
-    speed_kn = float(sp) + 0.0
-    course = float(co) + 0.0
-    tp = _fast_time_pos(hh, mm, ss, lat_d, lat_m, ns, lon_d, lon_m, ew)
-    if tp is None or speed_kn > MAX_SPEED_KN or course > 360.0:
-        return None
-    try:
-        ymd = _date(date)
-    except DecodeError:
-        return None
-    return _new(Rmc, (talker, tp[0], True, tp[1], tp[2], speed_kn * KNOT_MPS, course, ymd,
-                      mode))
 
 
 def _split_pynmea2(line: bytes, text: str, star: int) -> list[str]:
@@ -961,12 +868,6 @@ _DECODERS: dict[str, Callable[[str, list[str], int], NmeaMessage]] = {
     "GLL": _gll,
     "HDT": _hdt,
     "THS": _ths,
-}
-# The usual sentences decoded from one match (_fast_usual): pattern and builder (a third of
-# an offline replay's parsing was these two sentences' split, checks and conversions).
-_FAST: dict[str, tuple[re.Pattern[str], Callable[..., NmeaMessage | None]]] = {
-    "GGA": (_GGA_RE, _fast_gga),
-    "RMC": (_RMC_RE, _fast_rmc),
 }
 # The fields each decoder reads: indices below this (a shorter sentence is padded with _PAD).
 _NEED = {"GGA": 14, "RMC": 12, "VTG": 9, "GSA": 17, "GST": 8, "ZDA": 6, "GLL": 7, "HDT": 2,
