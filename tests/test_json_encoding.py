@@ -219,3 +219,17 @@ def test_round4_and_round2_are_round_bit_for_bit() -> None:
 def test_round4_and_round2_on_any_float(x: float) -> None:
     assert _bits(records.round4(x)) == _bits(round(x, 4))
     assert _bits(records.round2(x)) == _bits(round(x, 2))
+
+
+@settings(max_examples=3000, deadline=None)
+@given(st.lists(st.none() | st.floats(allow_nan=True, allow_infinity=True)
+                | st.floats(-1e-3, 1e-3) | st.floats(-3e5, 3e5) | st.floats(1e14, 1e18)
+                | st.integers(-2**70, 2**70) | st.sampled_from([0.00005, -0.00005, 214748.36475]),
+                max_size=20))
+def test_round4_all_is_round4_and_says_plain_as_the_number_test(values: list[Any]) -> None:
+    """The pipeline's one rounding call: each value as :func:`records.round4` rounds it (bit
+    for bit), and plain exactly when :func:`records.numbers_spelled_alike` passes them."""
+    rounded, plain = records.round4_all(values)
+    assert [_bits(v) for v in rounded] == [
+        _bits(None if x is None else records.round4(x)) for x in values]
+    assert plain == records.numbers_spelled_alike(rounded)

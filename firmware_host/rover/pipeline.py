@@ -39,7 +39,7 @@ from firmware_host.runtime.records import (
     encode_plain_line,
     numbers_spelled_alike,
     round2,
-    round4,
+    round4_all,
 )
 
 GREY_GATE_MARGIN = 1.1  # the grey gate's width over the minimum jump that is worth a warning
@@ -75,8 +75,7 @@ class EpochOutcome(NamedTuple):
 _new = tuple.__new__
 
 
-def _r(x: float | None) -> float | None:
-    return None if x is None else round4(x)
+_NONE3 = (None, None, None)
 
 
 class RoverPipeline:
@@ -123,11 +122,9 @@ class RoverPipeline:
         self._period_s: float | None = None
         self._last_t: float | None = None
         self.last_outcome: EpochOutcome | None = None
-        # The record's values that rarely change, with what they were made from (_record).
+        # The record's date, with what it was made from (_record).
         self._date_key: tuple[int, int, int] | None = None
         self._date_text: str | None = None
-        self._gates_key: tuple[float | None, ...] = ()
-        self._gates_out: tuple[float | None, ...] = (None, None, None, None)
 
     # ------------------------------------------------------------------ feeding
 
@@ -301,45 +298,36 @@ class RoverPipeline:
     ) -> tuple[dict[str, Any], bool]:
         """The epoch's record, and whether it holds only values orjson writes as json.dumps
         does (then :func:`~firmware_host.runtime.records.encode_plain_line` writes it).
-        Written out rather than through _r: this runs once an epoch (the same values)."""
-        pred = d.pred_enu
-        kf = d.kf_enu
-        e_ = n_ = u_ = pe = pn = pu = ke = kn = ku = None
+        Its rounded values in one :func:`~firmware_host.runtime.records.round4_all` (this runs
+        once an epoch), which also says whether they are plain."""
+        enu_v = None
         if enu:
-            e_, n_, u = enu
-            e_, n_ = round4(e_), round4(n_)
-            u_ = None if math.isnan(u) else round4(u)
-        if pred:
-            pe, pn, pu = round4(pred[0]), round4(pred[1]), round4(pred[2])
-        if kf:
-            ke, kn, ku = round4(kf[0]), round4(kf[1]), round4(kf[2])
+            ee, nn, u = enu
+            enu_v = (ee, nn, None if u != u else u)  # a 2D fix's NaN height: null
+        pred, kf = d.pred_enu, d.kf_enu
+        (e_, n_, u_, pe, pn, pu, ke, kn, ku, speed, rh, ru, dr, chi2, gh, gu, dg, ct
+         ), plain = round4_all((*(enu_v or _NONE3), *(pred or _NONE3), *(kf or _NONE3),
+                                e.speed_mps, d.grey_res_h, d.grey_res_u, d.doppler_res, d.chi2,
+                                d.grey_gate_h, d.grey_gate_u, d.doppler_gate, d.chi2_threshold))
         date = e.date
-        if date != self._date_key:  # the same date (and gates) epoch after epoch: kept
+        if date != self._date_key:  # the same date epoch after epoch: kept
             self._date_key = date
             self._date_text = None if date is None else "{:04d}-{:02d}-{:02d}".format(*date)
-        gates = (d.grey_gate_h, d.grey_gate_u, d.doppler_gate, d.chi2_threshold)
-        if gates != self._gates_key or 0.0 in gates:  # (0.0 in: -0.0 and 0.0 compare equal)
-            self._gates_key = gates
-            self._gates_out = (_r(gates[0]), _r(gates[1]), _r(gates[2]), _r(gates[3]))
-        gh, gu, dg, ct = self._gates_out
-        speed, drift, zones = e.speed_mps, d.drift, d.zones
-        rh, ru, dr, chi2 = d.grey_res_h, d.grey_res_u, d.doppler_res, d.chi2
-        speed = None if speed is None else round4(speed)
-        rh = None if rh is None else round4(rh)
-        ru = None if ru is None else round4(ru)
-        dr = None if dr is None else round4(dr)
+        drift, zones = d.drift, d.zones
         drift = None if drift is None else round2(drift)
-        chi2 = None if chi2 is None else round4(chi2)
         utc, raw_lat, raw_lon, raw_alt, hdop, course = (
             e.utc_s, e.lat_deg, e.lon_deg, e.alt_msl_m, e.hdop, e.course_deg)
         action, reason = d.action, d.reason
         # Does orjson write this record as json.dumps does (records.encode_line's test, done
         # here on what only this record can hold: its numbers and two strings; the keys are
-        # the literals below, the date is digits, the rest booleans and small integers)?
-        plain = (zones is None and numbers_spelled_alike((
-            utc, raw_lat, raw_lon, raw_alt, lat, lon, alt, hdop, speed, course, e_, n_, u_, pe,
-            pn, pu, rh, ru, gh, gu, dr, dg, drift, chi2, ct, ke, kn, ku))
-            and (action + reason).isascii() and (action + reason).isprintable())
+        # the literals below, the date is digits, the rest booleans and small integers)? The
+        # rounded ones said so above; an accepted fix's output is the receiver's own.
+        text = action + reason
+        plain = (plain and zones is None and text.isascii() and text.isprintable()
+                 and numbers_spelled_alike(
+                     (utc, raw_lat, raw_lon, raw_alt, hdop, course, drift)
+                     if lat is raw_lat and lon is raw_lon and alt is raw_alt else
+                     (utc, raw_lat, raw_lon, raw_alt, lat, lon, alt, hdop, course, drift)))
         return {
             "utc": utc,
             "date": self._date_text,
