@@ -41,8 +41,8 @@ def turn_fit(samples: Sequence[tuple[float, float, float]], t_f: float
     if not samples:
         return 0.0, 0.0, 0.0
     sw = swt = swp = 0.0
-    _, ve, vn = samples[-1]
-    last = math.atan2(ve, vn)
+    _, ve_f, vn_f = samples[-1]
+    speed, last = math.hypot(ve_f, vn_f), math.atan2(ve_f, vn_f)
     rows: list[tuple[float, float, float]] = []  # (w, t, course)
     for t, ve, vn in samples:
         w = ve * ve + vn * vn
@@ -51,8 +51,6 @@ def turn_fit(samples: Sequence[tuple[float, float, float]], t_f: float
         swt += w * (t - t_f)
         swp += w * psi
         rows.append((w, t - t_f, psi))
-    _, ve, vn = samples[-1]
-    speed = math.hypot(ve, vn)
     if sw <= 0.0:
         return speed, rows[-1][2], 0.0
     tm, pm = swt / sw, swp / sw

@@ -11,12 +11,8 @@ import pytest
 
 from fdi.geodesy import LocalFrame
 from firmware_host import cli
-from firmware_host.devtools.rover_frozen import (
-    CurveScenario,
-    generate_curves,
-    replay_stream,
-    score,
-)
+from firmware_host.devtools.rover_frozen import CurveScenario, generate_curves, score
+from firmware_host.devtools.rover_harness import replay_stream
 from firmware_host.runtime.config import load_config
 
 
